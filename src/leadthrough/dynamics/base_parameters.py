@@ -1,0 +1,172 @@
+"""Base (identifiable) parameters by column-pivoted QR of the regressor on random samples.
+
+Many standard parameters never affect the joint torques, and others only in fixed linear
+combinations. With the regressor W stacked over random samples, a column-pivoted QR
+``W·P = Q·[R11 R12; 0 0]`` splits the columns into r independent ones (P1) and dependent ones
+(P2). Then
+
+    β = φ_P1 + R11⁻¹·R12·φ_P2      and      W·φ = W_P1·β,
+
+so the base regressor is simply the independent columns of K. The mapping β = C·φ is kept
+explicit (:attr:`BaseParameters.combination`) and every base parameter has a readable name and
+expression.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import scipy.linalg
+from numpy.typing import NDArray
+
+from leadthrough.dynamics.regressor import link_regressor_batch, standard_parameter_names
+
+__all__ = ["BaseParameters", "compute_base_parameters", "random_samples"]
+
+
+@dataclass(frozen=True)
+class BaseParameters:
+    """Mapping from standard to base parameters.
+
+    Attributes:
+        standard_names: Names of the standard parameters φ, length 10·n.
+        independent: Indices (into φ) of the base columns, shape (r,).
+        dependent: Indices of the regrouped columns, shape (10·n − r,).
+        combination: C with β = C·φ, shape (r, 10·n).
+        names: Base parameter names (the independent standard parameter each is anchored on,
+            suffixed ``'`` when other parameters are regrouped into it), length r.
+        expressions: Human-readable β_k = φ_a + c·φ_b + ... , length r.
+    """
+
+    standard_names: tuple[str, ...]
+    independent: NDArray[np.intp]
+    dependent: NDArray[np.intp]
+    combination: NDArray[np.float64]
+    names: tuple[str, ...]
+    expressions: tuple[str, ...]
+
+    @property
+    def count(self) -> int:
+        """Number of base parameters r."""
+        return int(self.independent.size)
+
+    def from_standard(self, phi: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Base parameters β = C·φ.
+
+        Args:
+            phi: Standard parameters, shape (10·n,) or (..., 10·n).
+
+        Returns:
+            β, shape (r,) or (..., r).
+        """
+        return np.asarray(phi, dtype=float) @ self.combination.T
+
+    def regressor(self, K: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Base regressor from the full regressor (its independent columns).
+
+        Args:
+            K: Regressor, shape (..., 10·n).
+
+        Returns:
+            Base regressor, shape (..., r).
+        """
+        return np.asarray(K)[..., self.independent]
+
+
+def random_samples(
+    model: pin.Model, count: int, rng: np.random.Generator, speed: float = 2.0, acc: float = 5.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Random (q, q̇, q̈) within the model's position limits.
+
+    Args:
+        model: Pinocchio model with finite position limits.
+        count: Number of samples N.
+        rng: Random generator.
+        speed: Velocity range ± [rad/s].
+        acc: Acceleration range ± [rad/s²].
+
+    Returns:
+        q [rad], q̇ [rad/s], q̈ [rad/s²], each shape (N, n).
+    """
+    lo, hi = np.asarray(model.lowerPositionLimit), np.asarray(model.upperPositionLimit)
+    q = rng.uniform(lo, hi, size=(count, model.nq))
+    qd = rng.uniform(-speed, speed, size=(count, model.nv))
+    qdd = rng.uniform(-acc, acc, size=(count, model.nv))
+    return q, qd, qdd
+
+
+def compute_base_parameters(
+    model: pin.Model, samples: int = 200, seed: int = 0, tol: float = 1e-8
+) -> BaseParameters:
+    """Find the base parameters of a model.
+
+    Args:
+        model: Pinocchio model.
+        samples: Number of random (q, q̇, q̈) samples to stack.
+        seed: Seed of the random samples (fixed so the mapping is reproducible).
+        tol: Rank threshold, relative to the largest |R_ii|.
+
+    Returns:
+        The standard-to-base mapping.
+    """
+    rng = np.random.default_rng(seed)
+    q, qd, qdd = random_samples(model, samples, rng)
+    W = link_regressor_batch(model, q, qd, qdd).reshape(-1, 10 * model.nv)
+    # Rank from a column-pivoted QR of the column-normalised regressor.
+    norms = np.linalg.norm(W, axis=0)
+    # Columns that are zero up to round-off (parameters with no effect at all).
+    norms[norms <= 1e-10 * norms.max()] = 0.0
+    scale = np.where(norms > 0.0, norms, 1.0)
+    Wn = np.where(norms > 0.0, W / scale, 0.0)
+    _, R, _ = scipy.linalg.qr(Wn, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > tol * diag[0]))
+    # Choose the independent columns greedily in natural parameter order, so that parameters of
+    # outer links are regrouped into inner ones (the textbook grouping, readable coefficients).
+    chosen: list[int] = []
+    basis = np.zeros((Wn.shape[0], 0))
+    for j in range(Wn.shape[1]):
+        if norms[j] == 0.0:
+            continue
+        col = Wn[:, j] - basis @ (basis.T @ Wn[:, j])
+        col -= basis @ (basis.T @ col)  # re-orthogonalise once for accuracy
+        nrm = float(np.linalg.norm(col))
+        if nrm > np.sqrt(tol):
+            chosen.append(j)
+            basis = np.column_stack([basis, col / nrm])
+        if len(chosen) == rank:
+            break
+    ind = np.asarray(chosen, dtype=np.intp)
+    dep = np.setdiff1d(np.arange(W.shape[1]), ind).astype(np.intp)
+    if dep.size:
+        regroup, *_ = scipy.linalg.lstsq(W[:, ind], W[:, dep])
+    else:
+        regroup = np.zeros((rank, 0))
+    regroup[np.abs(regroup) < 1e-9] = 0.0
+    n_std = W.shape[1]
+    C = np.zeros((rank, n_std))
+    C[np.arange(rank), ind] = 1.0
+    C[:, dep] = regroup
+    std_names = tuple(standard_parameter_names(model))
+    names: list[str] = []
+    exprs: list[str] = []
+    for k in range(rank):
+        terms = [std_names[ind[k]]]
+        for j, c in zip(dep, regroup[k], strict=True):
+            if c != 0.0:
+                sign = "+" if c > 0 else "-"
+                mag = abs(c)
+                terms.append(f"{sign} {std_names[j]}" if np.isclose(mag, 1.0)
+                             else f"{sign} {mag:.6g}·{std_names[j]}")
+        names.append(std_names[ind[k]] + ("'" if len(terms) > 1 else ""))
+        exprs.append(" ".join(terms))
+    return BaseParameters(
+        standard_names=std_names,
+        independent=ind,
+        dependent=dep,
+        combination=C,
+        names=tuple(names),
+        expressions=tuple(exprs),
+    )

@@ -1,0 +1,106 @@
+"""The full identification model of eq. 21 (without the noise term).
+
+    R·τ_total = K(q, q̇, q̈)·φ + τ_f(q̇) + M_j·q̈
+
+The left side is what the drive delivers at the joint, R·Kt·i. ``model_torque`` evaluates the
+right side for any of the three friction models (paper eq. 15, baselines [7] and [22]).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.dynamics.friction import (
+    StribeckParameters,
+    cbrt_friction,
+    coulomb_viscous_friction,
+    rotor_inertia_torque,
+    stribeck_friction,
+)
+from leadthrough.dynamics.regressor import link_torque, standard_parameters
+from leadthrough.robot.description import Robot
+
+__all__ = ["DriveModelParameters", "FrictionModel", "model_torque", "nominal_drive_parameters"]
+
+Array = NDArray[np.float64]
+
+
+class FrictionModel(str, Enum):
+    """Which friction law the drive parameters follow."""
+
+    STRIBECK = "stribeck"          # paper eq. 15
+    COULOMB_VISCOUS = "coulomb-viscous"  # ref. [7], eq. 5
+    CBRT = "cbrt"                  # ref. [22], eq. 8
+
+
+@dataclass(frozen=True)
+class DriveModelParameters:
+    """All parameters of eq. 21.
+
+    Attributes:
+        phi: Standard link parameters, shape (10·n,) (see :mod:`leadthrough.dynamics.regressor`).
+        friction_model: Which friction law applies.
+        stribeck: Eq. 15 parameters (used when ``friction_model`` is STRIBECK).
+        coulomb: Coulomb friction Fc [N·m], shape (n,) (baselines).
+        viscous: Viscous friction β [N·m·s/rad], shape (n,) (baselines).
+        cbrt: Cube-root coefficient γ, shape (n,) (baseline [22]).
+        rotor_inertia: Joint-side rotor inertia M_j [kg·m²], shape (n,).
+    """
+
+    phi: Array
+    friction_model: FrictionModel
+    rotor_inertia: Array
+    stribeck: StribeckParameters | None = None
+    coulomb: Array = field(default_factory=lambda: np.zeros(0))
+    viscous: Array = field(default_factory=lambda: np.zeros(0))
+    cbrt: Array = field(default_factory=lambda: np.zeros(0))
+
+    def friction(self, qd: Array, gear_ratio: Array) -> Array:
+        """Friction torque [N·m] for joint velocities ``qd`` [rad/s], shape (N, n)."""
+        if self.friction_model is FrictionModel.STRIBECK:
+            if self.stribeck is None:
+                raise ValueError("Stribeck friction model without Stribeck parameters")
+            return stribeck_friction(qd, gear_ratio, self.stribeck)
+        if self.friction_model is FrictionModel.CBRT:
+            return cbrt_friction(qd, self.coulomb, self.viscous, self.cbrt)
+        return coulomb_viscous_friction(qd, self.coulomb, self.viscous)
+
+
+def nominal_drive_parameters(robot: Robot) -> DriveModelParameters:
+    """Nominal parameters: CAD link inertias, datasheet rotor inertia, no friction."""
+    n = robot.n
+    zeros = np.zeros(n)
+    return DriveModelParameters(
+        phi=standard_parameters(robot.model),
+        friction_model=FrictionModel.COULOMB_VISCOUS,
+        rotor_inertia=robot.reflected_rotor_inertia.copy(),
+        coulomb=zeros.copy(),
+        viscous=zeros.copy(),
+    )
+
+
+def model_torque(
+    robot: Robot, params: DriveModelParameters, q: Array, qd: Array, qdd: Array
+) -> Array:
+    """Model joint torque R·τ_total = K·φ + τ_f + M_j·q̈ (eq. 21 without noise).
+
+    Args:
+        robot: The robot.
+        params: Model parameters.
+        q: Joint positions [rad], shape (N, n).
+        qd: Joint velocities [rad/s], shape (N, n).
+        qdd: Joint accelerations [rad/s²], shape (N, n).
+
+    Returns:
+        Joint torque the drives must deliver [N·m], shape (N, n); divide by R·Kt for current.
+    """
+    q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
+    return (
+        link_torque(robot.model, params.phi, q, qd, qdd)
+        + params.friction(qd, robot.gear_ratio)
+        + rotor_inertia_torque(qdd, params.rotor_inertia)
+    )

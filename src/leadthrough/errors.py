@@ -1,0 +1,76 @@
+"""Exception hierarchy.
+
+Every error the package raises on purpose derives from :class:`LeadthroughError`. Subclasses carry
+the offending source (file), field, value and what was expected, so that a message always tells the
+user what to fix. Backend errors (Pinocchio, MuJoCo, TOML parsing) are wrapped with ``from e``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "DataError",
+    "LeadthroughError",
+    "RobotFileError",
+    "SimulationError",
+    "UnknownRobotError",
+]
+
+
+class LeadthroughError(Exception):
+    """Root of all leadthrough errors.
+
+    Attributes:
+        source: File (or other input) the problem was found in, if any.
+        field: Name of the offending field or column, if any.
+        value: The offending value, if any.
+        expected: What would have been accepted, in words.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        source: str | Path | None = None,
+        field: str | None = None,
+        value: Any = None,
+        expected: str | None = None,
+    ) -> None:
+        self.source = str(source) if source is not None else None
+        self.field = field
+        self.value = value
+        self.expected = expected
+        self.message = message
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        parts: list[str] = []
+        if self.source is not None:
+            parts.append(f"{self.source}:")
+        if self.field is not None:
+            parts.append(f"field '{self.field}'")
+            if self.value is not None:
+                parts.append(f"= {self.value!r}")
+            parts[-1] += ":"
+        parts.append(self.message)
+        if self.expected is not None:
+            parts.append(f"(expected {self.expected})")
+        return " ".join(parts)
+
+
+class RobotFileError(LeadthroughError):
+    """A robot description (URDF or drive TOML) is missing, unreadable or inconsistent."""
+
+
+class UnknownRobotError(RobotFileError):
+    """A robot name is neither a built-in robot nor a path to a robot TOML file."""
+
+
+class DataError(LeadthroughError):
+    """A recording, trajectory or parameter file is malformed or does not fit the robot."""
+
+
+class SimulationError(LeadthroughError):
+    """The simulated robot was configured with invalid settings."""
