@@ -9,7 +9,7 @@ right side for any of the three friction models (paper eq. 15, baselines [7] and
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,7 @@ from leadthrough.dynamics.friction import (
     stribeck_friction,
 )
 from leadthrough.dynamics.regressor import link_torque, standard_parameters
+from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
 __all__ = ["DriveModelParameters", "FrictionModel", "model_torque", "nominal_drive_parameters"]
@@ -29,7 +30,7 @@ __all__ = ["DriveModelParameters", "FrictionModel", "model_torque", "nominal_dri
 Array = NDArray[np.float64]
 
 
-class FrictionModel(str, Enum):
+class FrictionModel(StrEnum):
     """Which friction law the drive parameters follow."""
 
     STRIBECK = "stribeck"          # paper eq. 15
@@ -59,11 +60,14 @@ class DriveModelParameters:
     viscous: Array = field(default_factory=lambda: np.zeros(0))
     cbrt: Array = field(default_factory=lambda: np.zeros(0))
 
+    def __post_init__(self) -> None:
+        if self.friction_model is FrictionModel.STRIBECK and self.stribeck is None:
+            raise DataError("Stribeck friction model without Stribeck parameters",
+                            field="stribeck", expected="StribeckParameters")
+
     def friction(self, qd: Array, gear_ratio: Array) -> Array:
         """Friction torque [N·m] for joint velocities ``qd`` [rad/s], shape (N, n)."""
-        if self.friction_model is FrictionModel.STRIBECK:
-            if self.stribeck is None:
-                raise ValueError("Stribeck friction model without Stribeck parameters")
+        if self.stribeck is not None and self.friction_model is FrictionModel.STRIBECK:
             return stribeck_friction(qd, gear_ratio, self.stribeck)
         if self.friction_model is FrictionModel.CBRT:
             return cbrt_friction(qd, self.coulomb, self.viscous, self.cbrt)

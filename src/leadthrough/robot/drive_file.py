@@ -105,7 +105,8 @@ class DriveFile:
 def _positive(path: Path, field: str, value: Any, *, allow_zero: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise RobotFileError("not a number", source=path, field=field, value=value,
-                             expected="a number")
+                             expected="a finite number >= 0" if allow_zero else
+                             "a finite number > 0")
     v = float(value)
     ok = math.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
     if not ok:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
 
-__all__ = ["Payload", "build_mujoco_model", "TCP_SITE"]
+__all__ = ["TCP_SITE", "Payload", "build_mujoco_model"]
 
 TCP_SITE = "tcp"
 _AXES = {
@@ -71,11 +71,12 @@ def _joint_axis(jm: pin.JointModel) -> tuple[float, float, float]:
 
 
 def _set_inertial(body: mujoco.MjsBody, inertia: pin.Inertia) -> None:
-    I = np.asarray(inertia.inertia, dtype=float)
+    inertia_com = np.asarray(inertia.inertia, dtype=float)
     body.explicitinertial = True
     body.mass = float(inertia.mass)
     body.ipos = np.asarray(inertia.lever, dtype=float)
-    body.fullinertia = [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]
+    body.fullinertia = [inertia_com[0, 0], inertia_com[1, 1], inertia_com[2, 2],
+                        inertia_com[0, 1], inertia_com[0, 2], inertia_com[1, 2]]
 
 
 def build_mujoco_model(

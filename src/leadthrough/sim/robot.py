@@ -25,7 +25,12 @@ from numpy.typing import NDArray
 from leadthrough.dynamics.regressor import standard_parameters
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
-from leadthrough.sim.drivetrain import DriveTrain, DriveTrainConfig, DriveTrainTruth, sample_drive_truth
+from leadthrough.sim.drivetrain import (
+    DriveTrain,
+    DriveTrainConfig,
+    DriveTrainTruth,
+    sample_drive_truth,
+)
 from leadthrough.sim.link_truth import true_link_inertias
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
@@ -230,6 +235,11 @@ class SimRobot:
     def time(self) -> float:
         """Simulation time [s]."""
         return float(self.mj_data.time)
+
+    @property
+    def q_command(self) -> Array:
+        """The current position command [rad], shape (n,)."""
+        return self._q_cmd.copy()
 
     def command(self, q: Array, qd: Array | None = None) -> None:
         """Set the position command (and optional velocity feed-forward) for the next steps.

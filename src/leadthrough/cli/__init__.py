@@ -1,0 +1,65 @@
+"""Command-line interface: ``leadthrough <command> ...``.
+
+Exit codes: 0 OK, 2 bad input (a :class:`~leadthrough.errors.LeadthroughError`, printed as one
+line without a traceback), 1 internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from leadthrough import __version__
+from leadthrough.cli import demo_cmd, robots_cmd
+from leadthrough.errors import LeadthroughError
+
+__all__ = ["build_parser", "main"]
+
+_EPILOG = """examples:
+  leadthrough demo                      run the whole pipeline on the simulated ER20-class robot
+  leadthrough robots                    list built-in robots with their base-parameter counts
+  leadthrough robots --robot my.toml    check your own robot (URDF + drive TOML)
+"""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors with exit code 2 and one line."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.print_usage(sys.stderr)
+        print(f"{self.prog}: error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with all subcommands."""
+    parser = _Parser(
+        prog="leadthrough",
+        description="Sensorless hand guiding for industrial robots: identify the robot's "
+                    "dynamics from motor currents, estimate the operator's force, and follow it.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"leadthrough {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    robots_cmd.register(sub)
+    demo_cmd.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args))
+    except LeadthroughError as e:
+        print(f"leadthrough: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("leadthrough: interrupted", file=sys.stderr)
+        return 130
