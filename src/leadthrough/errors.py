@@ -12,6 +12,7 @@ from typing import Any
 
 __all__ = [
     "DataError",
+    "DataWarning",
     "LeadthroughError",
     "RobotFileError",
     "SimulationError",
@@ -74,3 +75,7 @@ class DataError(LeadthroughError):
 
 class SimulationError(LeadthroughError):
     """The simulated robot was configured with invalid settings."""
+
+
+class DataWarning(UserWarning):
+    """Data were usable but something was dropped or adjusted (e.g. rows with NaN)."""

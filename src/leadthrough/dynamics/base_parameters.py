@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.regressor import link_regressor_batch, standard_parameter_names
 
-__all__ = ["BaseParameters", "compute_base_parameters", "random_samples"]
+__all__ = ["BaseParameters", "compute_base_parameters", "random_samples", "rotor_columns"]
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,8 @@ class BaseParameters:
     """Mapping from standard to base parameters.
 
     Attributes:
-        standard_names: Names of the standard parameters φ, length 10·n.
+        standard_names: Names of the standard parameters φ, length 10·n (+ n rotor inertias
+            when built with ``include_rotor``).
         independent: Indices (into φ) of the base columns, shape (r,).
         dependent: Indices of the regrouped columns, shape (10·n − r,).
         combination: C with β = C·φ, shape (r, 10·n).
@@ -97,8 +98,29 @@ def random_samples(
     return q, qd, qdd
 
 
+def rotor_columns(qdd: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Regressor columns of the rotor inertias M_j·q̈_j (eq. 16).
+
+    Args:
+        qdd: Joint accelerations [rad/s²], shape (N, n).
+
+    Returns:
+        Columns, shape (N, n, n): entry [k, j, j] = q̈_j.
+    """
+    qdd = np.atleast_2d(qdd)
+    n = qdd.shape[1]
+    out = np.zeros((qdd.shape[0], n, n))
+    idx = np.arange(n)
+    out[:, idx, idx] = qdd
+    return out
+
+
 def compute_base_parameters(
-    model: pin.Model, samples: int = 200, seed: int = 0, tol: float = 1e-8
+    model: pin.Model,
+    samples: int = 200,
+    seed: int = 0,
+    tol: float = 1e-8,
+    include_rotor: bool = False,
 ) -> BaseParameters:
     """Find the base parameters of a model.
 
@@ -107,13 +129,19 @@ def compute_base_parameters(
         samples: Number of random (q, q̇, q̈) samples to stack.
         seed: Seed of the random samples (fixed so the mapping is reproducible).
         tol: Rank threshold, relative to the largest |R_ii|.
+        include_rotor: Append the n rotor inertias M_j (eq. 16) to the standard parameters
+            (named ``"<joint>.Mj"``); e.g. M_1 of a vertical first axis is then regrouped into
+            ``joint_1.Izz'``.
 
     Returns:
         The standard-to-base mapping.
     """
     rng = np.random.default_rng(seed)
     q, qd, qdd = random_samples(model, samples, rng)
-    W = link_regressor_batch(model, q, qd, qdd).reshape(-1, 10 * model.nv)
+    K = link_regressor_batch(model, q, qd, qdd)
+    if include_rotor:
+        K = np.concatenate([K, rotor_columns(qdd)], axis=2)
+    W = K.reshape(-1, K.shape[2])
     # Rank from a column-pivoted QR of the column-normalised regressor.
     norms = np.linalg.norm(W, axis=0)
     # Columns that are zero up to round-off (parameters with no effect at all).
@@ -149,7 +177,9 @@ def compute_base_parameters(
     C = np.zeros((rank, n_std))
     C[np.arange(rank), ind] = 1.0
     C[:, dep] = regroup
-    std_names = tuple(standard_parameter_names(model))
+    std_names = tuple(standard_parameter_names(model)
+                      + ([f"{model.names[j]}.Mj" for j in range(1, model.njoints)]
+                         if include_rotor else []))
     names: list[str] = []
     exprs: list[str] = []
     for k in range(rank):

@@ -62,8 +62,8 @@ class DriveTrainConfig:
 
     coulomb_motor: float = 0.010
     coulomb_gear: float = 0.014
-    stribeck_motor: float = 0.014
-    stribeck_gear: float = 0.012
+    stribeck_motor: float = 0.028
+    stribeck_gear: float = 0.024
     stribeck_velocity_motor: float = 12.0
     stribeck_velocity_gear: float = 0.12
     viscous: float = 0.03

@@ -47,7 +47,10 @@ class SimConfig:
     """Settings of the simulated robot.
 
     Attributes:
-        seed: Seeds the true parameters and the sensor noise (same seed, same recording).
+        seed: Seeds the robot instance: true parameters and sensor noise (same seed and run,
+            bit-identical recording).
+        run: Recording number on the same robot instance: each run gets independent sensor
+            noise while the true parameters stay those of ``seed``.
         timestep: Physics and servo step [s].
         link_deviation: True link parameters deviate from nominal by up to this (eq. 37 sense).
         drive: How the true drive train is drawn.
@@ -58,6 +61,7 @@ class SimConfig:
     """
 
     seed: int = 0
+    run: int = 0
     timestep: float = 1e-3
     link_deviation: float = 0.3
     drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
@@ -66,6 +70,9 @@ class SimConfig:
     friction_timeconst: float = 0.004
 
     def __post_init__(self) -> None:
+        if self.seed < 0 or self.run < 0:
+            raise SimulationError("must be >= 0", field="seed/run", value=(self.seed, self.run),
+                                  expected="non-negative integers")
         if not (0.0 < self.timestep <= 0.01):
             raise SimulationError("out of range", field="timestep", value=self.timestep,
                                   expected="0 < timestep <= 0.01 s")
@@ -91,7 +98,7 @@ class SimTruth:
         phi: True standard link parameters, shape (10·n,).
         drive: True drive-train parameters.
         current_bias: Current-sensor bias [A], shape (n,).
-        current_noise: Current-sensor noise σ [A], shape (n,).
+        current_noise: Current-sensor noise σ (white and slow parts combined) [A], shape (n,).
     """
 
     inertias: tuple[pin.Inertia, ...]
@@ -141,11 +148,12 @@ class SimRobot:
         self.robot = robot
         self.config = config = config if config is not None else SimConfig()
         rng_truth = np.random.default_rng([config.seed, 1])
-        rng_noise = np.random.default_rng([config.seed, 2])
+        rng_noise = np.random.default_rng([config.seed, 2, config.run])
         inertias = true_link_inertias(robot.model, rng_truth, config.link_deviation)
         drive = sample_drive_truth(robot, config.drive, rng_truth)
         self._drive = DriveTrain(drive, robot.gear_ratio)
-        self._sensor = CurrentSensor(config.sensors, robot.max_current, rng_noise)
+        self._sensor = CurrentSensor(config.sensors, robot.max_current, rng_noise,
+                                     config.timestep)
         model_true = robot.model.copy()
         for j, inertia in enumerate(inertias, start=1):
             model_true.inertias[j] = inertia

@@ -1,0 +1,178 @@
+"""Column maps: load real controller logs as they are, without reformatting.
+
+A small TOML file says which columns of a delimited text log are time, joint positions, motor
+current or joint torque, with units and scale factors. Example for the UR10e logs of Mamedov et
+al. (headerless, 31 columns, current × drive gain = joint torque)::
+
+    delimiter = ","
+    skip_rows = 0                   # header lines to skip
+    drop_abs_above = 1e4            # optional: rows with any |value| above are corrupt → dropped
+    drop_non_increasing_time = true # optional: drop rows whose time does not increase
+
+    [time]
+    column = 0                      # 0-based
+    unit = "s"                      # s | ms | us | ns
+
+    [q]
+    columns = [1, 2, 3, 4, 5, 6]
+    unit = "rad"                    # rad | deg
+    scale = 1.0                     # optional: scalar or one per joint (e.g. −1 flips a joint)
+    offset = 0.0                    # optional: added after scaling [rad]
+
+    [torque]                        # or [current] with unit "A" | "mA"
+    columns = [13, 14, 15, 16, 17, 18]
+    unit = "N·m"                    # N·m | Nm
+    scale = [11.976, 11.976, 9.839, 10.763, 10.763, 10.763]
+
+    [q_cmd]                         # optional, like [q]
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.errors import DataError
+
+__all__ = ["ColumnMap", "Signal", "parse_column_map"]
+
+_UNITS: dict[str, dict[str, float]] = {
+    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9},
+    "q": {"rad": 1.0, "deg": math.pi / 180.0},
+    "q_cmd": {"rad": 1.0, "deg": math.pi / 180.0},
+    "current": {"A": 1.0, "mA": 1e-3},
+    "torque": {"N·m": 1.0, "Nm": 1.0, "N*m": 1.0, "mN·m": 1e-3},
+}
+
+
+@dataclass(frozen=True)
+class Signal:
+    """One mapped signal.
+
+    Attributes:
+        columns: 0-based column indices, one per joint (one for time).
+        factor: Multiplier to SI (unit × scale), shape (len(columns),).
+        offset: Added after scaling, shape (len(columns),).
+    """
+
+    columns: tuple[int, ...]
+    factor: NDArray[np.float64]
+    offset: NDArray[np.float64]
+
+    def extract(self, table: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Scaled columns of a (rows, cols) table, shape (rows, len(columns))."""
+        return table[:, list(self.columns)] * self.factor + self.offset
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """A parsed column map (see the module docstring for the format).
+
+    Attributes:
+        path: The TOML file.
+        delimiter: Field separator.
+        skip_rows: Leading lines to skip.
+        drop_abs_above: Rows with any |value| above this are dropped (None: keep all).
+        drop_non_increasing_time: Drop rows whose time does not increase.
+        signals: Mapped signals by name: time, q, and current or torque, optionally q_cmd.
+    """
+
+    path: Path
+    delimiter: str
+    skip_rows: int
+    drop_abs_above: float | None
+    drop_non_increasing_time: bool
+    signals: dict[str, Signal]
+
+    @property
+    def max_column(self) -> int:
+        """Largest column index used."""
+        return max(max(s.columns) for s in self.signals.values())
+
+
+def _vector(path: Path, field: str, value: Any, size: int, default: float) -> NDArray[np.float64]:
+    if value is None:
+        return np.full(size, default)
+    vals = value if isinstance(value, list) else [value] * size
+    if len(vals) != size or not all(isinstance(v, int | float) and not isinstance(v, bool)
+                                    and math.isfinite(v) for v in vals):
+        raise DataError("malformed", source=path, field=field, value=value,
+                        expected=f"a finite number or a list of {size}")
+    return np.asarray(vals, dtype=float)
+
+
+def _signal(path: Path, name: str, table: Any) -> Signal:
+    if not isinstance(table, dict):
+        raise DataError("not a table", source=path, field=name, value=table,
+                        expected=f"a [{name}] table")
+    key = "column" if name == "time" else "columns"
+    cols = table.get(key)
+    if name == "time" and isinstance(cols, int) and not isinstance(cols, bool):
+        cols = [cols]
+    if (not isinstance(cols, list) or not cols
+            or not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in cols)):
+        raise DataError("malformed", source=path, field=f"{name}.{key}", value=cols,
+                        expected="a 0-based column index" if name == "time"
+                        else "a list of 0-based column indices, one per joint")
+    unit = table.get("unit", next(iter(_UNITS[name])))
+    if unit not in _UNITS[name]:
+        raise DataError("unknown unit", source=path, field=f"{name}.unit", value=unit,
+                        expected=f"one of {sorted(_UNITS[name])}")
+    scale = _vector(path, f"{name}.scale", table.get("scale"), len(cols), 1.0)
+    offset = _vector(path, f"{name}.offset", table.get("offset"), len(cols), 0.0)
+    return Signal(columns=tuple(cols), factor=scale * _UNITS[name][unit], offset=offset)
+
+
+def parse_column_map(path: str | Path) -> ColumnMap:
+    """Read and validate a column-map TOML file.
+
+    Raises:
+        DataError: The file is missing or malformed; the message names the field.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("column map not found", source=path, expected="an existing TOML file")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"not valid TOML: {e}", source=path) from e
+    for required in ("time", "q"):
+        if required not in doc:
+            raise DataError("missing", source=path, field=required,
+                            expected=f"a [{required}] table")
+    if ("current" in doc) == ("torque" in doc):
+        raise DataError("needs exactly one of [current] and [torque]", source=path,
+                        field="current/torque", expected="one signal table")
+    signals = {name: _signal(path, name, doc[name])
+               for name in ("time", "q", "current", "torque", "q_cmd") if name in doc}
+    n = len(signals["q"].columns)
+    for name, sig in signals.items():
+        if name != "time" and len(sig.columns) != n:
+            raise DataError("joint count differs from [q]", source=path,
+                            field=f"{name}.columns", value=list(sig.columns),
+                            expected=f"{n} columns")
+    delimiter = doc.get("delimiter", ",")
+    skip = doc.get("skip_rows", 0)
+    drop_abs = doc.get("drop_abs_above")
+    if not isinstance(delimiter, str) or len(delimiter) != 1:
+        raise DataError("malformed", source=path, field="delimiter", value=delimiter,
+                        expected="one character")
+    if isinstance(skip, bool) or not isinstance(skip, int) or skip < 0:
+        raise DataError("malformed", source=path, field="skip_rows", value=skip,
+                        expected="an integer >= 0")
+    if drop_abs is not None and (isinstance(drop_abs, bool) or not isinstance(
+            drop_abs, int | float) or not drop_abs > 0):
+        raise DataError("malformed", source=path, field="drop_abs_above", value=drop_abs,
+                        expected="a number > 0")
+    return ColumnMap(
+        path=path, delimiter=delimiter, skip_rows=skip,
+        drop_abs_above=None if drop_abs is None else float(drop_abs),
+        drop_non_increasing_time=bool(doc.get("drop_non_increasing_time", False)),
+        signals=signals,
+    )

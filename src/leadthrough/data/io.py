@@ -1,0 +1,235 @@
+"""Read and write recordings: our CSV (header with units), Parquet, and any log with a column map.
+
+Our CSV::
+
+    # leadthrough recording
+    # robot: er20
+    time [s],q1 [rad],...,q6 [rad],current1 [A],...,current6 [A],q_cmd1 [rad],...
+
+Parquet files use the same column names and keep the robot name in the schema metadata.
+Writing is atomic (temporary file, then rename). Rows with non-finite values are dropped on
+load and counted in a :class:`~leadthrough.errors.DataWarning`; anything else malformed raises a
+:class:`~leadthrough.errors.DataError` naming the file and column.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+
+from leadthrough.data.column_map import ColumnMap, parse_column_map
+from leadthrough.data.recording import Recording
+from leadthrough.errors import DataError, DataWarning
+from leadthrough.fileio import atomic_write
+
+__all__ = ["load_recording", "save_recording"]
+
+Array = NDArray[np.float64]
+_UNIT = {"time": "s", "q": "rad", "current": "A", "torque": "N·m", "q_cmd": "rad"}
+_HEADER = re.compile(r"^(time|q_cmd|q|current|torque)(\d*) \[(.+)\]$")
+
+
+def _columns(rec: Recording) -> dict[str, Array]:
+    cols: dict[str, Array] = {"time [s]": rec.time}
+    for name in ("q", "current", "torque", "q_cmd"):
+        v = getattr(rec, name)
+        if v is None:
+            continue
+        for j in range(rec.n):
+            cols[f"{name}{j + 1} [{_UNIT[name]}]"] = v[:, j]
+    return cols
+
+
+def save_recording(rec: Recording, path: str | Path) -> Path:
+    """Write a recording as CSV or Parquet (by suffix), atomically.
+
+    Raises:
+        DataError: Unknown suffix or unwritable folder.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    cols = _columns(rec)
+    if suffix == ".csv":
+        def write_csv(tmp: Path) -> None:
+            header = ",".join(cols)
+            data = np.column_stack(list(cols.values()))
+            with tmp.open("w", encoding="utf-8") as f:
+                f.write("# leadthrough recording\n")
+                f.write(f"# robot: {rec.robot or ''}\n")
+                np.savetxt(f, data, delimiter=",", header=header, comments="", fmt="%.17g")
+        return atomic_write(path, write_csv)
+    if suffix in (".parquet", ".pq"):
+        table = pa.table(cols).replace_schema_metadata(
+            {"leadthrough.robot": rec.robot or "", "leadthrough.kind": "recording"})
+        return atomic_write(path, lambda tmp: pq.write_table(table, tmp))
+    raise DataError("unknown recording format", source=path, field="suffix", value=suffix,
+                    expected=".csv or .parquet")
+
+
+def _assemble(columns: dict[str, Array], source: str, robot: str | None) -> Recording:
+    """Build a Recording from named columns, dropping rows with non-finite values."""
+    groups: dict[str, dict[int, Array]] = {}
+    for name, values in columns.items():
+        m = _HEADER.match(name.strip())
+        if m is None:
+            raise DataError("unknown column", source=source, field=name,
+                            expected="time [s], qJ [rad], currentJ [A], torqueJ [N·m], "
+                                     "q_cmdJ [rad]")
+        sig, idx, unit = m.group(1), m.group(2), m.group(3)
+        if unit != _UNIT[sig]:
+            raise DataError("unexpected unit", source=source, field=name, value=unit,
+                            expected=f"[{_UNIT[sig]}] (use a column map to convert units)")
+        groups.setdefault(sig, {})[int(idx) if idx else 0] = np.asarray(values, dtype=float)
+    if "time" not in groups or "q" not in groups:
+        raise DataError("missing columns", source=source, field="time/q",
+                        expected="'time [s]' and 'q1 [rad]'...")
+    arrays: dict[str, Array] = {"time": groups["time"][0]}
+    for sig in ("q", "current", "torque", "q_cmd"):
+        if sig in groups:
+            idx = sorted(groups[sig])
+            if idx != list(range(1, len(idx) + 1)):
+                raise DataError("joint columns are not numbered 1..n", source=source,
+                                field=sig, value=idx, expected="1, 2, ..., n")
+            arrays[sig] = np.column_stack([groups[sig][j] for j in idx])
+    return _finite_recording(arrays, source, robot)
+
+
+def _finite_recording(arrays: dict[str, Array], source: str, robot: str | None,
+                      extra_bad: NDArray[np.bool_] | None = None, why: str = "") -> Recording:
+    rows = arrays["time"].shape[0]
+    good = np.ones(rows, dtype=bool)
+    for v in arrays.values():
+        good &= np.isfinite(v.reshape(rows, -1)).all(axis=1)
+    dropped = int(rows - good.sum())
+    if extra_bad is not None:
+        good &= ~extra_bad
+    total = int(rows - good.sum())
+    if total:
+        detail = f"{dropped} with non-finite values" + (f", {total - dropped} {why}" if why
+                                                         and total > dropped else "")
+        warnings.warn(f"{source}: dropped {total} of {rows} rows ({detail})", DataWarning,
+                      stacklevel=3)
+    cut = {k: v[good] for k, v in arrays.items()}
+    return Recording(time=cut["time"], q=cut["q"], current=cut.get("current"),
+                     torque=cut.get("torque"), q_cmd=cut.get("q_cmd"), robot=robot,
+                     source=source)
+
+
+def _read_csv_table(path: Path, delimiter: str, skip_rows: int, header: bool) -> pa.Table:
+    invalid = [0]
+
+    def skip_invalid(row: object) -> str:
+        invalid[0] += 1
+        return "skip"
+
+    try:
+        table = pacsv.read_csv(
+            path,
+            read_options=pacsv.ReadOptions(skip_rows=skip_rows,
+                                           autogenerate_column_names=not header),
+            parse_options=pacsv.ParseOptions(delimiter=delimiter,
+                                             invalid_row_handler=skip_invalid),
+            convert_options=pacsv.ConvertOptions(strings_can_be_null=True),
+        )
+    except (pa.ArrowInvalid, OSError, UnicodeDecodeError) as e:
+        raise DataError(f"cannot parse CSV: {e}", source=path) from e
+    if invalid[0]:
+        warnings.warn(f"{path}: dropped {invalid[0]} malformed rows (wrong field count)",
+                      DataWarning, stacklevel=3)
+    return table
+
+
+def _to_float(table: pa.Table, source: Path) -> dict[str, Array]:
+    out: dict[str, Array] = {}
+    for name in table.column_names:
+        col = table.column(name)
+        try:
+            out[name] = col.cast(pa.float64()).to_numpy(zero_copy_only=False)
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError) as e:
+            raise DataError("column is not numeric", source=source, field=name,
+                            expected="numbers") from e
+    return out
+
+
+def _load_native_csv(path: Path) -> Recording:
+    robot = None
+    skip = 0
+    with path.open("r", encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if not line.startswith("#"):
+                break
+            skip += 1
+            if line.startswith("# robot:"):
+                robot = line.split(":", 1)[1].strip() or None
+    table = _read_csv_table(path, ",", skip, header=True)
+    return _assemble(_to_float(table, path), str(path), robot)
+
+
+def _load_parquet(path: Path) -> Recording:
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowInvalid, OSError) as e:
+        raise DataError(f"not a readable Parquet file: {e}", source=path) from e
+    meta = table.schema.metadata or {}
+    robot = meta.get(b"leadthrough.robot", b"").decode() or None
+    return _assemble(_to_float(table, path), str(path), robot)
+
+
+def _load_mapped(path: Path, cmap: ColumnMap) -> Recording:
+    table = _read_csv_table(path, cmap.delimiter, cmap.skip_rows, header=False)
+    if table.num_columns <= cmap.max_column:
+        raise DataError("log has fewer columns than the column map uses", source=path,
+                        field="columns", value=table.num_columns,
+                        expected=f"more than {cmap.max_column} (see {cmap.path})")
+    cols = _to_float(table, path)
+    raw = np.column_stack([cols[name] for name in table.column_names])
+    arrays = {name: sig.extract(raw) for name, sig in cmap.signals.items()}
+    arrays["time"] = arrays["time"][:, 0]
+    bad = np.zeros(raw.shape[0], dtype=bool)
+    reasons = []
+    if cmap.drop_abs_above is not None:
+        with np.errstate(invalid="ignore"):
+            bad |= np.nanmax(np.abs(raw), axis=1) > cmap.drop_abs_above
+        reasons.append(f"|value| > {cmap.drop_abs_above:g}")
+    if cmap.drop_non_increasing_time:
+        t = arrays["time"]
+        finite = np.isfinite(t) & ~bad
+        running = np.maximum.accumulate(np.where(finite, t, -np.inf))
+        prev = np.concatenate([[-np.inf], running[:-1]])
+        bad |= finite & (t <= prev)
+        reasons.append("non-increasing time")
+    return _finite_recording(arrays, str(path), None, bad, " or ".join(reasons))
+
+
+def load_recording(path: str | Path, columns: str | Path | None = None) -> Recording:
+    """Load a recording.
+
+    Args:
+        path: Our CSV, a Parquet file, or any delimited log when ``columns`` is given.
+        columns: Column-map TOML for logs in a controller's own format.
+
+    Returns:
+        The validated recording.
+
+    Raises:
+        DataError: Missing or malformed file, or columns that do not fit.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("recording not found", source=path, expected="an existing file")
+    if columns is not None:
+        return _load_mapped(path, parse_column_map(columns))
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return _load_native_csv(path)
+    if suffix in (".parquet", ".pq"):
+        return _load_parquet(path)
+    raise DataError("unknown recording format", source=path, field="suffix", value=suffix,
+                    expected=".csv or .parquet, or pass a column map (--columns map.toml)")
