@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 
 from leadthrough import __version__
-from leadthrough.cli import demo_cmd, robots_cmd
+from leadthrough.cli import calibration_cmds, demo_cmd, robots_cmd
 from leadthrough.errors import LeadthroughError
 
 __all__ = ["build_parser", "main"]
@@ -20,6 +20,10 @@ _EPILOG = """examples:
   leadthrough demo                      run the whole pipeline on the simulated ER20-class robot
   leadthrough robots                    list built-in robots with their base-parameter counts
   leadthrough robots --robot my.toml    check your own robot (URDF + drive TOML)
+  leadthrough excite --robot er20 -o traj.csv
+  leadthrough record --robot er20 --trajectory traj.csv -o rec.parquet
+  leadthrough identify rec.parquet --robot er20 --method proposed -o params.toml
+  leadthrough validate params.toml heldout.parquet --robot er20
 """
 
 
@@ -44,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"leadthrough {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     robots_cmd.register(sub)
+    calibration_cmds.register(sub)
     demo_cmd.register(sub)
     return parser
 

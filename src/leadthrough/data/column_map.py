@@ -149,7 +149,7 @@ def parse_column_map(path: str | Path) -> ColumnMap:
     if ("current" in doc) == ("torque" in doc):
         raise DataError("needs exactly one of [current] and [torque]", source=path,
                         field="current/torque", expected="one signal table")
-    signals = {name: _signal(path, name, doc[name])
+    signals: dict[str, Signal] = {name: _signal(path, name, doc[name])
                for name in ("time", "q", "current", "torque", "q_cmd") if name in doc}
     n = len(signals["q"].columns)
     for name, sig in signals.items():

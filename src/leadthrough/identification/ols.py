@@ -24,9 +24,9 @@ def _friction_columns(qd: Array, kinds: tuple[str, ...]) -> Array:
     N, n = qd.shape
     idx = np.arange(n)
     out = np.zeros((N, n, len(kinds) * n))
-    funcs = {"coulomb": np.sign, "viscous": lambda v: v, "cbrt": np.cbrt}
+    columns = {"coulomb": np.sign(qd), "viscous": qd, "cbrt": np.cbrt(qd)}
     for k, kind in enumerate(kinds):
-        out[:, idx, k * n + idx] = funcs[kind](qd)
+        out[:, idx, k * n + idx] = columns[kind]
     return out
 
 

@@ -136,7 +136,7 @@ class _Problem:
         lo: list[float] = []
         hi: list[float] = []
         x0: list[float] = []
-        self.link_free: list[Array] = []
+        self.link_free: list[NDArray[np.intp]] = []
         self.phys_nom = np.zeros((n, 10))
         col_norm = np.linalg.norm(obs.K[sel].reshape(-1, 10 * n), axis=0)
         b = cfg.bound
@@ -238,7 +238,7 @@ class _Problem:
         return out
 
     # ---------------------------------------------------------------------------- objective
-    def J(self, X: Array) -> Array:
+    def objective(self, X: Array) -> Array:
         """Objective for a population X (P, d) → (P,)."""
         X = np.atleast_2d(X)
         self.evaluations += X.shape[0]
@@ -259,12 +259,14 @@ class _Problem:
         std = np.sqrt(np.maximum(sq - mean**2, 0.0))
         J = np.abs(mean).sum(axis=1) + self.cfg.k_omega * std.sum(axis=1)
         # Step 5: inertia about the CoM positive definite (penalty, scaled per link).
-        I = np.empty((X.shape[0], self.n, 3, 3))
-        I[..., 0, 0], I[..., 1, 1], I[..., 2, 2] = phys[..., 4], phys[..., 6], phys[..., 9]
-        I[..., 0, 1] = I[..., 1, 0] = phys[..., 5]
-        I[..., 0, 2] = I[..., 2, 0] = phys[..., 7]
-        I[..., 1, 2] = I[..., 2, 1] = phys[..., 8]
-        lam = np.linalg.eigvalsh(I)[..., 0] / self.i_scale
+        inertia = np.empty((X.shape[0], self.n, 3, 3))
+        inertia[..., 0, 0] = phys[..., 4]
+        inertia[..., 1, 1] = phys[..., 6]
+        inertia[..., 2, 2] = phys[..., 9]
+        inertia[..., 0, 1] = inertia[..., 1, 0] = phys[..., 5]
+        inertia[..., 0, 2] = inertia[..., 2, 0] = phys[..., 7]
+        inertia[..., 1, 2] = inertia[..., 2, 1] = phys[..., 8]
+        lam = np.linalg.eigvalsh(inertia)[..., 0] / self.i_scale
         violation = np.maximum(1e-4 - lam, 0.0).sum(axis=1)
         return np.asarray(J + 1e3 * J.max() * violation)
 
@@ -336,8 +338,8 @@ class _Problem:
         pos = 0
         for k, free in enumerate(self.link_free):
             p = phys[k]
-            I = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
-            lam, vec = np.linalg.eigh(I)
+            inertia_k = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
+            lam, vec = np.linalg.eigh(inertia_k)
             viol = 1e-4 - lam[0] / self.i_scale[k]
             if viol > 0:
                 value += pen_w * viol
@@ -392,7 +394,7 @@ def identify_proposed(
 
     unit_bounds = [(0.0, 1.0)] * d
     de = scipy.optimize.differential_evolution(
-        lambda U: prob.J(prob.from_unit(U.T)), bounds=unit_bounds,
+        lambda U: prob.objective(prob.from_unit(U.T)), bounds=unit_bounds,
         maxiter=cfg.generations, init=init, vectorized=True, updating="deferred",
         polish=False, tol=0.0, seed=cfg.seed, mutation=(0.5, 1.0), recombination=0.9,
         callback=callback)
@@ -410,13 +412,13 @@ def identify_proposed(
             prob.unit_value_and_gradient, u, jac=True, method="L-BFGS-B", bounds=unit_bounds,
             callback=cb, options={"maxiter": cfg.polish_iterations, "ftol": 1e-12,
                                   "gtol": 1e-10})
-        if prob.J(prob.from_unit(res.x[None, :]))[0] <= prob.J(prob.from_unit(u[None, :]))[0]:
+        if prob.objective(prob.from_unit(res.x[None, :]))[0] <= prob.objective(prob.from_unit(u[None, :]))[0]:
             u = np.asarray(res.x)
         polish_it = int(res.nit)
     x = prob.from_unit(u[None, :])[0]
     if progress is not None:
         progress(total, total)
     return ProposedOutcome(
-        params=prob.params(x), J=float(prob.J(x[None, :])[0]), generations=int(de.nit),
+        params=prob.params(x), J=float(prob.objective(x[None, :])[0]), generations=int(de.nit),
         polish_iterations=polish_it, evaluations=prob.evaluations,
         runtime_s=time.perf_counter() - t0)

@@ -1,0 +1,250 @@
+"""Calibration commands: ``excite``, ``record``, ``identify``, ``validate``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leadthrough.data.io import load_recording, save_recording
+from leadthrough.data.preprocess import PreprocessConfig
+from leadthrough.data.recording import Recording
+from leadthrough.errors import DataError
+from leadthrough.excitation.design import ExcitationConfig, design_excitation
+from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
+from leadthrough.identification.api import METHODS, IdentifyConfig, evaluate, identify
+from leadthrough.identification.metrics import ResidualStats
+from leadthrough.identification.params_file import load_params, save_params
+from leadthrough.identification.proposed import ProposedConfig
+from leadthrough.progress import Progress
+from leadthrough.robot.description import Robot, load_robot
+from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.robot import SimConfig, SimRobot
+from leadthrough.sim.run import run_trajectory
+
+__all__ = ["register", "stats_json"]
+
+_RAW = argparse.RawDescriptionHelpFormatter
+
+
+def register(sub: Any) -> None:
+    """Add the four subcommands."""
+    p = sub.add_parser("excite", help="design an exciting trajectory", formatter_class=_RAW,
+                       description="Optimise a Fourier excitation trajectory (rest to rest) for "
+                                   "identification: minimal condition number within joint, "
+                                   "speed, acceleration, torque and floor limits.",
+                       epilog="example: leadthrough excite --robot er20 --duration 60 -o traj.csv")
+    p.add_argument("--robot", default="er20", help="built-in name or robot TOML")
+    p.add_argument("--duration", type=float, default=60.0, help="length [s], whole periods")
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start")
+    p.add_argument("--harmonics", type=int, default=5)
+    p.add_argument("--base-frequency", type=float, default=0.1, help="f0 [Hz]")
+    p.add_argument("--starts", type=int, default=4, help="random starts")
+    p.add_argument("--floor", type=float, default=0.3, help="min TCP height [m]")
+    p.add_argument("-o", "--output", type=Path, required=True, help="trajectory CSV")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run_excite)
+
+    p = sub.add_parser("record", help="run a trajectory on the simulated robot",
+                       formatter_class=_RAW,
+                       description="Run a joint trajectory on the simulated robot (position "
+                                   "mode) and log q and motor current at 1 kHz.",
+                       epilog="example: leadthrough record --robot er20 --trajectory traj.csv "
+                              "-o rec.parquet")
+    p.add_argument("--robot", default="er20")
+    p.add_argument("--trajectory", type=Path, required=True, help="trajectory CSV")
+    p.add_argument("--seed", type=int, default=0, help="robot instance (true parameters)")
+    p.add_argument("--run", type=int, default=0, help="recording number (sensor noise)")
+    p.add_argument("--payload-mass", type=float, default=None, help="payload at the TCP [kg]")
+    p.add_argument("--payload-com", type=float, nargs=3, default=(0.0, 0.0, 0.05),
+                   metavar=("X", "Y", "Z"), help="payload CoM in the TCP frame [m]")
+    p.add_argument("-o", "--output", type=Path, required=True, help="recording .parquet/.csv")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_record)
+
+    p = sub.add_parser("identify", help="calibrate the dynamic model from a recording",
+                       formatter_class=_RAW,
+                       description="Identify link, friction and rotor parameters from an "
+                                   f"excitation recording. Methods: {', '.join(METHODS)}.",
+                       epilog="example: leadthrough identify rec.parquet --robot er20 "
+                              "--method proposed -o params.toml --json")
+    p.add_argument("recording", type=Path)
+    p.add_argument("--robot", default="er20")
+    p.add_argument("--method", choices=METHODS, default="proposed")
+    p.add_argument("--columns", type=Path, default=None, help="column map for a raw log")
+    p.add_argument("--seed", type=int, default=0, help="seed of the proposed search")
+    _preprocess_args(p)
+    p.add_argument("-o", "--output", type=Path, required=True, help="params TOML")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_identify)
+
+    p = sub.add_parser("validate", help="check identified parameters on a held-out recording",
+                       formatter_class=_RAW,
+                       description="J, per-joint mean/std and relative torque error of a params "
+                                   "file on a recording.",
+                       epilog="example: leadthrough validate params.toml heldout.parquet "
+                              "--robot er20 --json")
+    p.add_argument("params", type=Path)
+    p.add_argument("recording", type=Path)
+    p.add_argument("--robot", default="er20")
+    p.add_argument("--columns", type=Path, default=None)
+    _preprocess_args(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_validate)
+
+
+def _preprocess_args(p: argparse.ArgumentParser) -> None:
+    d = PreprocessConfig()
+    p.add_argument("--cutoff", type=float, default=d.position_cutoff_hz,
+                   help=f"low-pass cut-off for q and torque [Hz] (default {d.position_cutoff_hz})")
+    p.add_argument("--standstill", type=float, default=d.standstill_velocity,
+                   help="drop joint samples slower than this [rad/s] "
+                        f"(default {d.standstill_velocity})")
+
+
+def _identify_config(args: argparse.Namespace) -> IdentifyConfig:
+    pre = PreprocessConfig(position_cutoff_hz=args.cutoff, torque_cutoff_hz=args.cutoff,
+                           standstill_velocity=args.standstill)
+    return IdentifyConfig(preprocess=pre, proposed=ProposedConfig(seed=getattr(args, "seed", 0)))
+
+
+def stats_json(robot: Robot, stats: ResidualStats) -> dict[str, Any]:
+    """Residual statistics as JSON-ready dict."""
+    return {
+        "J": stats.J,
+        "rel_error_pct": stats.rel_error_pct,
+        "per_joint": [
+            {"joint": jn, "mean": float(stats.mean[k]), "std": float(stats.std[k]),
+             "std_pct_max": float(stats.std_pct_max[k]), "rms": float(stats.rms[k])}
+            for k, jn in enumerate(robot.joint_names)
+        ],
+    }
+
+
+def _print_stats(robot: Robot, stats: ResidualStats, title: str) -> None:
+    print(title)
+    print(f"  {'joint':<22} {'mean [N·m]':>11} {'std [N·m]':>10} {'std/max [%]':>12}")
+    for k, jn in enumerate(robot.joint_names):
+        print(f"  {jn:<22} {stats.mean[k]:>11.3f} {stats.std[k]:>10.3f} "
+              f"{stats.std_pct_max[k]:>12.2f}")
+    print(f"  J = {stats.J:.3f} N·m, relative torque error {stats.rel_error_pct:.2f} %")
+
+
+def _load(args: argparse.Namespace, robot: Robot) -> Recording:
+    rec = load_recording(args.recording, args.columns)
+    rec.check_robot(robot)
+    return rec
+
+
+def run_excite(args: argparse.Namespace) -> int:
+    """Execute ``leadthrough excite``."""
+    robot = load_robot(args.robot)
+    cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
+                           starts=args.starts, seed=args.seed, floor_height=args.floor)
+    period = 1.0 / cfg.base_frequency
+    periods = args.duration / period
+    if not (args.duration > 0 and math.isclose(periods, round(periods), abs_tol=1e-9)):
+        raise DataError("duration must be a whole number of periods", field="--duration",
+                        value=args.duration,
+                        expected=f"a positive multiple of 1/f0 = {period:g} s")
+    bar = Progress("designing excitation", cfg.starts)
+    res = design_excitation(robot, cfg, progress=bar)
+    bar.close(f"cond = {res.condition_number:.1f}")
+    samples = res.trajectory.at_rate(args.duration, 1000.0)
+    save_trajectory(args.output, samples, robot.name,
+                    {"condition_number": f"{res.condition_number:.6g}",
+                     "harmonics": str(cfg.harmonics), "base_frequency": f"{cfg.base_frequency:g}"})
+    out = {"robot": robot.name, "condition_number": res.condition_number,
+           "start_conditions": list(res.start_conditions),
+           "max_velocity_ratio": res.max_velocity_ratio,
+           "max_acceleration_ratio": res.max_acceleration_ratio,
+           "max_torque_ratio": res.max_torque_ratio, "min_tcp_height_m": res.min_tcp_height,
+           "duration_s": args.duration, "runtime_s": res.runtime_s, "output": str(args.output)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"condition number {res.condition_number:.1f} (starts: "
+              f"{', '.join(f'{c:.1f}' for c in res.start_conditions)}); max speed "
+              f"{100 * res.max_velocity_ratio:.0f} %, acceleration "
+              f"{100 * res.max_acceleration_ratio:.0f} %, torque {100 * res.max_torque_ratio:.0f} %"
+              f" of limits; TCP >= {res.min_tcp_height:.2f} m; written to {args.output}")
+    return 0
+
+
+def run_record(args: argparse.Namespace) -> int:
+    """Execute ``leadthrough record``."""
+    robot = load_robot(args.robot)
+    traj, traj_robot = load_trajectory(args.trajectory)
+    if traj_robot is not None and traj_robot != robot.name:
+        raise DataError("trajectory was designed for another robot", source=args.trajectory,
+                        field="robot", value=traj_robot, expected=f"'{robot.name}'")
+    if traj.q.shape[1] != robot.n:
+        raise DataError("joint count does not match the robot", source=args.trajectory,
+                        field="q", value=traj.q.shape[1], expected=f"{robot.n}")
+    if np.any(traj.q < robot.lower_limits) or np.any(traj.q > robot.upper_limits):
+        raise DataError("trajectory leaves the joint limits", source=args.trajectory,
+                        field="q", expected="positions within the robot's limits")
+    config = SimConfig(seed=args.seed, run=args.run)
+    t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
+    q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
+    qd_cmd = np.column_stack([np.interp(t, traj.time, traj.qd[:, j]) for j in range(robot.n)])
+    payload = None if args.payload_mass is None else Payload(args.payload_mass,
+                                                             tuple(args.payload_com))
+    sim = SimRobot(robot, config, payload=payload, q0=q_cmd[0])
+    bar = Progress("recording", t.size)
+    log = run_trajectory(sim, q_cmd, qd_cmd, progress=bar)
+    bar.close()
+    rec = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
+                    robot=robot.name)
+    save_recording(rec, args.output)
+    out = {"robot": robot.name, "samples": rec.samples, "duration_s": rec.duration,
+           "seed": args.seed, "run": args.run, "payload_mass_kg": args.payload_mass,
+           "max_tracking_error_rad": float(np.max(np.abs(log.truth.q - q_cmd))),
+           "output": str(args.output)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"recorded {rec.duration:.1f} s ({rec.samples} samples) to {args.output}")
+    return 0
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    """Execute ``leadthrough identify``."""
+    robot = load_robot(args.robot)
+    rec = _load(args, robot)
+    bar = Progress(f"identifying ({args.method})", 1)
+    result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
+    bar.close(f"J = {result.J:.3f}")
+    save_params(args.output, robot, args.method, result.params, result.stats)
+    if args.json:
+        out = {"method": result.method, "robot": robot.name, **stats_json(robot, result.stats),
+               "runtime_s": result.runtime_s, "iterations": result.iterations,
+               "samples": result.samples, "output": str(args.output),
+               "parameters": [p._asdict() for p in result.named_parameters(robot)]}
+        print(json.dumps(out, indent=2))
+    else:
+        _print_stats(robot, result.stats, f"{args.method} on {args.recording} "
+                                          f"({result.runtime_s:.1f} s, {result.iterations} it.)")
+        print(f"parameters written to {args.output}")
+    return 0
+
+
+def run_validate(args: argparse.Namespace) -> int:
+    """Execute ``leadthrough validate``."""
+    import time
+
+    robot = load_robot(args.robot)
+    pf = load_params(args.params, robot)
+    rec = _load(args, robot)
+    t0 = time.perf_counter()
+    stats = evaluate(pf.params, robot, rec, _identify_config(args))
+    if args.json:
+        print(json.dumps({"method": pf.method, "robot": robot.name, **stats_json(robot, stats),
+                          "runtime_s": time.perf_counter() - t0}, indent=2))
+    else:
+        _print_stats(robot, stats, f"{pf.method} parameters on {args.recording}")
+    return 0

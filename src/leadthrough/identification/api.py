@@ -1,0 +1,207 @@
+"""One interface for every calibration method.
+
+    result = identify(recording, robot, "proposed")
+    report = evaluate(result.params, robot, held_out_recording)
+
+Methods: ``ols-cv`` (ref. [7]), ``ols-cbrt`` (ref. [22]) and ``proposed`` (the paper's).
+All return an :class:`IdentificationResult` with named parameters and units, the per-joint
+residual statistics, J, the runtime and the iteration count.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from leadthrough.data.preprocess import PreprocessConfig, ProcessedData, preprocess
+from leadthrough.data.recording import Recording
+from leadthrough.dynamics.model import DriveModelParameters, FrictionModel, model_torque
+from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES, LINK_PARAMETER_UNITS
+from leadthrough.errors import DataError
+from leadthrough.identification.metrics import ResidualStats, residual_stats
+from leadthrough.identification.observations import build_observations
+from leadthrough.identification.ols import identify_ols_cbrt, identify_ols_cv
+from leadthrough.identification.proposed import ProposedConfig, identify_proposed
+from leadthrough.robot.description import Robot
+
+__all__ = [
+    "METHODS",
+    "IdentificationResult",
+    "IdentifyConfig",
+    "NamedParameter",
+    "evaluate",
+    "identify",
+    "named_parameters",
+]
+
+METHODS: tuple[str, ...] = ("ols-cv", "ols-cbrt", "proposed")
+
+
+class NamedParameter(NamedTuple):
+    """One identified parameter."""
+
+    name: str
+    value: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class IdentifyConfig:
+    """Settings shared by all methods.
+
+    Attributes:
+        preprocess: Filtering, differentiation and standstill removal.
+        k_omega: K_ω of J (eq. 26).
+        proposed: Settings of the paper's method.
+    """
+
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    k_omega: float = 1.0
+    proposed: ProposedConfig = field(default_factory=ProposedConfig)
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """What every method returns.
+
+    Attributes:
+        robot: Robot name.
+        method: Method name.
+        params: Identified model parameters.
+        stats: Residual statistics on the identification data (τ_ω = τ_measured − τ_model).
+        runtime_s: Wall time of the identification, pre-processing included [s].
+        iterations: Iterations of the solver (1 for least squares).
+        samples: Samples used after pre-processing.
+    """
+
+    robot: str
+    method: str
+    params: DriveModelParameters
+    stats: ResidualStats
+    runtime_s: float
+    iterations: int
+    samples: int
+
+    @property
+    def J(self) -> float:  # noqa: N802 (the paper's symbol)
+        """The objective J on the identification data [N·m]."""
+        return self.stats.J
+
+    def named_parameters(self, robot: Robot) -> list[NamedParameter]:
+        """All parameters with names and units."""
+        return named_parameters(robot, self.params)
+
+
+def named_parameters(robot: Robot, params: DriveModelParameters) -> list[NamedParameter]:
+    """Named parameters with units of a model (links, rotor inertia, friction)."""
+    out: list[NamedParameter] = []
+    for k, jn in enumerate(robot.joint_names):
+        for i, (p, u) in enumerate(zip(LINK_PARAMETER_NAMES, LINK_PARAMETER_UNITS, strict=True)):
+            out.append(NamedParameter(f"{jn}.{p}", float(params.phi[10 * k + i]), u))
+    for k, jn in enumerate(robot.joint_names):
+        out.append(NamedParameter(f"{jn}.rotor_inertia", float(params.rotor_inertia[k]),
+                                  "kg·m²"))
+        if params.friction_model is FrictionModel.STRIBECK and params.stribeck is not None:
+            st = params.stribeck
+            for name, arr, unit in (("f1", st.f1, "N·m"), ("f2", st.f2, "N·m"),
+                                    ("qd_sm", st.qd_sm, "rad/s (motor)"), ("f3", st.f3, "N·m"),
+                                    ("qd_sg", st.qd_sg, "rad/s"), ("f4", st.f4, "N·m·s/rad")):
+                out.append(NamedParameter(f"{jn}.{name}", float(arr[k]), unit))
+        else:
+            out.append(NamedParameter(f"{jn}.coulomb", float(params.coulomb[k]), "N·m"))
+            out.append(NamedParameter(f"{jn}.viscous", float(params.viscous[k]), "N·m·s/rad"))
+            if params.friction_model is FrictionModel.CBRT:
+                out.append(NamedParameter(f"{jn}.cbrt", float(params.cbrt[k]),
+                                          "N·m·(s/rad)^(1/3)"))
+    return out
+
+
+def _processed(data: Recording | ProcessedData, robot: Robot, cfg: IdentifyConfig
+               ) -> ProcessedData:
+    if isinstance(data, ProcessedData):
+        return data
+    data.check_robot(robot)
+    return preprocess(data, robot, cfg.preprocess)
+
+
+def identify(
+    data: Recording | ProcessedData,
+    robot: Robot,
+    method: str,
+    config: IdentifyConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> IdentificationResult:
+    """Calibrate the robot's model from a recording with no external force.
+
+    Args:
+        data: The excitation recording (or already processed data).
+        robot: The robot.
+        method: ``ols-cv``, ``ols-cbrt`` or ``proposed``.
+        config: Settings.
+        progress: Progress callback for long methods, ``progress(done, total)``.
+
+    Returns:
+        The identified model and its figures on the identification data.
+
+    Raises:
+        DataError: Unknown method, data that do not fit the robot, or data that do not excite
+            every parameter.
+    """
+    if method not in METHODS:
+        raise DataError("unknown method", field="method", value=method,
+                        expected=f"one of {', '.join(METHODS)}")
+    cfg = config if config is not None else IdentifyConfig()
+    t0 = time.perf_counter()
+    processed = _processed(data, robot, cfg)
+    obs = build_observations(robot, processed)
+    iterations = 1
+    if method == "ols-cv":
+        params = identify_ols_cv(obs)
+    elif method == "ols-cbrt":
+        params = identify_ols_cbrt(obs)
+    else:
+        pcfg = cfg.proposed
+        if pcfg.k_omega != cfg.k_omega:
+            pcfg = ProposedConfig(**{**pcfg.__dict__, "k_omega": cfg.k_omega})
+        outcome = identify_proposed(obs, pcfg, progress)
+        params = outcome.params
+        iterations = outcome.generations + outcome.polish_iterations
+    stats = _stats(robot, params, processed, cfg.k_omega)
+    return IdentificationResult(
+        robot=robot.name, method=method, params=params, stats=stats,
+        runtime_s=time.perf_counter() - t0, iterations=iterations, samples=processed.samples)
+
+
+def _stats(robot: Robot, params: DriveModelParameters, data: ProcessedData, k_omega: float
+           ) -> ResidualStats:
+    tau_model = model_torque(robot, params, data.q, data.qd, data.qdd)
+    return residual_stats(data.torque, tau_model, data.moving, robot.max_torque, k_omega)
+
+
+def evaluate(
+    params: DriveModelParameters,
+    robot: Robot,
+    data: Recording | ProcessedData,
+    config: IdentifyConfig | None = None,
+) -> ResidualStats:
+    """Residual statistics of identified parameters on (held-out) data.
+
+    Args:
+        params: Identified parameters.
+        robot: The robot.
+        data: Recording or processed data.
+        config: Pre-processing and K_ω.
+
+    Returns:
+        Per-joint mean/std, std as % of max torque, relative error and J.
+    """
+    cfg = config if config is not None else IdentifyConfig()
+    processed = _processed(data, robot, cfg)
+    if not np.all(processed.moving.any(axis=0)):
+        raise DataError("some joint never moves in the validation data", source=processed.source,
+                        field="q", expected="a recording that moves every joint")
+    return _stats(robot, params, processed, cfg.k_omega)

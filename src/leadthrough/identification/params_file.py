@@ -1,0 +1,211 @@
+"""Params files: identified model parameters as TOML, tied to the robot they belong to.
+
+Layout::
+
+    [meta]
+    robot = "er20"                   # checked against the robot on load
+    method = "proposed"
+    friction_model = "stribeck"      # stribeck | coulomb-viscous | cbrt
+    leadthrough_version = "0.1.0"
+    J = 38.9                          # on the identification data [N·m]
+    k_omega = 1.0
+
+    [noise]                          # residual τ_ω on the identification data (eq. 26, 30, 36)
+    mean = [...]                     # τ̄_ω per joint [N·m]
+    std = [...]                      # σ per joint [N·m]
+
+    [joints.joint_1]                 # drive parameters
+    rotor_inertia = 8.6              # M_j [kg·m²]
+    f1 = 40.0                        # ... per friction model
+
+    [links.joint_1]                  # standard link parameters (regressor order) [kg, kg·m, kg·m²]
+    m = 66.0
+    ...
+
+Files are written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough import __version__
+from leadthrough.dynamics.friction import StribeckParameters
+from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
+from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
+from leadthrough.errors import DataError
+from leadthrough.fileio import atomic_write_text
+from leadthrough.identification.metrics import ResidualStats
+from leadthrough.robot.description import Robot
+
+__all__ = ["ParamsFile", "load_params", "save_params"]
+
+Array = NDArray[np.float64]
+_FRICTION_KEYS = {
+    FrictionModel.STRIBECK: ("f1", "f2", "qd_sm", "f3", "qd_sg", "f4"),
+    FrictionModel.COULOMB_VISCOUS: ("coulomb", "viscous"),
+    FrictionModel.CBRT: ("coulomb", "viscous", "cbrt"),
+}
+
+
+@dataclass(frozen=True)
+class ParamsFile:
+    """A loaded params file.
+
+    Attributes:
+        robot: Robot name it belongs to.
+        method: Identification method.
+        params: The model parameters.
+        noise_mean: τ̄_ω per joint [N·m], shape (n,).
+        noise_std: σ of τ_ω per joint [N·m], shape (n,).
+        J: J on the identification data [N·m].
+        path: The file.
+    """
+
+    robot: str
+    method: str
+    params: DriveModelParameters
+    noise_mean: Array
+    noise_std: Array
+    J: float
+    path: Path | None = None
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def save_params(
+    path: str | Path, robot: Robot, method: str, params: DriveModelParameters,
+    stats: ResidualStats,
+) -> Path:
+    """Write a params file atomically.
+
+    Args:
+        path: Output TOML file.
+        robot: The robot the parameters belong to.
+        method: Identification method.
+        params: Identified parameters.
+        stats: Residual statistics on the identification data (J, τ̄_ω, σ).
+
+    Returns:
+        The path written.
+    """
+    lines = [
+        "# leadthrough identified parameters",
+        "[meta]",
+        f'robot = "{robot.name}"',
+        f'method = "{method}"',
+        f'friction_model = "{params.friction_model.value}"',
+        f'leadthrough_version = "{__version__}"',
+        f"J = {_fmt(stats.J)}",
+        f"k_omega = {_fmt(stats.k_omega)}",
+        "",
+        "[noise]",
+        "mean = [" + ", ".join(_fmt(v) for v in stats.mean) + "]",
+        "std = [" + ", ".join(_fmt(v) for v in stats.std) + "]",
+    ]
+    keys = _FRICTION_KEYS[params.friction_model]
+    for k, jn in enumerate(robot.joint_names):
+        lines += ["", f"[joints.{jn}]", f"rotor_inertia = {_fmt(params.rotor_inertia[k])}"]
+        for key in keys:
+            if params.friction_model is FrictionModel.STRIBECK:
+                assert params.stribeck is not None
+                value = getattr(params.stribeck, key)[k]
+            else:
+                value = getattr(params, key)[k]
+            lines.append(f"{key} = {_fmt(value)}")
+    for k, jn in enumerate(robot.joint_names):
+        lines += ["", f"[links.{jn}]"]
+        lines += [f"{p} = {_fmt(params.phi[10 * k + i])}"
+                  for i, p in enumerate(LINK_PARAMETER_NAMES)]
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def _number(path: Path, field: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise DataError("not a finite number", source=path, field=field, value=value,
+                        expected="a finite number")
+    return float(value)
+
+
+def _table(path: Path, doc: dict[str, Any], key: str) -> dict[str, Any]:
+    t = doc.get(key)
+    if not isinstance(t, dict):
+        raise DataError("missing", source=path, field=key, expected=f"a [{key}] table")
+    return t
+
+
+def load_params(path: str | Path, robot: Robot) -> ParamsFile:
+    """Read a params file and check it belongs to ``robot``.
+
+    Raises:
+        DataError: Missing, malformed, or written for another robot.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("params file not found", source=path, expected="an existing TOML file")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"not valid TOML: {e}", source=path) from e
+    meta = _table(path, doc, "meta")
+    if meta.get("robot") != robot.name:
+        raise DataError("params file belongs to another robot", source=path, field="meta.robot",
+                        value=meta.get("robot"), expected=f"'{robot.name}' (identify this robot "
+                                                          "first, or pass the matching --robot)")
+    try:
+        model = FrictionModel(str(meta.get("friction_model")))
+    except ValueError as e:
+        raise DataError("unknown friction model", source=path, field="meta.friction_model",
+                        value=meta.get("friction_model"),
+                        expected=f"one of {[m.value for m in FrictionModel]}") from e
+    joints = _table(path, doc, "joints")
+    links = _table(path, doc, "links")
+    n = robot.n
+    keys = _FRICTION_KEYS[model]
+    fr = {key: np.zeros(n) for key in (*keys, "rotor_inertia")}
+    phi = np.zeros(10 * n)
+    for k, jn in enumerate(robot.joint_names):
+        jt = joints.get(jn)
+        lt = links.get(jn)
+        if not isinstance(jt, dict) or not isinstance(lt, dict):
+            raise DataError("missing joint", source=path, field=f"joints.{jn} / links.{jn}",
+                            expected="a table per joint of the robot")
+        for key in fr:
+            if key not in jt:
+                raise DataError("missing", source=path, field=f"joints.{jn}.{key}",
+                                expected="the field to be present")
+            fr[key][k] = _number(path, f"joints.{jn}.{key}", jt[key])
+        for i, p in enumerate(LINK_PARAMETER_NAMES):
+            if p not in lt:
+                raise DataError("missing", source=path, field=f"links.{jn}.{p}",
+                                expected="the field to be present")
+            phi[10 * k + i] = _number(path, f"links.{jn}.{p}", lt[p])
+    noise = _table(path, doc, "noise")
+    arrays = {}
+    for key in ("mean", "std"):
+        v = noise.get(key)
+        if not isinstance(v, list) or len(v) != n:
+            raise DataError("malformed", source=path, field=f"noise.{key}", value=v,
+                            expected=f"a list of {n} numbers")
+        arrays[key] = np.array([_number(path, f"noise.{key}", x) for x in v])
+    if model is FrictionModel.STRIBECK:
+        params = DriveModelParameters(
+            phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
+            stribeck=StribeckParameters(**{key: fr[key] for key in keys}))
+    else:
+        params = DriveModelParameters(
+            phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
+            coulomb=fr["coulomb"], viscous=fr["viscous"],
+            cbrt=fr.get("cbrt", np.zeros(n)))
+    return ParamsFile(robot=robot.name, method=str(meta.get("method", "")), params=params,
+                      noise_mean=arrays["mean"], noise_std=arrays["std"],
+                      J=_number(path, "meta.J", meta.get("J")), path=path)
