@@ -102,9 +102,9 @@ def test_truth_differs_from_nominal(er20: Robot) -> None:
 
 def test_payload_adds_its_weight(er20: Robot) -> None:
     q0 = POSES[0]
-    base = check_hold(er20, SimConfig(seed=1), q0, duration=0.5)
-    sim = SimRobot(er20, SimConfig(seed=1), q0=q0, payload=Payload(10.0, (0.0, 0.0, 0.1)))
-    log = hold(sim, 0.5)
+    base = check_hold(er20, SimConfig(seed=1), q0, duration=2.0)
+    sim = SimRobot(er20, SimConfig(seed=2), q0=q0, payload=Payload(10.0, (0.0, 0.0, 0.1)))
+    log = hold(sim, 2.0)
     model = er20.model.copy()
     for j, inertia in enumerate(sim.truth.inertias, start=1):
         model.inertias[j] = inertia

@@ -412,7 +412,8 @@ def identify_proposed(
             prob.unit_value_and_gradient, u, jac=True, method="L-BFGS-B", bounds=unit_bounds,
             callback=cb, options={"maxiter": cfg.polish_iterations, "ftol": 1e-12,
                                   "gtol": 1e-10})
-        if prob.objective(prob.from_unit(res.x[None, :]))[0] <= prob.objective(prob.from_unit(u[None, :]))[0]:
+        before = prob.objective(prob.from_unit(u[None, :]))[0]
+        if prob.objective(prob.from_unit(res.x[None, :]))[0] <= before:
             u = np.asarray(res.x)
         polish_it = int(res.nit)
     x = prob.from_unit(u[None, :])[0]
