@@ -17,11 +17,14 @@ from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
 from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
 from leadthrough.identification.api import METHODS, IdentifyConfig, evaluate, identify
+from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
+from leadthrough.identification.consistent import ConsistentConfig
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import load_params, save_params
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
+from leadthrough.robot.urdf_export import write_urdf_with_inertias
 from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import run_trajectory
@@ -77,8 +80,13 @@ def register(sub: Any) -> None:
     p.add_argument("--method", choices=METHODS, default="proposed")
     p.add_argument("--columns", type=Path, default=None, help="column map for a raw log")
     p.add_argument("--seed", type=int, default=0, help="seed of the proposed search")
+    p.add_argument("--bound", type=_bound, default=0.3,
+                   help="bounds around the URDF values for proposed/consistent, as a fraction "
+                        "(default 0.3 = ±30 %%, the paper's) or 'none' (consistent only)")
     _preprocess_args(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="params TOML")
+    p.add_argument("--urdf-out", type=Path, default=None,
+                   help="also write the URDF with the identified link inertias")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_identify)
 
@@ -106,10 +114,30 @@ def _preprocess_args(p: argparse.ArgumentParser) -> None:
                         f"(default {d.standstill_velocity})")
 
 
+def _bound(text: str) -> float | None:
+    """Parse --bound: a fraction in (0, 1) or 'none'."""
+    if text.strip().lower() == "none":
+        return None
+    try:
+        value = float(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number or 'none'") from e
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"{value} is outside (0, 1)")
+    return value
+
+
 def _identify_config(args: argparse.Namespace) -> IdentifyConfig:
     pre = PreprocessConfig(position_cutoff_hz=args.cutoff, torque_cutoff_hz=args.cutoff,
                            standstill_velocity=args.standstill)
-    return IdentifyConfig(preprocess=pre, proposed=ProposedConfig(seed=getattr(args, "seed", 0)))
+    bound = getattr(args, "bound", 0.3)
+    if bound is None and getattr(args, "method", "") == "proposed":
+        raise DataError("the paper's method needs finite bounds", field="--bound", value="none",
+                        expected="a fraction in (0, 1)")
+    proposed = ProposedConfig(seed=getattr(args, "seed", 0),
+                              bound=bound if bound is not None else 0.3)
+    return IdentifyConfig(preprocess=pre, proposed=proposed,
+                          consistent=ConsistentConfig(bound=bound))
 
 
 def stats_json(robot: Robot, stats: ResidualStats) -> dict[str, Any]:
@@ -220,16 +248,25 @@ def run_identify(args: argparse.Namespace) -> int:
     result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
     bar.close(f"J = {result.J:.3f}")
     save_params(args.output, robot, args.method, result.params, result.stats)
+    if args.urdf_out is not None:
+        write_urdf_with_inertias(robot, result.params.phi, args.urdf_out)
+    eig = {jn: float(v) for jn, v in zip(robot.joint_names, result.min_pseudo_inertia_eig,
+                                         strict=True)}
     if args.json:
         out = {"method": result.method, "robot": robot.name, **stats_json(robot, result.stats),
                "runtime_s": result.runtime_s, "iterations": result.iterations,
                "samples": result.samples, "output": str(args.output),
                "parameters": [p._asdict() for p in result.named_parameters(robot)]}
+        if args.method == "consistent":
+            out["min_pseudo_inertia_eig"] = eig
         print(json.dumps(out, indent=2))
     else:
         _print_stats(robot, result.stats, f"{args.method} on {args.recording} "
                                           f"({result.runtime_s:.1f} s, {result.iterations} it.)")
-        print(f"parameters written to {args.output}")
+        print("  min pseudo-inertia eigenvalue per link [kg·m²]: "
+              + ", ".join(f"{v:.3g}" for v in eig.values()))
+        print(f"parameters written to {args.output}"
+              + (f", URDF to {args.urdf_out}" if args.urdf_out is not None else ""))
     return 0
 
 
@@ -242,8 +279,11 @@ def run_validate(args: argparse.Namespace) -> int:
     rec = _load(args, robot)
     t0 = time.perf_counter()
     stats = evaluate(pf.params, robot, rec, _identify_config(args))
+    eig = min_pseudo_inertia_eigenvalues(pf.params.phi)
     if args.json:
         print(json.dumps({"method": pf.method, "robot": robot.name, **stats_json(robot, stats),
+                          "min_pseudo_inertia_eig": dict(zip(robot.joint_names,
+                                                             map(float, eig), strict=True)),
                           "runtime_s": time.perf_counter() - t0}, indent=2))
     else:
         _print_stats(robot, stats, f"{pf.method} parameters on {args.recording}")

@@ -25,6 +25,17 @@ al. (headerless, 31 columns, current × drive gain = joint torque)::
     scale = [11.976, 11.976, 9.839, 10.763, 10.763, 10.763]
 
     [q_cmd]                         # optional, like [q]
+
+MATLAB files (``format = "mat"``) name a struct and, per signal, a field holding a
+(joints, samples) or (samples, joints) array instead of columns::
+
+    format = "mat"
+    struct = "rec"
+    [time]
+    field = "time_cont"
+    [q]
+    field = "act_pos_mot_deg"
+    unit = "deg"
 """
 
 from __future__ import annotations
@@ -56,14 +67,16 @@ class Signal:
     """One mapped signal.
 
     Attributes:
-        columns: 0-based column indices, one per joint (one for time).
-        factor: Multiplier to SI (unit × scale), shape (len(columns),).
-        offset: Added after scaling, shape (len(columns),).
+        columns: 0-based column indices, one per joint (one for time); empty for MAT fields.
+        factor: Multiplier to SI (unit × scale), shape (joints,) or (1,).
+        offset: Added after scaling, same shape.
+        field: Struct field name (MAT files), else None.
     """
 
     columns: tuple[int, ...]
     factor: NDArray[np.float64]
     offset: NDArray[np.float64]
+    field: str | None = None
 
     def extract(self, table: NDArray[np.float64]) -> NDArray[np.float64]:
         """Scaled columns of a (rows, cols) table, shape (rows, len(columns))."""
@@ -76,6 +89,8 @@ class ColumnMap:
 
     Attributes:
         path: The TOML file.
+        format: ``"csv"`` (delimited text) or ``"mat"`` (MATLAB file).
+        struct: Struct holding the fields (MAT files).
         delimiter: Field separator.
         skip_rows: Leading lines to skip.
         drop_abs_above: Rows with any |value| above this are dropped (None: keep all).
@@ -84,6 +99,8 @@ class ColumnMap:
     """
 
     path: Path
+    format: str
+    struct: str | None
     delimiter: str
     skip_rows: int
     drop_abs_above: float | None
@@ -92,8 +109,8 @@ class ColumnMap:
 
     @property
     def max_column(self) -> int:
-        """Largest column index used."""
-        return max(max(s.columns) for s in self.signals.values())
+        """Largest column index used (−1 for MAT files)."""
+        return max((max(s.columns) for s in self.signals.values() if s.columns), default=-1)
 
 
 def _vector(path: Path, field: str, value: Any, size: int, default: float) -> NDArray[np.float64]:
@@ -107,10 +124,23 @@ def _vector(path: Path, field: str, value: Any, size: int, default: float) -> ND
     return np.asarray(vals, dtype=float)
 
 
-def _signal(path: Path, name: str, table: Any) -> Signal:
+def _signal(path: Path, name: str, table: Any, mat: bool = False, joints: int = 0) -> Signal:
     if not isinstance(table, dict):
         raise DataError("not a table", source=path, field=name, value=table,
                         expected=f"a [{name}] table")
+    unit = table.get("unit", next(iter(_UNITS[name])))
+    if unit not in _UNITS[name]:
+        raise DataError("unknown unit", source=path, field=f"{name}.unit", value=unit,
+                        expected=f"one of {sorted(_UNITS[name])}")
+    if mat:
+        fld = table.get("field")
+        if not isinstance(fld, str) or not fld:
+            raise DataError("missing", source=path, field=f"{name}.field",
+                            expected="the name of the struct field")
+        size = 1 if name == "time" else joints
+        scale = _vector(path, f"{name}.scale", table.get("scale"), size, 1.0)
+        offset = _vector(path, f"{name}.offset", table.get("offset"), size, 0.0)
+        return Signal(columns=(), factor=scale * _UNITS[name][unit], offset=offset, field=fld)
     key = "column" if name == "time" else "columns"
     cols = table.get(key)
     if name == "time" and isinstance(cols, int) and not isinstance(cols, bool):
@@ -120,10 +150,6 @@ def _signal(path: Path, name: str, table: Any) -> Signal:
         raise DataError("malformed", source=path, field=f"{name}.{key}", value=cols,
                         expected="a 0-based column index" if name == "time"
                         else "a list of 0-based column indices, one per joint")
-    unit = table.get("unit", next(iter(_UNITS[name])))
-    if unit not in _UNITS[name]:
-        raise DataError("unknown unit", source=path, field=f"{name}.unit", value=unit,
-                        expected=f"one of {sorted(_UNITS[name])}")
     scale = _vector(path, f"{name}.scale", table.get("scale"), len(cols), 1.0)
     offset = _vector(path, f"{name}.offset", table.get("offset"), len(cols), 0.0)
     return Signal(columns=tuple(cols), factor=scale * _UNITS[name][unit], offset=offset)
@@ -149,11 +175,26 @@ def parse_column_map(path: str | Path) -> ColumnMap:
     if ("current" in doc) == ("torque" in doc):
         raise DataError("needs exactly one of [current] and [torque]", source=path,
                         field="current/torque", expected="one signal table")
-    signals: dict[str, Signal] = {name: _signal(path, name, doc[name])
-               for name in ("time", "q", "current", "torque", "q_cmd") if name in doc}
+    fmt = doc.get("format", "csv")
+    if fmt not in ("csv", "mat"):
+        raise DataError("unknown format", source=path, field="format", value=fmt,
+                        expected="'csv' or 'mat'")
+    struct = doc.get("struct")
+    joints = 0
+    if fmt == "mat":
+        joints = doc.get("joints", 0)
+        if isinstance(joints, bool) or not isinstance(joints, int) or joints < 1:
+            raise DataError("malformed", source=path, field="joints", value=joints,
+                            expected="the number of joints (an integer >= 1) for MAT files")
+        if struct is not None and not isinstance(struct, str):
+            raise DataError("malformed", source=path, field="struct", value=struct,
+                            expected="a struct name")
+    signals: dict[str, Signal] = {
+        name: _signal(path, name, doc[name], fmt == "mat", joints)
+        for name in ("time", "q", "current", "torque", "q_cmd") if name in doc}
     n = len(signals["q"].columns)
     for name, sig in signals.items():
-        if name != "time" and len(sig.columns) != n:
+        if fmt != "mat" and name != "time" and len(sig.columns) != n:
             raise DataError("joint count differs from [q]", source=path,
                             field=f"{name}.columns", value=list(sig.columns),
                             expected=f"{n} columns")
@@ -171,7 +212,8 @@ def parse_column_map(path: str | Path) -> ColumnMap:
         raise DataError("malformed", source=path, field="drop_abs_above", value=drop_abs,
                         expected="a number > 0")
     return ColumnMap(
-        path=path, delimiter=delimiter, skip_rows=skip,
+        path=path, format=fmt, struct=struct if isinstance(struct, str) else None,
+        delimiter=delimiter, skip_rows=skip,
         drop_abs_above=None if drop_abs is None else float(drop_abs),
         drop_non_increasing_time=bool(doc.get("drop_non_increasing_time", False)),
         signals=signals,

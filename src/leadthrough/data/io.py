@@ -182,7 +182,45 @@ def _load_parquet(path: Path) -> Recording:
     return _assemble(_to_float(table, path), str(path), robot)
 
 
+def _load_mat(path: Path, cmap: ColumnMap) -> Recording:
+    import scipy.io
+
+    try:
+        doc = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
+    except (ValueError, OSError, NotImplementedError) as e:
+        raise DataError(f"not a readable MATLAB file: {e}", source=path) from e
+    container: object = doc
+    if cmap.struct is not None:
+        if cmap.struct not in doc:
+            names = sorted(k for k in doc if not k.startswith("__"))
+            raise DataError("struct not in file", source=path, field="struct",
+                            value=cmap.struct, expected=f"one of {names}")
+        container = doc[cmap.struct]
+    arrays: dict[str, Array] = {}
+    for name, sig in cmap.signals.items():
+        assert sig.field is not None
+        try:
+            raw = np.asarray(container[sig.field] if isinstance(container, dict)
+                             else getattr(container, sig.field), dtype=float)
+        except (KeyError, AttributeError) as e:
+            raise DataError("field not in file", source=path, field=f"{name}.field",
+                            value=sig.field, expected="a field of the struct") from e
+        if name == "time":
+            arrays[name] = raw.ravel() * sig.factor[0] + sig.offset[0]
+            continue
+        joints = sig.factor.size
+        if raw.ndim != 2 or joints not in raw.shape:
+            raise DataError("wrong shape", source=path, field=f"{name}.field",
+                            value=raw.shape, expected=f"(samples, {joints}) or ({joints}, samples)")
+        if raw.shape[1] != joints:
+            raw = raw.T
+        arrays[name] = raw * sig.factor + sig.offset
+    return _finite_recording(arrays, str(path), None)
+
+
 def _load_mapped(path: Path, cmap: ColumnMap) -> Recording:
+    if cmap.format == "mat":
+        return _load_mat(path, cmap)
     table = _read_csv_table(path, cmap.delimiter, cmap.skip_rows, header=False)
     if table.num_columns <= cmap.max_column:
         raise DataError("log has fewer columns than the column map uses", source=path,

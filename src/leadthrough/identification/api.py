@@ -3,7 +3,8 @@
     result = identify(recording, robot, "proposed")
     report = evaluate(result.params, robot, held_out_recording)
 
-Methods: ``ols-cv`` (ref. [7]), ``ols-cbrt`` (ref. [22]) and ``proposed`` (the paper's).
+Methods: ``ols-cv`` (ref. [7]), ``ols-cbrt`` (ref. [22]), ``proposed`` (the paper's) and
+``consistent`` (ours: variable projection + physically consistent convex inner problem).
 All return an :class:`IdentificationResult` with named parameters and units, the per-joint
 residual statistics, J, the runtime and the iteration count.
 """
@@ -12,16 +13,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import NDArray
 
 from leadthrough.data.preprocess import PreprocessConfig, ProcessedData, preprocess
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel, model_torque
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES, LINK_PARAMETER_UNITS
 from leadthrough.errors import DataError
+from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
+from leadthrough.identification.consistent import ConsistentConfig, identify_consistent
 from leadthrough.identification.metrics import ResidualStats, residual_stats
 from leadthrough.identification.observations import build_observations
 from leadthrough.identification.ols import identify_ols_cbrt, identify_ols_cv
@@ -38,7 +42,7 @@ __all__ = [
     "named_parameters",
 ]
 
-METHODS: tuple[str, ...] = ("ols-cv", "ols-cbrt", "proposed")
+METHODS: tuple[str, ...] = ("ols-cv", "ols-cbrt", "proposed", "consistent")
 
 
 class NamedParameter(NamedTuple):
@@ -57,11 +61,13 @@ class IdentifyConfig:
         preprocess: Filtering, differentiation and standstill removal.
         k_omega: K_ω of J (eq. 26).
         proposed: Settings of the paper's method.
+        consistent: Settings of the consistent method.
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     k_omega: float = 1.0
     proposed: ProposedConfig = field(default_factory=ProposedConfig)
+    consistent: ConsistentConfig = field(default_factory=ConsistentConfig)
 
 
 @dataclass(frozen=True)
@@ -90,6 +96,11 @@ class IdentificationResult:
     def J(self) -> float:  # noqa: N802 (the paper's symbol)
         """The objective J on the identification data [N·m]."""
         return self.stats.J
+
+    @property
+    def min_pseudo_inertia_eig(self) -> NDArray[np.float64]:
+        """Smallest pseudo-inertia eigenvalue per link [kg·m²] (< 0: not physical)."""
+        return min_pseudo_inertia_eigenvalues(self.params.phi)
 
     def named_parameters(self, robot: Robot) -> list[NamedParameter]:
         """All parameters with names and units."""
@@ -140,7 +151,7 @@ def identify(
     Args:
         data: The excitation recording (or already processed data).
         robot: The robot.
-        method: ``ols-cv``, ``ols-cbrt`` or ``proposed``.
+        method: ``ols-cv``, ``ols-cbrt``, ``proposed`` or ``consistent``.
         config: Settings.
         progress: Progress callback for long methods, ``progress(done, total)``.
 
@@ -163,10 +174,17 @@ def identify(
         params = identify_ols_cv(obs)
     elif method == "ols-cbrt":
         params = identify_ols_cbrt(obs)
+    elif method == "consistent":
+        ccfg = cfg.consistent
+        if ccfg.k_omega != cfg.k_omega:
+            ccfg = replace(ccfg, k_omega=cfg.k_omega)
+        cons = identify_consistent(obs, ccfg)
+        params = cons.params
+        iterations = cons.iterations
     else:
         pcfg = cfg.proposed
         if pcfg.k_omega != cfg.k_omega:
-            pcfg = ProposedConfig(**{**pcfg.__dict__, "k_omega": cfg.k_omega})
+            pcfg = replace(pcfg, k_omega=cfg.k_omega)
         outcome = identify_proposed(obs, pcfg, progress)
         params = outcome.params
         iterations = outcome.generations + outcome.polish_iterations
