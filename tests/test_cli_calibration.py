@@ -117,3 +117,23 @@ def test_bad_inputs_exit_2(workdir: Path, tmp_path: Path,
     assert not (tmp_path / "t.csv").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.toml", "short.parquet",
                                                           "still.parquet"]
+
+
+def test_identify_consistent_json_adds_pseudo_inertia(workdir: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    import pinocchio as pin
+
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "ols-cv", "-o", str(tmp_path / "a.toml"), "--json"]) == 0
+    keys_cv = set(_json(capsys))
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "consistent", "-o", str(tmp_path / "c.toml"), "--urdf-out",
+                 str(tmp_path / "c.urdf"), "--json"]) == 0
+    out = _json(capsys)
+    assert set(out) == keys_cv | {"min_pseudo_inertia_eig"}
+    assert len(out["min_pseudo_inertia_eig"]) == 6
+    assert min(out["min_pseudo_inertia_eig"].values()) >= 0
+    assert pin.buildModelFromUrdf(str(tmp_path / "c.urdf")).nq == 6
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "proposed", "--bound", "none", "-o", str(tmp_path / "p.toml")]) == 2
+    assert "finite bounds" in capsys.readouterr().err

@@ -271,35 +271,40 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
         phi), iterations=cfg.alternations + 2, runtime_s=time.perf_counter() - t0)
 
 
+_SLACK = 1e-6  # relative tolerance of the closest-to-nominal step on the bounds
+
+
 def _link_constraints(obs: Observations, phi: cp.Expression, cfg: ConsistentConfig,
                       links: range | None = None, margin_factor: float = 1.0,
-                      inset: float = 0.0) -> list[cp.Constraint]:
+                      slack: float = 0.0) -> list[cp.Constraint]:
     """Pseudo-inertia ⪰ margin and the optional bounds, per link.
 
-    ``inset`` shrinks the bound box by inset·(link scale) on every side: the inner problem
-    uses a slightly smaller feasible set than the closest-to-nominal step, so a solution on an
-    active bound stays feasible for the second step despite solver tolerances.
+    ``slack`` widens every bound outward by slack·(link scale). The closest-to-nominal step uses
+    a tiny slack (and half the PSD margin of the inner problem), so a solution that the solver
+    left on an active bound within its tolerance stays feasible for the second step.
     """
     n = obs.robot.n
     phi_nom = obs.x_nominal[: 10 * n]
     out: list[cp.Constraint] = []
     for k in links if links is not None else range(n):
         link_scale = max(float(np.max(np.abs(phi_nom[10 * k:10 * k + 10]))), 1e-3)
-        margin = margin_factor * cfg.margin * link_scale
+        margin = margin_factor * cfg.margin
         p = [phi[10 * k + i] for i in range(10)]
         m, hx, hy, hz, ixx, ixy, iyy, ixz, iyz, izz = p
         half = 0.5 * (ixx + iyy + izz)
         J = cp.bmat([[half - ixx, -ixy, -ixz, hx], [-ixy, half - iyy, -iyz, hy],
-                     [-ixz, -iyz, half - izz, hz], [hx, hy, hz, m]])
-        out.append(0.5 * (J + J.T) >> margin * np.eye(4))
+                     [-ixz, -iyz, half - izz, hz], [hx, hy, hz, m]]) / link_scale
+        out.append(0.5 * (J + J.T) >> margin * np.eye(4))  # scaled: well-conditioned LMIs
         if cfg.bound is not None:
             b = link_bounds(phi_nom[10 * k:10 * k + 10], cfg.bound)
             h = cp.hstack([hx, hy, hz])
             inertia = cp.hstack([ixx, ixy, iyy, ixz, iyz, izz])
-            e = inset * link_scale
-            out += [m >= b.mass[0] + e, m <= b.mass[1] - e, h >= m * b.com_lower + e,
-                    h <= m * b.com_upper - e, inertia >= b.inertia_lower + e,
-                    inertia <= b.inertia_upper - e]
+            e = slack * link_scale
+            w = 1.0 / link_scale
+            out += [w * m >= w * (b.mass[0] - e), w * m <= w * (b.mass[1] + e),
+                    w * h >= w * (m * b.com_lower - e), w * h <= w * (m * b.com_upper + e),
+                    w * inertia >= w * (b.inertia_lower - e),
+                    w * inertia <= w * (b.inertia_upper + e)]
     return out
 
 
@@ -352,9 +357,7 @@ def _inner_problem(obs: Observations, joints: list[_Joint], cols: list[Array], l
         else:
             Rf = np.linalg.qr(np.column_stack([As, r0]), mode="r")
             terms.append(cp.sum_squares(Rf @ cp.hstack([-u[idx], np.ones(1)])) / jt.N)
-    inset = 10.0 * cfg.margin
-    cons = [*_link_constraints(obs, z[: 10 * n], cfg, margin_factor=2.0, inset=inset),
-            z[10 * n:] >= inset * scale[10 * n:]]
+    cons = [*_link_constraints(obs, z[: 10 * n], cfg, margin_factor=2.0), z[10 * n:] >= 0]
     prob = cp.Problem(cp.Minimize(cp.sum(cp.hstack(terms))), cons)
     _solve(prob, "inner problem")
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or u.value is None:
@@ -375,7 +378,8 @@ def _closest_to_nominal(obs: Observations, z: Array, z_nom: Array, scale: Array,
     N = scipy.linalg.null_space(C * s)
     w = cp.Variable(N.shape[1])
     x = x_star + cp.multiply(s, N @ w)
-    cons = [*_link_constraints(obs, x[: 10 * n], cfg), x[10 * n:] >= 0]
+    cons = [*_link_constraints(obs, x[: 10 * n], cfg, slack=_SLACK),
+            x[10 * n:] >= -_SLACK * s[10 * n:]]
     prob = cp.Problem(cp.Minimize(cp.sum_squares((x_star - z_nom[: 11 * n]) / s + N @ w)), cons)
     _solve(prob, "closest-to-nominal problem")
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or w.value is None:
