@@ -50,6 +50,8 @@ class DriveModelParameters:
         viscous: Viscous friction β [N·m·s/rad], shape (n,) (baselines).
         cbrt: Cube-root coefficient γ, shape (n,) (baseline [22]).
         rotor_inertia: Joint-side rotor inertia M_j [kg·m²], shape (n,).
+        offset: Constant joint-torque offset τ_0 [N·m], shape (n,), or empty for none. Not in
+            eq. 21; the ``consistent`` method identifies it (current-sensor offsets).
     """
 
     phi: Array
@@ -59,6 +61,7 @@ class DriveModelParameters:
     coulomb: Array = field(default_factory=lambda: np.zeros(0))
     viscous: Array = field(default_factory=lambda: np.zeros(0))
     cbrt: Array = field(default_factory=lambda: np.zeros(0))
+    offset: Array = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if self.friction_model is FrictionModel.STRIBECK and self.stribeck is None:
@@ -90,7 +93,7 @@ def nominal_drive_parameters(robot: Robot) -> DriveModelParameters:
 def model_torque(
     robot: Robot, params: DriveModelParameters, q: Array, qd: Array, qdd: Array
 ) -> Array:
-    """Model joint torque R·τ_total = K·φ + τ_f + M_j·q̈ (eq. 21 without noise).
+    """Model joint torque R·τ_total = K·φ + τ_f + M_j·q̈ (eq. 21 without noise), plus τ_0.
 
     Args:
         robot: The robot.
@@ -103,8 +106,11 @@ def model_torque(
         Joint torque the drives must deliver [N·m], shape (N, n); divide by R·Kt for current.
     """
     q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
-    return (
+    tau = (
         link_torque(robot.model, params.phi, q, qd, qdd)
         + params.friction(qd, robot.gear_ratio)
         + rotor_inertia_torque(qdd, params.rotor_inertia)
     )
+    if params.offset.size:
+        tau += params.offset
+    return tau

@@ -116,6 +116,8 @@ def named_parameters(robot: Robot, params: DriveModelParameters) -> list[NamedPa
     for k, jn in enumerate(robot.joint_names):
         out.append(NamedParameter(f"{jn}.rotor_inertia", float(params.rotor_inertia[k]),
                                   "kg·m²"))
+        if params.offset.size:
+            out.append(NamedParameter(f"{jn}.offset", float(params.offset[k]), "N·m"))
         if params.friction_model is FrictionModel.STRIBECK and params.stribeck is not None:
             st = params.stribeck
             for name, arr, unit in (("f1", st.f1, "N·m"), ("f2", st.f2, "N·m"),

@@ -17,11 +17,16 @@ Almost every parameter of eq. 21 enters the torque linearly; only the 2n Stribec
   factor by QR, so the inner problem costs the same whatever the number of samples.
 * **Standard parameters**: among all consistent parameter sets with the optimal base parameters,
   the one closest to nominal (a second small SDP).
+
+Beyond eq. 21, a free constant torque offset τ_0 per joint is identified: drives report currents
+with an offset (the simulator's sensor bias; ``F0`` in the UR10e reference model), which eq. 21
+can only absorb into Coulomb terms, depending on the motion's direction balance.
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -122,27 +127,33 @@ class _Joint:
         return gm * self.s, gg * self.s
 
     def columns(self, qd_sm: float, qd_sg: float) -> Array:
-        """[K, q̈, sgn, g_m, g_g, q̇], shape (N, 10n + 5)."""
+        """[K, q̈, sgn, g_m, g_g, q̇, 1], shape (N, 10n + 6)."""
         gm, gg = self.stribeck(np.array([qd_sm]), np.array([qd_sg]))
-        return np.column_stack([self.K, self.qdd, self.s, gm[0], gg[0], self.qd])
+        return np.column_stack([self.K, self.qdd, self.s, gm[0], gg[0], self.qd,
+                                np.ones(self.N)])
 
 
 class _Layout:
-    """Index layout of z = [φ (10n), M (n), f1 (n), f2 (n), f3 (n), f4 (n)]."""
+    """Index layout of z = [φ (10n), M (n), f1 (n), f2 (n), f3 (n), f4 (n), τ_0 (n)]."""
 
     def __init__(self, n: int) -> None:
         self.n = n
-        self.size = 15 * n
+        self.size = 16 * n
 
     def joint(self, j: int) -> NDArray[np.intp]:
         n = self.n
-        return np.r_[np.arange(10 * n), 10 * n + j + n * np.arange(5)].astype(np.intp)
+        return np.r_[np.arange(10 * n), 10 * n + j + n * np.arange(6)].astype(np.intp)
 
 
 def _best_stribeck(jt: _Joint, r0: Array, grid_m: Array, grid_g: Array) -> tuple[float, float]:
     """Grid search of one joint's (q̇sm, q̇sg) on least squares of its drive columns."""
     gm, gg = jt.stribeck(grid_m, grid_g)                     # (Gm, N), (Gg, N)
+    # A free offset τ_0 is fitted too: centre every column (an intercept).
+    gm = gm - gm.mean(axis=1, keepdims=True)
+    gg = gg - gg.mean(axis=1, keepdims=True)
+    r0 = r0 - r0.mean()
     fixed = np.vstack([jt.qdd, jt.s, jt.qd])                 # (3, N)
+    fixed = fixed - fixed.mean(axis=1, keepdims=True)
     Gm, Gg = gm.shape[0], gg.shape[0]
     A = np.zeros((Gm, Gg, 5, 5))
     rhs = np.zeros((Gm, Gg, 5))
@@ -229,11 +240,11 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
     joints = [_Joint(obs, j) for j in range(n)]
     tmax, vmax, R = robot.max_torque, robot.velocity_limit, robot.gear_ratio
     phi_nom = obs.x_nominal[: 10 * n]
-    z_nom = np.concatenate([phi_nom, robot.reflected_rotor_inertia, np.zeros(4 * n)])
+    z_nom = np.concatenate([phi_nom, robot.reflected_rotor_inertia, np.zeros(5 * n)])
     phi_scale = np.concatenate([np.full(10, max(float(np.max(np.abs(phi_nom[10 * k:10 * k + 10]))),
                                                 1e-3)) for k in range(n)])
     scale = np.concatenate([phi_scale, np.maximum(robot.reflected_rotor_inertia, 1e-3 * tmax / 10),
-                            np.tile(0.01 * tmax, 3), 0.01 * tmax / vmax])
+                            np.tile(0.01 * tmax, 3), 0.01 * tmax / vmax, 0.01 * tmax])
     grids_m = [np.geomspace(0.5, R[j] * vmax[j], cfg.grid) for j in range(n)]
     grids_g = [np.geomspace(1e-3 * vmax[j], vmax[j], cfg.grid) for j in range(n)]
     vel = [(float(np.sqrt(gm[0] * gm[-1])), float(np.sqrt(gg[0] * gg[-1])))
@@ -262,11 +273,12 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
         z = _inner_problem(obs, joints, cols, layout, z_nom, scale, cfg)
         solves += 1
     phi, M = _closest_to_nominal(obs, z, z_nom, scale, cfg)
-    f = z[11 * n:].reshape(4, n)
+    f = z[11 * n:15 * n].reshape(4, n)
     params = DriveModelParameters(
         phi=phi, friction_model=FrictionModel.STRIBECK, rotor_inertia=M,
         stribeck=StribeckParameters(f1=f[0], f2=f[1], qd_sm=np.array([v[0] for v in vel]),
-                                    f3=f[2], qd_sg=np.array([v[1] for v in vel]), f4=f[3]))
+                                    f3=f[2], qd_sg=np.array([v[1] for v in vel]), f4=f[3]),
+        offset=z[15 * n:].copy())
     return ConsistentOutcome(params=params, min_pseudo_inertia_eig=min_pseudo_inertia_eigenvalues(
         phi), iterations=cfg.alternations + 2, runtime_s=time.perf_counter() - t0)
 
@@ -310,10 +322,46 @@ def _link_constraints(obs: Observations, phi: cp.Expression, cfg: ConsistentConf
 
 def _solve(problem: cp.Problem, what: str) -> None:
     try:
-        problem.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():
+            # "optimal_inaccurate" is not trusted blindly: callers verify the solution.
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=cp.CLARABEL)
     except cp.SolverError as e:
         raise SolverError(f"Clarabel failed on the {what}: {e}", field="solver",
                           expected="a solvable problem (check the bounds and the data)") from e
+
+
+def _verify(obs: Observations, phi: Array, rotor: Array, cfg: ConsistentConfig, status: str,
+            what: str) -> None:
+    """Check a solution really is physically consistent and within the bounds.
+
+    Raises:
+        SolverError: Naming the first link that violates its constraints.
+    """
+    n = obs.robot.n
+    phi_nom = obs.x_nominal[: 10 * n]
+    eig = min_pseudo_inertia_eigenvalues(phi)
+    for k in range(n):
+        name = obs.robot.joint_names[k]
+        scale = max(float(np.max(np.abs(phi_nom[10 * k:10 * k + 10]))), 1e-3)
+        bad = eig[k] < 0.0
+        if cfg.bound is not None and not bad:
+            b = link_bounds(phi_nom[10 * k:10 * k + 10], cfg.bound)
+            p = phi[10 * k:10 * k + 10]
+            tol = 10.0 * _SLACK * scale
+            bad = bool(p[0] < b.mass[0] - tol or p[0] > b.mass[1] + tol
+                       or np.any(p[1:4] < p[0] * b.com_lower - tol)
+                       or np.any(p[1:4] > p[0] * b.com_upper + tol)
+                       or np.any(p[4:] < b.inertia_lower - tol)
+                       or np.any(p[4:] > b.inertia_upper + tol))
+        if bad:
+            raise SolverError(f"the {what} returned an invalid solution for link '{name}' "
+                              f"(status '{status}', min pseudo-inertia eigenvalue {eig[k]:.3g})",
+                              field=f"links.{name}", value=status,
+                              expected="a physically consistent solution within the bounds")
+    if np.any(rotor < -1e-9 * max(1.0, float(np.max(np.abs(rotor))))):
+        raise SolverError(f"the {what} returned a negative rotor inertia (status '{status}')",
+                          field="rotor_inertia", value=rotor.tolist(), expected=">= 0")
 
 
 def _diagnose(obs: Observations, cfg: ConsistentConfig, status: str, what: str) -> SolverError:
@@ -357,12 +405,15 @@ def _inner_problem(obs: Observations, joints: list[_Joint], cols: list[Array], l
         else:
             Rf = np.linalg.qr(np.column_stack([As, r0]), mode="r")
             terms.append(cp.sum_squares(Rf @ cp.hstack([-u[idx], np.ones(1)])) / jt.N)
-    cons = [*_link_constraints(obs, z[: 10 * n], cfg, margin_factor=2.0), z[10 * n:] >= 0]
+    cons = [*_link_constraints(obs, z[: 10 * n], cfg, margin_factor=2.0),
+            z[10 * n:15 * n] >= 0]
     prob = cp.Problem(cp.Minimize(cp.sum(cp.hstack(terms))), cons)
     _solve(prob, "inner problem")
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or u.value is None:
         raise _diagnose(obs, cfg, str(prob.status), "inner problem")
-    return np.asarray(z_nom + scale * u.value)
+    out = np.asarray(z_nom + scale * u.value)
+    _verify(obs, out[: 10 * n], out[10 * n:11 * n], cfg, str(prob.status), "inner problem")
+    return out
 
 
 def _closest_to_nominal(obs: Observations, z: Array, z_nom: Array, scale: Array,
@@ -380,9 +431,11 @@ def _closest_to_nominal(obs: Observations, z: Array, z_nom: Array, scale: Array,
     x = x_star + cp.multiply(s, N @ w)
     cons = [*_link_constraints(obs, x[: 10 * n], cfg, slack=_SLACK),
             x[10 * n:] >= -_SLACK * s[10 * n:]]
-    prob = cp.Problem(cp.Minimize(cp.sum_squares((x_star - z_nom[: 11 * n]) / s + N @ w)), cons)
+    # The (equivalent) norm objective is numerically better behaved in Clarabel than its square.
+    prob = cp.Problem(cp.Minimize(cp.norm((x_star - z_nom[: 11 * n]) / s + N @ w)), cons)
     _solve(prob, "closest-to-nominal problem")
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or w.value is None:
         raise _diagnose(obs, cfg, str(prob.status), "closest-to-nominal problem")
     out = np.asarray(x_star + s * (N @ w.value))
+    _verify(obs, out[: 10 * n], out[10 * n:], cfg, str(prob.status), "closest-to-nominal problem")
     return out[: 10 * n], out[10 * n:]

@@ -16,6 +16,7 @@ Layout::
 
     [joints.joint_1]                 # drive parameters
     rotor_inertia = 8.6              # M_j [kg·m²]
+    offset = 0.4                     # τ_0 [N·m] (optional, consistent method)
     f1 = 40.0                        # ... per friction model
 
     [links.joint_1]                  # standard link parameters (regressor order) [kg, kg·m, kg·m²]
@@ -115,6 +116,8 @@ def save_params(
     keys = _FRICTION_KEYS[params.friction_model]
     for k, jn in enumerate(robot.joint_names):
         lines += ["", f"[joints.{jn}]", f"rotor_inertia = {_fmt(params.rotor_inertia[k])}"]
+        if params.offset.size:
+            lines.append(f"offset = {_fmt(params.offset[k])}")
         for key in keys:
             if params.friction_model is FrictionModel.STRIBECK:
                 assert params.stribeck is not None
@@ -172,6 +175,8 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     n = robot.n
     keys = _FRICTION_KEYS[model]
     fr = {key: np.zeros(n) for key in (*keys, "rotor_inertia")}
+    offset = np.zeros(n)
+    has_offset = False
     phi = np.zeros(10 * n)
     for k, jn in enumerate(robot.joint_names):
         jt = joints.get(jn)
@@ -179,6 +184,9 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         if not isinstance(jt, dict) or not isinstance(lt, dict):
             raise DataError("missing joint", source=path, field=f"joints.{jn} / links.{jn}",
                             expected="a table per joint of the robot")
+        if "offset" in jt:
+            offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
+            has_offset = True
         for key in fr:
             if key not in jt:
                 raise DataError("missing", source=path, field=f"joints.{jn}.{key}",
@@ -200,12 +208,13 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     if model is FrictionModel.STRIBECK:
         params = DriveModelParameters(
             phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
-            stribeck=StribeckParameters(**{key: fr[key] for key in keys}))
+            stribeck=StribeckParameters(**{key: fr[key] for key in keys}),
+            offset=offset if has_offset else np.zeros(0))
     else:
         params = DriveModelParameters(
             phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
             coulomb=fr["coulomb"], viscous=fr["viscous"],
-            cbrt=fr.get("cbrt", np.zeros(n)))
+            cbrt=fr.get("cbrt", np.zeros(n)), offset=offset if has_offset else np.zeros(0))
     return ParamsFile(robot=robot.name, method=str(meta.get("method", "")), params=params,
                       noise_mean=arrays["mean"], noise_std=arrays["std"],
                       J=_number(path, "meta.J", meta.get("J")), path=path)

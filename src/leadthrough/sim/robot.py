@@ -153,7 +153,8 @@ class SimRobot:
         drive = sample_drive_truth(robot, config.drive, rng_truth)
         self._drive = DriveTrain(drive, robot.gear_ratio)
         self._sensor = CurrentSensor(config.sensors, robot.max_current, rng_noise,
-                                     config.timestep)
+                                     config.timestep,
+                                     bias_rng=np.random.default_rng([config.seed, 3]))
         model_true = robot.model.copy()
         for j, inertia in enumerate(inertias, start=1):
             model_true.inertias[j] = inertia

@@ -69,13 +69,16 @@ class CurrentSensor:
     Args:
         config: Noise model.
         max_current: Max current per joint [A], shape (n,).
-        rng: Random generator (owned: draws are reproducible per seed).
+        rng: Random generator of the noise (owned: draws are reproducible per seed).
         dt: Sample period [s].
+        bias_rng: Random generator of the bias (a property of the drive, so of the robot
+            instance, not of the recording); default ``rng``.
         block: Samples of noise drawn at once.
     """
 
     def __init__(self, config: SensorConfig, max_current: Array, rng: np.random.Generator,
-                 dt: float, block: int = 4096) -> None:
+                 dt: float, block: int = 4096,
+                 bias_rng: np.random.Generator | None = None) -> None:
         imax = np.asarray(max_current, dtype=float)
         self.white_sigma = config.current_noise * imax
         self.drift_sigma = config.current_drift * imax
@@ -83,7 +86,8 @@ class CurrentSensor:
         self._a = float(np.exp(-dt / config.drift_time))
         self._drift_state = self.drift_sigma * rng.standard_normal(imax.size)
         self._drift_noise = np.empty((block, imax.size))
-        self.bias = config.current_bias * imax * rng.uniform(-1.0, 1.0, imax.size)
+        self.bias = (config.current_bias * imax
+                     * (bias_rng or rng).uniform(-1.0, 1.0, imax.size))
         self.lsb = 2.0 * config.adc_range * imax / (2**config.adc_bits)
         self._inv_lsb = 1.0 / self.lsb
         self._full = config.adc_range * imax
