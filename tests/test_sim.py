@@ -26,7 +26,7 @@ POSES = [
 
 @pytest.mark.parametrize("q0", POSES)
 def test_holds_pose_and_currents_match_gravity(er20: Robot, q0: np.ndarray) -> None:
-    h = check_hold(er20, SimConfig(seed=1), q0, duration=1.5)
+    h = check_hold(er20, SimConfig(seed=1), q0)
     assert h.max_joint_error.max() < 1e-4  # rad: below 0.1 mrad
     assert np.all(h.error_in_sigma < WITHIN_NOISE)
 
@@ -102,9 +102,9 @@ def test_truth_differs_from_nominal(er20: Robot) -> None:
 
 def test_payload_adds_its_weight(er20: Robot) -> None:
     q0 = POSES[0]
-    base = check_hold(er20, SimConfig(seed=1), q0, duration=2.0)
+    base = check_hold(er20, SimConfig(seed=1), q0)
     sim = SimRobot(er20, SimConfig(seed=2), q0=q0, payload=Payload(10.0, (0.0, 0.0, 0.1)))
-    log = hold(sim, 2.0)
+    log = hold(sim, 4.0)
     model = er20.model.copy()
     for j, inertia in enumerate(sim.truth.inertias, start=1):
         model.inertias[j] = inertia

@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
         f"Y_base·β vs K·φ {reg.rel_error_base:.1e} (relative)")
 
     say("[2/5] simulated robot: hold a pose, then a 50 N push at the TCP ...")
-    h = check_hold(robot, config, q0, duration=2.0)
+    h = check_hold(robot, config, q0)
     push = check_push(robot, config, q0, np.array([50.0, 0, 0, 0, 0, 0]))
     say(f"      max joint error {1e3 * h.max_joint_error.max():.2e} mrad; currents vs gravity "
         f"{h.error_in_sigma.max():.2f} σ; push vs -J^T·F/(R·Kt) {push.error_in_sigma.max():.2f} σ"
