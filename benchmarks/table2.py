@@ -19,16 +19,11 @@ from leadthrough.data.preprocess import preprocess
 from leadthrough.errors import DataWarning
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import METHODS, IdentifyConfig, evaluate, identify
-from leadthrough.identification.comparison import (
-    compare_methods,
-    format_table2,
-    noise_floor,
-    ratio_summary,
-)
+from leadthrough.identification.comparison import compare_methods, format_table2, ratio_summary
 from leadthrough.identification.plots import plot_torque_fit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot import load_robot
-from leadthrough.sim.calibration_set import record_calibration_set
+from leadthrough.sim.calibration_set import compare_on_calibration_set, record_calibration_set
 
 ROOT = Path(__file__).resolve().parents[1]
 UR10E = ROOT.parent / "shared" / "data" / "ur10e"
@@ -46,12 +41,9 @@ def simulated(out: Path, seed: int, quick: bool) -> dict:
     cal = record_calibration_set(robot, seed=seed, duration=duration, excitation_config=exc,
                                  progress=print)
     cfg = IdentifyConfig()
-    comp = compare_methods(robot, cal.identification.measured,
-                           {"held-out": cal.held_out.measured}, METHODS, cfg,
-                           progress=lambda s: print("  " + s))
-    floors = {"identification": noise_floor(robot, cal.identification.measured,
-                                            cal.identification.true, cfg),
-              "held-out": noise_floor(robot, cal.held_out.measured, cal.held_out.true, cfg)}
+    result = compare_on_calibration_set(robot, cal, METHODS, cfg,
+                                        progress=lambda s: print("  " + s))
+    comp, floors = result.comparison, result.floors
     table = format_table2(comp, floors)
     ratios = ratio_summary(comp, floors)
     print(f"\nTable II, simulated er20 (seed {seed}, {duration:g} s at 1 kHz, "

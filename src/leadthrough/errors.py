@@ -17,6 +17,7 @@ __all__ = [
     "RobotFileError",
     "SimulationError",
     "UnknownRobotError",
+    "check_fields",
 ]
 
 
@@ -75,6 +76,26 @@ class DataError(LeadthroughError):
 
 class SimulationError(LeadthroughError):
     """The simulated robot was configured with invalid settings."""
+
+
+def check_fields(prefix: str, obj: Any, checks: list[tuple[str, bool, str]],
+                 error: type[LeadthroughError] | None = None) -> None:
+    """Raise for the first failed check of a settings object.
+
+    Args:
+        prefix: Prefix of the field names in messages (e.g. ``"excitation"``).
+        obj: The settings object (its attributes give the offending values).
+        checks: (attribute name, passed, expected range in words) triples.
+        error: Exception class to raise (default :class:`DataError`).
+
+    Raises:
+        LeadthroughError: Naming ``prefix.name``, the value and the expected range.
+    """
+    cls = error if error is not None else DataError
+    for name, ok, expected in checks:
+        if not ok:
+            raise cls("out of range", field=f"{prefix}.{name}", value=getattr(obj, name),
+                      expected=expected)
 
 
 class DataWarning(UserWarning):

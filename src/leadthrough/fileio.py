@@ -12,7 +12,7 @@ from pathlib import Path
 
 from leadthrough.errors import DataError
 
-__all__ = ["atomic_write", "atomic_write_text"]
+__all__ = ["atomic_write", "atomic_write_text", "read_comment_header"]
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
@@ -52,3 +52,22 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
         tmp.write_text(text, encoding="utf-8")
 
     return atomic_write(path, write)
+
+
+def read_comment_header(path: Path) -> tuple[int, dict[str, str]]:
+    """Leading ``# key: value`` lines of a text file.
+
+    Returns:
+        The number of comment lines and the key/value pairs found in them.
+    """
+    meta: dict[str, str] = {}
+    count = 0
+    with Path(path).open("r", encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if not line.startswith("#"):
+                break
+            count += 1
+            key, sep, value = line[1:].partition(":")
+            if sep:
+                meta[key.strip()] = value.strip()
+    return count, meta

@@ -25,17 +25,12 @@ from leadthrough.data.preprocess import preprocess
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.fileio import atomic_write_text
 from leadthrough.identification.api import METHODS, IdentifyConfig
-from leadthrough.identification.comparison import (
-    compare_methods,
-    format_table2,
-    noise_floor,
-    ratio_summary,
-)
+from leadthrough.identification.comparison import format_table2, ratio_summary
 from leadthrough.identification.params_file import save_params
 from leadthrough.identification.plots import plot_torque_fit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot.description import load_robot
-from leadthrough.sim.calibration_set import record_calibration_set
+from leadthrough.sim.calibration_set import compare_on_calibration_set, record_calibration_set
 from leadthrough.sim.checks import check_hold, check_push, check_regressor
 from leadthrough.sim.robot import SimConfig
 
@@ -96,15 +91,12 @@ def run(args: argparse.Namespace) -> int:
     save_recording(cal.identification.measured, out / "identification.parquet")
     save_recording(cal.held_out.measured, out / "held_out.parquet")
 
-    say("[5/5] calibration: ols-cv, ols-cbrt, proposed ...")
+    say("[5/5] calibration: " + ", ".join(METHODS) + " ...")
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
                                                  polish_iterations=150 if quick else 300))
-    comp = compare_methods(robot, cal.identification.measured,
-                           {"held-out": cal.held_out.measured}, METHODS, cfg,
-                           progress=lambda s: say("      " + s))
-    floors = {"identification": noise_floor(robot, cal.identification.measured,
-                                            cal.identification.true, cfg),
-              "held-out": noise_floor(robot, cal.held_out.measured, cal.held_out.true, cfg)}
+    result = compare_on_calibration_set(robot, cal, METHODS, cfg,
+                                        progress=lambda s: say("      " + s))
+    comp, floors = result.comparison, result.floors
     table = format_table2(comp, floors)
     ratios = ratio_summary(comp, floors)
     best = comp.results["proposed"]

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from leadthrough.data.column_map import ColumnMap, parse_column_map
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError, DataWarning
-from leadthrough.fileio import atomic_write
+from leadthrough.fileio import atomic_write, read_comment_header
 
 __all__ = ["load_recording", "save_recording"]
 
@@ -159,17 +159,9 @@ def _to_float(table: pa.Table, source: Path) -> dict[str, Array]:
 
 
 def _load_native_csv(path: Path) -> Recording:
-    robot = None
-    skip = 0
-    with path.open("r", encoding="utf-8", errors="replace") as f:
-        for line in f:
-            if not line.startswith("#"):
-                break
-            skip += 1
-            if line.startswith("# robot:"):
-                robot = line.split(":", 1)[1].strip() or None
+    skip, meta = read_comment_header(path)
     table = _read_csv_table(path, ",", skip, header=True)
-    return _assemble(_to_float(table, path), str(path), robot)
+    return _assemble(_to_float(table, path), str(path), meta.get("robot") or None)
 
 
 def _load_parquet(path: Path) -> Recording:

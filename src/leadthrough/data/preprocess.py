@@ -19,7 +19,7 @@ import scipy.signal
 from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, check_fields
 from leadthrough.robot.description import Robot
 
 __all__ = ["PreprocessConfig", "ProcessedData", "preprocess"]
@@ -64,10 +64,7 @@ class PreprocessConfig:
             ("trim_s", self.trim_s >= 0, ">= 0 s"),
             ("max_jitter", self.max_jitter >= 0, ">= 0"),
         ]
-        for name, ok, expected in checks:
-            if not ok:
-                raise DataError("out of range", field=f"preprocess.{name}",
-                                value=getattr(self, name), expected=expected)
+        check_fields("preprocess", self, checks)
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from leadthrough.dynamics.base_parameters import (
     rotor_columns,
 )
 from leadthrough.dynamics.regressor import link_regressor_batch
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, check_fields
 from leadthrough.excitation.fourier import FourierTrajectory
 from leadthrough.robot.description import Robot
 
@@ -85,10 +85,7 @@ class ExcitationConfig:
             ("starts", self.starts >= 1, ">= 1"),
             ("max_iterations", self.max_iterations >= 1, ">= 1"),
         ]
-        for name, ok, expected in checks:
-            if not ok:
-                raise DataError("out of range", field=f"excitation.{name}",
-                                value=getattr(self, name), expected=expected)
+        check_fields("excitation", self, checks)
 
 
 @dataclass(frozen=True)

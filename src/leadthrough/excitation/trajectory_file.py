@@ -16,7 +16,7 @@ import numpy as np
 
 from leadthrough.errors import DataError
 from leadthrough.excitation.fourier import TrajectorySamples
-from leadthrough.fileio import atomic_write
+from leadthrough.fileio import atomic_write, read_comment_header
 
 __all__ = ["load_trajectory", "save_trajectory"]
 
@@ -60,15 +60,8 @@ def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
     path = Path(path)
     if not path.is_file():
         raise DataError("trajectory not found", source=path, expected="an existing CSV file")
-    robot = None
-    skip = 0
-    with path.open("r", encoding="utf-8", errors="replace") as f:
-        for line in f:
-            if not line.startswith("#"):
-                break
-            skip += 1
-            if line.startswith("# robot:"):
-                robot = line.split(":", 1)[1].strip() or None
+    skip, meta = read_comment_header(path)
+    robot = meta.get("robot") or None
     try:
         data = np.loadtxt(path, delimiter=",", skiprows=skip + 1, ndmin=2)
     except ValueError as e:

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.friction import StribeckParameters
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
-from leadthrough.errors import DataError, LeadthroughError
+from leadthrough.errors import LeadthroughError, check_fields
 from leadthrough.identification.consistency import link_bounds, min_pseudo_inertia_eigenvalues
 from leadthrough.identification.observations import Observations
 
@@ -84,10 +84,7 @@ class ConsistentConfig:
             ("alternations", self.alternations >= 1, ">= 1"),
             ("constrained_alternations", self.constrained_alternations >= 1, ">= 1"),
         ]
-        for name, ok, expected in checks:
-            if not ok:
-                raise DataError("out of range", field=f"consistent.{name}",
-                                value=getattr(self, name), expected=expected)
+        check_fields("consistent", self, checks)
 
 
 @dataclass(frozen=True)

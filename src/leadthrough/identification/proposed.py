@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.friction import StribeckParameters
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
-from leadthrough.errors import DataError
+from leadthrough.errors import check_fields
 from leadthrough.identification.observations import Observations
 
 __all__ = ["ProposedConfig", "ProposedOutcome", "identify_proposed"]
@@ -75,10 +75,7 @@ class ProposedConfig:
             ("polish_iterations", self.polish_iterations >= 0, ">= 0"),
             ("max_friction", 0 < self.max_friction <= 1, "in (0, 1]"),
         ]
-        for name, ok, expected in checks:
-            if not ok:
-                raise DataError("out of range", field=f"proposed.{name}",
-                                value=getattr(self, name), expected=expected)
+        check_fields("proposed", self, checks)
 
 
 @dataclass(frozen=True)

@@ -4,19 +4,29 @@ identification and a different one held out for validation, with the true curren
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from leadthrough.data.recording import Recording
 from leadthrough.excitation.design import ExcitationConfig, ExcitationResult, design_excitation
+from leadthrough.identification.api import IdentifyConfig
+from leadthrough.identification.comparison import MethodComparison, compare_methods, noise_floor
+from leadthrough.identification.metrics import ResidualStats
 from leadthrough.robot.description import Robot
 from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import SimLog, run_trajectory
 
-__all__ = ["CalibrationSet", "SimRecording", "record_calibration_set", "record_excitation"]
+__all__ = [
+    "CalibrationComparison",
+    "CalibrationSet",
+    "SimRecording",
+    "compare_on_calibration_set",
+    "record_calibration_set",
+    "record_excitation",
+]
 
 
 @dataclass(frozen=True)
@@ -114,3 +124,33 @@ def record_calibration_set(
         f"{1e3 * float(np.max(np.abs(ident.log.truth.q - ident.log.q_cmd))):.2f} mrad")
     return CalibrationSet(identification=ident, held_out=held, excitation=exc,
                           held_out_excitation=exc_h)
+
+
+@dataclass(frozen=True)
+class CalibrationComparison:
+    """Table II on a simulated calibration set.
+
+    Attributes:
+        comparison: All methods, identified on the identification run, evaluated held out.
+        floors: Noise floor per data-set label ("identification", "held-out").
+    """
+
+    comparison: MethodComparison
+    floors: dict[str, ResidualStats]
+
+
+def compare_on_calibration_set(
+    robot: Robot,
+    cal: CalibrationSet,
+    methods: Sequence[str],
+    config: IdentifyConfig | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> CalibrationComparison:
+    """Identify with every method, validate held out, and measure both noise floors."""
+    cfg = config if config is not None else IdentifyConfig()
+    comp = compare_methods(robot, cal.identification.measured,
+                           {"held-out": cal.held_out.measured}, methods, cfg, progress=progress)
+    floors = {"identification": noise_floor(robot, cal.identification.measured,
+                                            cal.identification.true, cfg),
+              "held-out": noise_floor(robot, cal.held_out.measured, cal.held_out.true, cfg)}
+    return CalibrationComparison(comparison=comp, floors=floors)
