@@ -29,12 +29,14 @@ from leadthrough.sim.calibration_set import record_calibration_set
 from leadthrough.sim.link_truth import true_link_inertias
 
 
-def _trajectory(robot: Robot, seed: int, seconds: float = 30.0, rate: float = 100.0):
+def _trajectory(robot: Robot, seed: int, seconds: float = 30.0, rate: float = 100.0,
+                amplitude: float = 0.12):
     rng = np.random.default_rng(seed)
     mid = 0.5 * (robot.lower_limits + robot.upper_limits)
     half = 0.5 * (robot.upper_limits - robot.lower_limits)
-    traj = FourierTrajectory(0.1, mid, rng.uniform(-1, 1, (robot.n, 4)) * 0.12 * half[:, None],
-                             rng.uniform(-1, 1, (robot.n, 4)) * 0.12 * half[:, None])
+    scale = amplitude * half[:, None]
+    traj = FourierTrajectory(0.1, mid, rng.uniform(-1, 1, (robot.n, 4)) * scale,
+                             rng.uniform(-1, 1, (robot.n, 4)) * scale)
     return traj.sample(np.arange(0.0, seconds, 1.0 / rate))
 
 

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 
 from leadthrough import __version__
-from leadthrough.cli import calibration_cmds, demo_cmd, robots_cmd
+from leadthrough.cli import calibration_cmds, demo_cmd, payload_cmd, robots_cmd
 from leadthrough.errors import LeadthroughError
 
 __all__ = ["build_parser", "main"]
@@ -24,6 +24,7 @@ _EPILOG = """examples:
   leadthrough record --robot er20 --trajectory traj.csv -o rec.parquet
   leadthrough identify rec.parquet --robot er20 --method proposed -o params.toml
   leadthrough validate params.toml heldout.parquet --robot er20
+  leadthrough payload loaded.parquet --robot er20 --params params.toml
 """
 
 
@@ -49,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     robots_cmd.register(sub)
     calibration_cmds.register(sub)
+    payload_cmd.register(sub)
     demo_cmd.register(sub)
     return parser
 

@@ -23,7 +23,8 @@ Array = NDArray[np.float64]
 class StateVariableDifferentiator:
     """Causal estimate of velocity and acceleration from positions.
 
-    The filter is x = [q_f, q̇_f] with q̈_f = ω²(q − q_f) − 2ω·q̇_f (critically damped).
+    The filter is x = [q_f, q̇_f] with q̈_f = ω²(q − q_f) − 2ω·q̇_f (critically damped); the
+    acceleration output is the backward difference of q̇_f.
 
     Args:
         n: Number of channels.
@@ -48,7 +49,7 @@ class StateVariableDifferentiator:
         self._a11, self._a12 = float(E[0, 0]), float(E[0, 1])
         self._a21, self._a22 = float(E[1, 0]), float(E[1, 1])
         self._b1, self._b2 = float(E[0, 2]), float(E[1, 2])
-        self._w2, self._2w = w * w, 2.0 * w
+        self._inv_dt = 1.0 / dt
         self.position = np.zeros(n)
         self.velocity = np.zeros(n)
         self.acceleration = np.zeros(n)
@@ -64,11 +65,6 @@ class StateVariableDifferentiator:
     def step(self, q: Array) -> None:
         """Advance one sample with the measured positions ``q`` (n,)."""
         p, v, t, u = self.position, self.velocity, self._tmp, self._tmp2
-        # acceleration at the start of the interval (input minus states)
-        np.subtract(q, p, out=self.acceleration)
-        self.acceleration *= self._w2
-        np.multiply(v, self._2w, out=t)
-        self.acceleration -= t
         # exact discrete update of [p, v]: v' = a21·p + a22·v + b2·q, p' = a11·p + a12·v + b1·q
         np.multiply(p, self._a21, out=t)
         np.multiply(v, self._a22, out=u)
@@ -80,6 +76,10 @@ class StateVariableDifferentiator:
         p += u
         np.multiply(q, self._b1, out=u)
         p += u
+        # acceleration: backward difference of the filtered velocity (consistent with the
+        # discrete update; the continuous formula ω²(q − p) − 2ω·v is off by ≈ ω²·dt·q̇)
+        np.subtract(t, v, out=self.acceleration)
+        self.acceleration *= self._inv_dt
         v[:] = t
 
 

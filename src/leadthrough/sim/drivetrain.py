@@ -103,6 +103,7 @@ class DriveTrainTruth:
         stribeck_velocity_motor: [rad/s motor]. stribeck_velocity_gear: [rad/s joint].
         viscous: Total viscous friction [N·m·s/rad].
         bristle: g_d [N·m]. bristle_stiffness: σ0 [N·m/rad]. bristle_damping: σ1 [N·m·s/rad].
+        bristle_presliding: z_ss [rad].
         load_coefficient: μ [-]. ripple: ε [-]. ripple_frequency: k·R [periods/rad joint].
         ripple_phase: ϕ [rad].
     """
@@ -118,6 +119,7 @@ class DriveTrainTruth:
     bristle: Array
     bristle_stiffness: Array
     bristle_damping: Array
+    bristle_presliding: Array
     load_coefficient: Array
     ripple: Array
     ripple_frequency: Array
@@ -170,6 +172,7 @@ def sample_drive_truth(
         bristle=bristle,
         bristle_stiffness=sigma0,
         bristle_damping=config.bristle_damping_ratio * sigma0 * z_ss,
+        bristle_presliding=z_ss,
         load_coefficient=draw(config.load_coefficient),
         ripple=draw(config.ripple),
         ripple_frequency=config.ripple_periods_per_motor_rev * robot.gear_ratio,
@@ -191,7 +194,7 @@ class DriveTrain:
         self._a_motor = gear_ratio / truth.stribeck_velocity_motor
         self._a_gear = 1.0 / truth.stribeck_velocity_gear
         self._coulomb = truth.coulomb_motor + truth.coulomb_gear
-        self._inv_zss = truth.bristle_stiffness / np.maximum(truth.bristle, 1e-300)
+        self._inv_zss = 1.0 / truth.bristle_presliding
         self.z = np.zeros(n)
         self.static = np.zeros(n)
         self.bristle_force = np.zeros(n)

@@ -1,0 +1,54 @@
+"""``leadthrough payload``: payload mass (and CoM) from a recording with the payload attached."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from leadthrough.data.io import load_recording
+from leadthrough.estimation.payload import estimate_payload
+from leadthrough.identification.params_file import load_params
+from leadthrough.robot.description import load_robot
+
+__all__ = ["register"]
+
+
+def register(sub: Any) -> None:
+    """Add the subcommand."""
+    p = sub.add_parser(
+        "payload", help="identify a payload with the unloaded robot's parameters",
+        description="Estimate the payload at the flange from a recording made with it attached, "
+                    "using parameters identified on the unloaded robot (paper Table III).",
+        epilog="example: leadthrough payload loaded.parquet --robot er20 --params params.toml "
+               "--json",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", type=Path)
+    p.add_argument("--robot", default="er20")
+    p.add_argument("--params", type=Path, required=True, help="params of the unloaded robot")
+    p.add_argument("--columns", type=Path, default=None, help="column map for a raw log")
+    p.add_argument("--method", choices=("motion", "static"), default="motion",
+                   help="during motion (default, the paper's) or from static poses")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``leadthrough payload``."""
+    robot = load_robot(args.robot)
+    pf = load_params(args.params, robot)
+    rec = load_recording(args.recording, args.columns)
+    rec.check_robot(robot)
+    est = estimate_payload(rec, robot, pf.params, args.method)
+    out: dict[str, Any] = {"robot": robot.name, "method": est.method, "mass_kg": est.mass_kg,
+                           "weight_N": est.weight_n, "samples": est.samples}
+    if est.com_tcp is not None:
+        out["com_m"] = [float(v) for v in est.com_tcp]
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        com = "" if est.com_tcp is None else \
+            " at CoM (" + ", ".join(f"{v:.3f}" for v in est.com_tcp) + ") m in the TCP frame"
+        print(f"payload {est.mass_kg:.3f} kg ({est.weight_n:.2f} N){com}")
+    return 0

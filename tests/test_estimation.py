@@ -1,0 +1,148 @@
+"""Estimation: causal filters, the real-time estimator's contract, payload identification."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from leadthrough.dynamics import nominal_drive_parameters
+from leadthrough.errors import DataError
+from leadthrough.estimation.estimator import (
+    EstimatorConfig,
+    ExternalForceEstimator,
+    Status,
+)
+from leadthrough.estimation.filters import FirstOrderLowPass, StateVariableDifferentiator
+from leadthrough.estimation.payload import estimate_payload
+from leadthrough.robot import Robot
+from leadthrough.sim import ConstantWrench, Payload, SimConfig, SimRobot, hold
+from leadthrough.sim.mujoco_model import build_mujoco_model
+from test_identification import _trajectory
+
+Q0 = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
+
+
+def test_differentiator_tracks_a_sine() -> None:
+    dt, w = 1e-3, 2 * np.pi * 0.5
+    diff = StateVariableDifferentiator(1, 20.0, dt)
+    t = np.arange(0, 4, dt)
+    diff.reset(np.zeros(1))
+    v, a = np.empty(t.size), np.empty(t.size)
+    for k, tk in enumerate(t):
+        diff.step(np.array([np.sin(w * tk)]))
+        v[k], a[k] = diff.velocity[0], diff.acceleration[0]
+    late = t > 1.0
+    # critically damped 2nd order at 20 Hz: small lag at 0.5 Hz (≈ 2·ζ/ω_c = 16 ms)
+    lag = 2.0 / (2 * np.pi * 20.0)
+    np.testing.assert_allclose(v[late], w * np.cos(w * (t[late] - lag)), atol=0.02 * w)
+    # acceleration: half a sample more lag (backward difference)
+    np.testing.assert_allclose(a[late], -w * w * np.sin(w * (t[late] - lag - 5e-4)),
+                               atol=0.05 * w * w)
+
+
+def test_low_pass_step_response() -> None:
+    lp = FirstOrderLowPass(2, 3.0, 1e-3)
+    for _ in range(1000):
+        y = lp.step(np.array([1.0, -2.0]))
+    np.testing.assert_allclose(y, [1.0, -2.0], rtol=1e-6)
+    with pytest.raises(DataError):
+        StateVariableDifferentiator(1, 600.0, 1e-3)
+
+
+def _estimator(robot: Robot, **kw: object) -> ExternalForceEstimator:
+    return ExternalForceEstimator(robot, nominal_drive_parameters(robot), np.zeros(robot.n),
+                                  EstimatorConfig(**kw))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("method", ["direct", "momentum"])
+def test_estimates_a_push_with_the_true_model(er20: Robot, method: str) -> None:
+    """With a noise-free simulator of the nominal model, the estimate converges to J^T F."""
+    from leadthrough.sim.drivetrain import DriveTrainConfig
+    from leadthrough.sim.sensors import SensorConfig
+
+    quiet = SimConfig(seed=1, link_deviation=0.0,
+                      sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
+                                           current_bias=0.0, adc_bits=32),
+                      drive=DriveTrainConfig(coulomb_motor=0, coulomb_gear=0, stribeck_motor=0,
+                                             stribeck_gear=0, viscous=0, bristle=0,
+                                             load_coefficient=0, ripple=0,
+                                             rotor_inertia_spread=0))
+    force = np.array([30.0, -40.0, 20.0])
+    sim = SimRobot(er20, quiet, q0=Q0, operator=ConstantWrench((*force, 0, 0, 0), 0.5))
+    log = hold(sim, 3.0)
+    params = nominal_drive_parameters(er20)
+    est = ExternalForceEstimator(er20, params, np.zeros(6), EstimatorConfig(method=method))
+    inp, out = est.make_input(), est.make_output()
+    est.reset(log.q[0])
+    for k in range(log.time.size):
+        inp.t, inp.q[:], inp.current[:] = log.time[k], log.q[k], log.current[k]
+        status = est.update(inp, out)
+    assert status is Status.OK
+    np.testing.assert_allclose(out.wrench[:3], force, atol=1.0)
+    np.testing.assert_allclose(out.tau_ext, log.truth.external_torque[-1], atol=0.5)
+
+
+def test_nonfinite_input_latches_a_fault(er20: Robot) -> None:
+    est = _estimator(er20)
+    inp, out = est.make_input(), est.make_output()
+    est.reset(Q0)
+    inp.q[:] = Q0
+    for _ in range(10):
+        est.update(inp, out)
+    last = out.wrench.copy()
+    inp.current[2] = np.nan
+    assert est.update(inp, out) is Status.FAULT_NONFINITE
+    inp.current[2] = 0.0
+    assert est.update(inp, out) is Status.FAULT_NONFINITE  # latched until reset
+    np.testing.assert_array_equal(out.wrench, last)
+    est.reset(Q0)
+    assert est.update(inp, out) is Status.WARMING_UP
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-0.2, 0.2), st.floats(0.0, 1.0))
+def test_wrench_stays_bounded_near_the_wrist_singularity(er20: Robot, q5: float, scale: float
+                                                         ) -> None:
+    """q5 → 0 aligns axes 4 and 6: the damped inverse keeps the wrench bounded."""
+    est = _estimator(er20)
+    out = est.make_output()
+    q = np.array([0.2, -0.5, 0.3, 0.4, q5, 0.1])
+    out.tau_ext[:] = scale * np.array([50.0, 50.0, 20.0, 5.0, 5.0, 5.0])
+    est._wrench(q, out)
+    assert np.all(np.isfinite(out.wrench))
+    assert np.linalg.norm(out.wrench) < 1e4
+    if out.manipulability < est.config.manipulability_threshold:
+        assert out.damping > 0
+
+
+def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
+    """Noise-free, friction-free simulator of the nominal model: mass and CoM are exact."""
+    from leadthrough.data.recording import Recording
+    from leadthrough.sim.drivetrain import DriveTrainConfig
+    from leadthrough.sim.run import run_trajectory
+    from leadthrough.sim.sensors import SensorConfig
+
+    quiet = SimConfig(seed=1, link_deviation=0.0,
+                      sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
+                                           current_bias=0.0, adc_bits=32),
+                      drive=DriveTrainConfig(coulomb_motor=0, coulomb_gear=0, stribeck_motor=0,
+                                             stribeck_gear=0, viscous=0, bristle=0,
+                                             load_coefficient=0, ripple=0,
+                                             rotor_inertia_spread=0))
+    s = _trajectory(er20, 3, seconds=20.0, rate=1000.0, amplitude=0.04)
+    sim = SimRobot(er20, quiet, q0=s.q[0], payload=Payload(8.0, (0.02, -0.01, 0.12)))
+    log = run_trajectory(sim, s.q, s.qd)
+    rec = Recording(time=log.time, q=log.q, current=log.current, robot="er20")
+    params = nominal_drive_parameters(er20)
+    params = type(params)(phi=params.phi, friction_model=params.friction_model,
+                          rotor_inertia=sim.truth.drive.armature, coulomb=np.zeros(6),
+                          viscous=np.zeros(6))
+    est = estimate_payload(rec, er20, params, "motion", refit_friction=False)
+    assert est.mass_kg == pytest.approx(8.0, rel=5e-3)
+    assert est.com_tcp is not None
+    np.testing.assert_allclose(est.com_tcp, [0.02, -0.01, 0.12], atol=5e-3)
+    with pytest.raises(DataError, match="unknown method"):
+        estimate_payload(rec, er20, params, "guess")
+    assert build_mujoco_model(er20) is not None
