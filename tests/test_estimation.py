@@ -51,6 +51,20 @@ def test_low_pass_step_response() -> None:
         StateVariableDifferentiator(1, 600.0, 1e-3)
 
 
+def _quiet_config() -> SimConfig:
+    """A simulator of exactly the nominal model: no sensor noise, no friction, no CAD error."""
+    from leadthrough.sim.drivetrain import DriveTrainConfig
+    from leadthrough.sim.sensors import SensorConfig
+
+    return SimConfig(seed=1, link_deviation=0.0,
+                     sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
+                                          current_bias=0.0, adc_bits=32),
+                     drive=DriveTrainConfig(coulomb_motor=0, coulomb_gear=0, stribeck_motor=0,
+                                            stribeck_gear=0, viscous=0, bristle=0,
+                                            load_coefficient=0, ripple=0,
+                                            rotor_inertia_spread=0))
+
+
 def _estimator(robot: Robot, **kw: object) -> ExternalForceEstimator:
     return ExternalForceEstimator(robot, nominal_drive_parameters(robot), np.zeros(robot.n),
                                   EstimatorConfig(**kw))  # type: ignore[arg-type]
@@ -59,16 +73,7 @@ def _estimator(robot: Robot, **kw: object) -> ExternalForceEstimator:
 @pytest.mark.parametrize("method", ["direct", "momentum"])
 def test_estimates_a_push_with_the_true_model(er20: Robot, method: str) -> None:
     """With a noise-free simulator of the nominal model, the estimate converges to J^T F."""
-    from leadthrough.sim.drivetrain import DriveTrainConfig
-    from leadthrough.sim.sensors import SensorConfig
-
-    quiet = SimConfig(seed=1, link_deviation=0.0,
-                      sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
-                                           current_bias=0.0, adc_bits=32),
-                      drive=DriveTrainConfig(coulomb_motor=0, coulomb_gear=0, stribeck_motor=0,
-                                             stribeck_gear=0, viscous=0, bristle=0,
-                                             load_coefficient=0, ripple=0,
-                                             rotor_inertia_spread=0))
+    quiet = _quiet_config()
     force = np.array([30.0, -40.0, 20.0])
     sim = SimRobot(er20, quiet, q0=Q0, operator=ConstantWrench((*force, 0, 0, 0), 0.5))
     log = hold(sim, 3.0)
@@ -120,17 +125,9 @@ def test_wrench_stays_bounded_near_the_wrist_singularity(er20: Robot, q5: float,
 def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
     """Noise-free, friction-free simulator of the nominal model: mass and CoM are exact."""
     from leadthrough.data.recording import Recording
-    from leadthrough.sim.drivetrain import DriveTrainConfig
     from leadthrough.sim.run import run_trajectory
-    from leadthrough.sim.sensors import SensorConfig
 
-    quiet = SimConfig(seed=1, link_deviation=0.0,
-                      sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
-                                           current_bias=0.0, adc_bits=32),
-                      drive=DriveTrainConfig(coulomb_motor=0, coulomb_gear=0, stribeck_motor=0,
-                                             stribeck_gear=0, viscous=0, bristle=0,
-                                             load_coefficient=0, ripple=0,
-                                             rotor_inertia_spread=0))
+    quiet = _quiet_config()
     s = _trajectory(er20, 3, seconds=20.0, rate=1000.0, amplitude=0.04)
     sim = SimRobot(er20, quiet, q0=s.q[0], payload=Payload(8.0, (0.02, -0.01, 0.12)))
     log = run_trajectory(sim, s.q, s.qd)

@@ -69,20 +69,15 @@ class IdentifiedModel:
         np.multiply(qd, self._visc, out=t)
         f += t
         if self._stribeck:
-            np.multiply(qd, self._am, out=t)
-            np.square(t, out=t)
-            np.negative(t, out=t)
-            np.exp(t, out=t)
-            t *= self._c2
-            t *= s
-            f += t
-            np.multiply(qd, self._ag, out=t)
-            np.square(t, out=t)
-            np.negative(t, out=t)
-            np.exp(t, out=t)
-            t *= self._c3
-            t *= s
-            f += t
+            # motor-side and gear-side Stribeck terms: c·exp(−(a·q̇)²)·sgn
+            for a, c in ((self._am, self._c2), (self._ag, self._c3)):
+                np.multiply(qd, a, out=t)
+                np.square(t, out=t)
+                np.negative(t, out=t)
+                np.exp(t, out=t)
+                t *= c
+                t *= s
+                f += t
         else:
             np.cbrt(qd, out=t)
             t *= self._cbrt
