@@ -93,9 +93,9 @@ def estimate_payload(
     n = robot.n
     model = robot.model
     last = n  # joint index of the last link in the Pinocchio model
-    K = link_regressor_batch(model, data.q, data.qd, data.qdd)[:, :, 10 * (last - 1):]
-    residual = data.torque - model_torque(robot, params, data.q, data.qd, data.qdd)
     if method == "motion":
+        K = link_regressor_batch(model, data.q, data.qd, data.qdd)[:, :, 10 * (last - 1):]
+        residual = data.torque - model_torque(robot, params, data.q, data.qd, data.qdd)
         used = data.moving
         cols = np.arange(10 + n)
         if refit_friction:
@@ -107,11 +107,10 @@ def estimate_payload(
             cols = np.arange(10)
     else:
         still = np.all(np.abs(data.qd) < static_velocity, axis=1)
-        # keep only samples preceded by settle_s of rest
-        run = np.zeros(still.size, dtype=int)
-        for k in range(still.size):
-            run[k] = run[k - 1] + 1 if still[k] and k > 0 else int(still[k])
-        still &= run >= round(settle_s * data.rate_hz)
+        # keep only samples preceded by settle_s of rest: samples since the last moving one
+        idx = np.arange(still.size)
+        last_moving = np.maximum.accumulate(np.where(still, -1, idx))
+        still &= idx - last_moving >= round(settle_s * data.rate_hz)
         if still.sum() < 10:
             raise DataError("too few static samples", source=data.source, field="q̇",
                             value=int(still.sum()),
