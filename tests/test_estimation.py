@@ -143,3 +143,36 @@ def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
     with pytest.raises(DataError, match="unknown method"):
         estimate_payload(rec, er20, params, "guess")
     assert build_mujoco_model(er20) is not None
+
+
+@pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt"])
+def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: str) -> None:
+    """The compiled per-sample model (smoothed sign) equals the offline eq. 21 for |q̇| > v_ε."""
+    from dataclasses import replace
+
+    from leadthrough.dynamics import FrictionModel, model_torque
+    from leadthrough.dynamics.friction import StribeckParameters
+    from leadthrough.estimation.identified_model import IdentifiedModel
+
+    base = nominal_drive_parameters(er20)
+    n = er20.n
+    ones = np.ones(n)
+    params = {
+        "stribeck": replace(base, friction_model=FrictionModel.STRIBECK,
+                            stribeck=StribeckParameters(30 * ones, 20 * ones, 40 * ones,
+                                                        10 * ones, 0.1 * ones, 5 * ones),
+                            offset=np.linspace(-2, 2, n)),
+        "coulomb-viscous": replace(base, coulomb=12 * ones, viscous=3 * ones),
+        "cbrt": replace(base, friction_model=FrictionModel.CBRT,
+                        coulomb=12 * ones, viscous=3 * ones, cbrt=4 * ones),
+    }[model]
+    rt = IdentifiedModel(er20, params, standstill_velocity=0.02)
+    rng = np.random.default_rng(3)
+    out = np.zeros(n)
+    for _ in range(50):
+        q = rng.uniform(er20.lower_limits, er20.upper_limits)
+        qd = rng.choice([-1.0, 1.0], n) * rng.uniform(0.03, 2.0, n)
+        qdd = rng.normal(size=n)
+        rt.torque(q, qd, qdd, out)
+        expected = model_torque(er20, params, q[None], qd[None], qdd[None])[0]
+        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-9)

@@ -19,6 +19,10 @@ The joint torque is mapped to a wrench at the TCP through a damped pseudo-invers
 μ = √det(J Jᵀ) falls below μ₀, so the wrench shrinks toward zero near a singularity instead of
 blowing up. The frame is the base (axes of the base, at the TCP) or the tool.
 
+Per sample, ``update`` makes two or four Pinocchio calls (RNEA or CRBA/Coriolis/gravity, and
+the TCP Jacobian) and hands all element-wise work to the compiled kernels of
+:mod:`leadthrough.estimation.kernels`; ``benchmarks/estimator_speed.py`` measures it.
+
 ``update`` validates nothing but finiteness (configuration is checked once at construction),
 never raises, never reads the clock: a non-finite sample sets ``Status.FAULT_NONFINITE`` and
 keeps the last valid output; the fault latches until ``reset``.
@@ -35,6 +39,7 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.errors import DataError, check_fields
+from leadthrough.estimation import kernels
 from leadthrough.estimation.filters import FirstOrderLowPass, StateVariableDifferentiator
 from leadthrough.estimation.identified_model import IdentifiedModel
 from leadthrough.robot.description import Robot
@@ -174,16 +179,15 @@ class ExternalForceEstimator:
         self._lpf = FirstOrderLowPass(n, cfg.output_cutoff_hz, cfg.dt)
         self._k_obs = 2.0 * np.pi * cfg.output_cutoff_hz
         self._ref = pin.LOCAL_WORLD_ALIGNED if cfg.frame == "base" else pin.LOCAL
-        self._tau_d = np.zeros(n)
         self._tau_j = np.zeros(n)
-        self._raw = np.zeros(n)
         self._p0 = np.zeros(n)
         self._integral = np.zeros(n)
         self._r = np.zeros(n)
-        self._beta = np.zeros(n)
+        self._work = np.zeros(n)
+        self._direct = cfg.method == "direct"
+        self._force_only = cfg.axes == "force"
         self._last_tau = np.zeros(n)
         self._last_wrench = np.zeros(6)
-        self._eye = np.eye(6)
         std = np.ones(n) if noise_std is None else np.asarray(noise_std, dtype=float)
         if std.shape != (n,) or not np.all(std > 0):
             raise DataError("wrong size or not positive", field="noise_std", value=std.tolist(),
@@ -229,13 +233,14 @@ class ExternalForceEstimator:
         self._diff.step(inp.q)
         q, qd, qdd = self._diff.position, self._diff.velocity, self._diff.acceleration
         np.multiply(inp.current, self._tpa, out=self._tau_j)
-        if self.config.method == "direct":
-            self.model.torque(q, qd, qdd, self._tau_d)
-            np.subtract(self._tau_d, self._tau_j, out=self._raw)
-            tau = self._lpf.step(self._raw)
+        mdl = self.model
+        if self._direct:
+            rnea = pin.rnea(mdl.model, mdl.data, q, qd, qdd)
+            kernels.direct_residual(rnea, qd, qdd, self._tau_j, mdl.friction_rows,
+                                    mdl.stribeck, mdl.rotor, mdl.offset, self._lpf.alpha,
+                                    self._lpf.value, self._noise_mean, out.tau_ext)
         else:
-            tau = self._momentum(q, qd)
-        np.add(tau, self._noise_mean, out=out.tau_ext)
+            self._momentum(q, qd, out.tau_ext)
         self._wrench(q, out)
         out.qd[:] = qd
         self._last_tau[:] = out.tau_ext
@@ -244,46 +249,23 @@ class ExternalForceEstimator:
         out.status = Status.OK if self._samples > self._warm else Status.WARMING_UP
         return out.status
 
-    def _momentum(self, q: Array, qd: Array) -> Array:
-        m, d = self.model.model, self.model.data
-        M = pin.crba(m, d, q)
-        M = np.triu(M) + np.triu(M, 1).T
-        M[np.diag_indices_from(M)] += self.model.params.rotor_inertia
-        p = M @ qd
+    def _momentum(self, q: Array, qd: Array, tau_ext: Array) -> None:
+        mdl = self.model
+        m, d = mdl.model, mdl.data
+        M = pin.crba(m, d, q)  # upper triangle only
         C = pin.computeCoriolisMatrix(m, d, q, qd)
         g = pin.computeGeneralizedGravity(m, d, q)
-        # β = τ_j + Cᵀq̇ − g − τ_f − τ_0
-        np.subtract(self._tau_j, g, out=self._beta)
-        self._beta += C.T @ qd
-        self._beta -= self.model.friction_torque(qd)
-        self._beta -= self.model.offset
-        if self._samples == 0:
-            self._p0[:] = p
-        self._beta += self._r
-        self._beta *= self.config.dt
-        self._integral += self._beta
-        np.subtract(p, self._p0, out=self._r)
-        self._r -= self._integral
-        self._r *= self._k_obs
-        # r estimates τ_j-side sign: M q̈ + ... = τ_j + τ_ext  →  r → τ_ext
-        return self._r
+        kernels.momentum_step(M, mdl.rotor, C, g, qd, self._tau_j, mdl.friction_rows,
+                              mdl.stribeck, mdl.offset, self.config.dt, self._k_obs,
+                              self._samples == 0, self._p0, self._integral, self._r,
+                              self._work, self._noise_mean, tau_ext)
 
     def _wrench(self, q: Array, out: EstimatorOutput) -> None:
         m, d = self.model.model, self.model.data
         J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
-        JJt = J @ J.T
-        mu = float(np.sqrt(max(np.linalg.det(JJt), 0.0)))
-        mu0 = self.config.manipulability_threshold
-        lam2 = 0.0
-        if mu < mu0:
-            lam2 = self.config.max_damping**2 * (1.0 - (mu / mu0) ** 2)
-        if self.config.axes == "wrench":
-            JJt += lam2 * self._eye
-            out.wrench[:] = np.linalg.solve(JJt, J @ out.tau_ext)
-        else:
-            Jw = J[:3] * self._w             # weighted: minimise Σ_j w_j²·(Jᵀf − τ)_j²
-            A = Jw @ Jw.T + lam2 * self._eye[:3, :3]
-            out.wrench[:3] = np.linalg.solve(A, Jw @ (self._w * out.tau_ext))
-            out.wrench[3:] = 0.0
+        cfg = self.config
+        mu = kernels.wrench_from_torque(J, out.tau_ext, self._w, self._force_only,
+                                        cfg.manipulability_threshold, cfg.max_damping,
+                                        out.wrench)
         out.manipulability = mu
-        out.damping = float(np.sqrt(lam2))
+        out.damping = kernels.damping_of(mu, cfg.manipulability_threshold, cfg.max_damping)

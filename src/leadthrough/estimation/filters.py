@@ -14,6 +14,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
+from leadthrough.estimation import kernels
 
 __all__ = ["FirstOrderLowPass", "StateVariableDifferentiator"]
 
@@ -46,15 +47,10 @@ class StateVariableDifferentiator:
         M[:2, :2] = A * dt
         M[:2, 2:] = B * dt
         E = scipy.linalg.expm(M)
-        self._a11, self._a12 = float(E[0, 0]), float(E[0, 1])
-        self._a21, self._a22 = float(E[1, 0]), float(E[1, 1])
-        self._b1, self._b2 = float(E[0, 2]), float(E[1, 2])
-        self._inv_dt = 1.0 / dt
+        self.coef = np.array([E[0, 0], E[0, 1], E[1, 0], E[1, 1], E[0, 2], E[1, 2], 1.0 / dt])
         self.position = np.zeros(n)
         self.velocity = np.zeros(n)
         self.acceleration = np.zeros(n)
-        self._tmp = np.zeros(n)
-        self._tmp2 = np.zeros(n)
 
     def reset(self, q: Array) -> None:
         """Start at rest at ``q``."""
@@ -63,24 +59,13 @@ class StateVariableDifferentiator:
         self.acceleration[:] = 0.0
 
     def step(self, q: Array) -> None:
-        """Advance one sample with the measured positions ``q`` (n,)."""
-        p, v, t, u = self.position, self.velocity, self._tmp, self._tmp2
-        # exact discrete update of [p, v]: v' = a21·p + a22·v + b2·q, p' = a11·p + a12·v + b1·q
-        np.multiply(p, self._a21, out=t)
-        np.multiply(v, self._a22, out=u)
-        t += u
-        np.multiply(q, self._b2, out=u)
-        t += u
-        p *= self._a11
-        np.multiply(v, self._a12, out=u)
-        p += u
-        np.multiply(q, self._b1, out=u)
-        p += u
-        # acceleration: backward difference of the filtered velocity (consistent with the
-        # discrete update; the continuous formula ω²(q − p) − 2ω·v is off by ≈ ω²·dt·q̇)
-        np.subtract(t, v, out=self.acceleration)
-        self.acceleration *= self._inv_dt
-        v[:] = t
+        """Advance one sample with the measured positions ``q`` (n,).
+
+        Exact discrete update of [p, v] (v' = a21·p + a22·v + b2·q, p' = a11·p + a12·v + b1·q);
+        the acceleration is the backward difference of the filtered velocity, consistent with
+        the discrete update (the continuous ω²(q − p) − 2ω·v is off by ≈ ω²·dt·q̇).
+        """
+        kernels.svf_step(self.coef, q, self.position, self.velocity, self.acceleration)
 
 
 class FirstOrderLowPass:
@@ -98,7 +83,6 @@ class FirstOrderLowPass:
                             expected="> 0 Hz")
         self.alpha = 1.0 - float(np.exp(-2.0 * np.pi * cutoff_hz * dt))
         self.value = np.zeros(n)
-        self._tmp = np.zeros(n)
 
     def reset(self, x: Array) -> None:
         """Set the output to ``x``."""
@@ -106,7 +90,5 @@ class FirstOrderLowPass:
 
     def step(self, x: Array) -> Array:
         """Filter one sample; returns the (internal) output buffer."""
-        np.subtract(x, self.value, out=self._tmp)
-        self._tmp *= self.alpha
-        self.value += self._tmp
+        kernels.low_pass_step(self.alpha, x, self.value)
         return self.value

@@ -16,6 +16,8 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
 from leadthrough.dynamics.regressor import parameters_to_inertias
+from leadthrough.estimation import kernels
+from leadthrough.estimation.kernels import FRICTION_ROWS
 from leadthrough.robot.description import Robot
 
 __all__ = ["IdentifiedModel"]
@@ -41,53 +43,32 @@ class IdentifiedModel:
             self.model.inertias[j] = inertia
         self.data = self.model.createData()
         n = robot.n
-        self._inv_eps = 1.0 / standstill_velocity
-        self._rotor = np.asarray(params.rotor_inertia, dtype=float)
-        self._offset = params.offset if params.offset.size else np.zeros(n)
+        self.rotor = np.asarray(params.rotor_inertia, dtype=float)
+        self.offset = params.offset if params.offset.size else np.zeros(n)
         fm = params.friction_model
-        self._stribeck = fm is FrictionModel.STRIBECK and params.stribeck is not None
-        if self._stribeck:
-            st = params.stribeck
-            assert st is not None
-            self._c1, self._c2, self._c3, self._visc = st.f1, st.f2, st.f3, st.f4
-            self._am = robot.gear_ratio / st.qd_sm
-            self._ag = 1.0 / st.qd_sg
+        st = params.stribeck
+        self.stribeck = fm is FrictionModel.STRIBECK and st is not None
+        fp = np.zeros((FRICTION_ROWS, n))
+        fp[0] = 1.0 / standstill_velocity
+        if st is not None and self.stribeck:
+            fp[1], fp[2], fp[4], fp[6] = st.f1, st.f4, st.f2, st.f3
+            fp[3] = robot.gear_ratio / st.qd_sm
+            fp[5] = 1.0 / st.qd_sg
         else:
-            self._c1, self._visc = params.coulomb, params.viscous
-            self._cbrt = params.cbrt if params.cbrt.size else np.zeros(n)
+            fp[1] = params.coulomb if params.coulomb.size else 0.0
+            fp[2] = params.viscous if params.viscous.size else 0.0
+            fp[7] = params.cbrt if params.cbrt.size else 0.0
+        self.friction_rows = fp
         self.friction = np.zeros(n)
-        self.offset = self._offset
-        self._s = np.zeros(n)
-        self._t = np.zeros(n)
 
     def friction_torque(self, qd: Array) -> Array:
-        """Friction τ_f(q̇) with the smoothed sign [N·m]; internal buffer."""
-        s, t, f = self._s, self._t, self.friction
-        np.multiply(qd, self._inv_eps, out=s)
-        np.clip(s, -1.0, 1.0, out=s)
-        np.multiply(s, self._c1, out=f)
-        np.multiply(qd, self._visc, out=t)
-        f += t
-        if self._stribeck:
-            # motor-side and gear-side Stribeck terms: c·exp(−(a·q̇)²)·sgn
-            for a, c in ((self._am, self._c2), (self._ag, self._c3)):
-                np.multiply(qd, a, out=t)
-                np.square(t, out=t)
-                np.negative(t, out=t)
-                np.exp(t, out=t)
-                t *= c
-                t *= s
-                f += t
-        else:
-            np.cbrt(qd, out=t)
-            t *= self._cbrt
-            f += t
-        return f
+        """Friction τ_f(q̇) with the smoothed sign [N·m]; returns an internal buffer."""
+        kernels.friction_torque(qd, self.friction_rows, self.stribeck, self.friction)
+        return self.friction
 
     def torque(self, q: Array, qd: Array, qdd: Array, out: Array) -> None:
         """τ̂_d into ``out`` [N·m] (eq. 21 right side, smoothed friction sign)."""
         out[:] = pin.rnea(self.model, self.data, q, qd, qdd)
         out += self.friction_torque(qd)
-        np.multiply(qdd, self._rotor, out=self._t)
-        out += self._t
-        out += self._offset
+        out += self.rotor * qdd
+        out += self.offset

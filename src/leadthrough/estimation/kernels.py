@@ -1,0 +1,222 @@
+"""Compiled inner loops of the real-time estimator (Numba, ``nopython``, cached on disk).
+
+With six joints, each NumPy call costs more in dispatch (~0.5–1 µs) than in arithmetic, and one
+estimator sample needs dozens of them. These kernels fuse the element-wise work of one sample
+into a single compiled call each, so an update costs a few Pinocchio calls plus two kernel
+calls. They are the only implementation of these formulas: the filter and model classes call
+them too, so offline and real-time results are identical.
+
+All kernels write into preallocated arrays and return nothing (or a float); they never
+allocate on the heap except inside the 6×6 LAPACK solve of :func:`wrench_from_torque`.
+
+Friction parameter rows (``fp``, shape (8, n)), see :mod:`leadthrough.dynamics.friction`:
+``0`` 1/v_ε (smoothed sign), ``1`` Coulomb f1, ``2`` viscous f4, ``3`` R/q̇_sm, ``4`` f2,
+``5`` 1/q̇_sg, ``6`` f3, ``7`` cube-root coefficient (OLS-cbrt model only).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = [
+    "FRICTION_ROWS",
+    "damping_of",
+    "direct_residual",
+    "friction_torque",
+    "low_pass_step",
+    "momentum_step",
+    "svf_step",
+    "wrench_from_torque",
+]
+
+Array = NDArray[np.float64]
+FRICTION_ROWS = 8
+
+
+@njit(cache=True, nogil=True)
+def svf_step(coef: Array, q: Array, position: Array, velocity: Array,
+             acceleration: Array) -> None:
+    """One exact-discretised step of the state-variable differentiator (in place).
+
+    Args:
+        coef: [a11, a12, a21, a22, b1, b2, 1/dt], shape (7,).
+        q: Measured positions, shape (n,).
+        position: Filtered positions (state), shape (n,).
+        velocity: Filtered velocities (state), shape (n,).
+        acceleration: Output: backward difference of the filtered velocity, shape (n,).
+    """
+    for j in range(q.size):
+        v_new = coef[2] * position[j] + coef[3] * velocity[j] + coef[5] * q[j]
+        position[j] = coef[0] * position[j] + coef[1] * velocity[j] + coef[4] * q[j]
+        acceleration[j] = (v_new - velocity[j]) * coef[6]
+        velocity[j] = v_new
+
+
+@njit(cache=True, nogil=True)
+def low_pass_step(alpha: float, x: Array, value: Array) -> None:
+    """First-order low-pass y ← y + α·(x − y) (in place on ``value``)."""
+    for j in range(x.size):
+        value[j] += alpha * (x[j] - value[j])
+
+
+@njit(cache=True, nogil=True)
+def friction_torque(qd: Array, fp: Array, stribeck: bool, out: Array) -> None:
+    """Joint friction with the smoothed sign sat(q̇/v_ε) (eq. 15, or the OLS models) [N·m].
+
+    Args:
+        qd: Joint velocities [rad/s], shape (n,).
+        fp: Friction parameter rows, shape (8, n) (module docstring).
+        stribeck: Use the Stribeck rows (eq. 15) instead of the cube-root row.
+        out: Output [N·m], shape (n,).
+    """
+    for j in range(qd.size):
+        v = qd[j]
+        s = min(1.0, max(-1.0, v * fp[0, j]))
+        f = s * fp[1, j] + v * fp[2, j]
+        if stribeck:
+            a = v * fp[3, j]
+            b = v * fp[5, j]
+            f += s * (fp[4, j] * np.exp(-a * a) + fp[6, j] * np.exp(-b * b))
+        else:
+            f += fp[7, j] * np.cbrt(v)
+        out[j] = f
+
+
+@njit(cache=True, nogil=True)
+def direct_residual(rnea: Array, qd: Array, qdd: Array, tau_j: Array, fp: Array,
+                    stribeck: bool, rotor: Array, offset: Array, alpha: float,
+                    filtered: Array, noise_mean: Array, tau_ext: Array) -> None:
+    """Eq. 27 and 30 for one sample: τ_ext = LPF(τ̂_d − τ̂_j) + τ̄_ω (in place).
+
+    τ̂_d = RNEA + τ_f(q̇) + M_j·q̈ + τ_0 (eq. 21 right side) with the smoothed friction sign.
+
+    Args:
+        rnea: Rigid-body torque of the identified links [N·m], shape (n,).
+        qd: Joint velocities [rad/s], shape (n,).
+        qdd: Joint accelerations [rad/s²], shape (n,).
+        tau_j: Torque from current [N·m], shape (n,).
+        fp: Friction rows, shape (8, n).
+        stribeck: Friction model flag (see :func:`friction_torque`).
+        rotor: Rotor inertias M_j [kg·m²], shape (n,).
+        offset: Torque offsets τ_0 [N·m], shape (n,).
+        alpha: Low-pass coefficient.
+        filtered: Low-pass state (in place), shape (n,).
+        noise_mean: τ̄_ω added back (zeros to skip) [N·m], shape (n,).
+        tau_ext: Output [N·m], shape (n,).
+    """
+    friction_torque(qd, fp, stribeck, tau_ext)
+    for j in range(qd.size):
+        raw = rnea[j] + tau_ext[j] + rotor[j] * qdd[j] + offset[j] - tau_j[j]
+        filtered[j] += alpha * (raw - filtered[j])
+        tau_ext[j] = filtered[j] + noise_mean[j]
+
+
+@njit(cache=True, nogil=True)
+def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Array,
+                  qd: Array, tau_j: Array, fp: Array, stribeck: bool, offset: Array,
+                  dt: float, gain: float, first: bool, p0: Array, integral: Array,
+                  r: Array, work: Array, noise_mean: Array, tau_ext: Array) -> None:
+    """One step of De Luca's generalized-momentum observer (in place).
+
+    r = K_O·(p − p₀ − ∫(τ_j + Cᵀq̇ − g − τ_f − τ_0 + r) dt), p = (M + M_j)·q̇; r → τ_ext with
+    bandwidth K_O. Then τ_ext = r + τ̄_ω.
+
+    Args:
+        mass_upper: M(q) of the links, upper triangle used (as ``pin.crba`` fills it),
+            shape (n, n).
+        rotor: Rotor inertias M_j [kg·m²], shape (n,).
+        coriolis: C(q, q̇), shape (n, n).
+        gravity: g(q) [N·m], shape (n,).
+        qd: Joint velocities [rad/s], shape (n,).
+        tau_j: Torque from current [N·m], shape (n,).
+        fp: Friction rows, shape (8, n).
+        stribeck: Friction model flag.
+        offset: τ_0 [N·m], shape (n,).
+        dt: Sample period [s].
+        gain: Observer gain K_O [1/s].
+        first: First sample after reset (sets p₀).
+        p0: Initial momentum (state), shape (n,).
+        integral: Integral (state), shape (n,).
+        r: Residual (state) [N·m], shape (n,).
+        work: Scratch, shape (n,).
+        noise_mean: τ̄_ω [N·m], shape (n,).
+        tau_ext: Output [N·m], shape (n,).
+    """
+    n = qd.size
+    friction_torque(qd, fp, stribeck, work)
+    for i in range(n):
+        p = rotor[i] * qd[i]
+        ctq = 0.0
+        for k in range(n):
+            p += (mass_upper[i, k] if i <= k else mass_upper[k, i]) * qd[k]
+            ctq += coriolis[k, i] * qd[k]
+        if first:
+            p0[i] = p
+        beta = tau_j[i] + ctq - gravity[i] - work[i] - offset[i]
+        integral[i] += (beta + r[i]) * dt
+        work[i] = p
+    for i in range(n):
+        r[i] = gain * (work[i] - p0[i] - integral[i])
+        tau_ext[i] = r[i] + noise_mean[i]
+
+
+@njit(cache=True, nogil=True)
+def damping_of(mu: float, mu0: float, max_damping: float) -> float:
+    """Damping λ = λ_max·√(1 − (μ/μ₀)²) below the manipulability threshold μ₀, else 0."""
+    if mu >= mu0:
+        return 0.0
+    return max_damping * np.sqrt(1.0 - (mu / mu0) ** 2)
+
+
+@njit(cache=True, nogil=True)
+def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: bool,
+                       mu0: float, max_damping: float, wrench: Array) -> float:
+    """Joint torque → TCP wrench through a damped pseudo-inverse of Jᵀ (eq. 28–30, in place).
+
+    ``force_only``: the three force components are the weighted least-squares fit of Jᵥᵀf to τ
+    (weights ``weight`` per joint) and the torque components are zero; otherwise the full
+    wrench (J Jᵀ + λ²·1)⁻¹·J·τ. λ² = λ_max²·(1 − (μ/μ₀)²) when the manipulability
+    μ = √det(J Jᵀ) < μ₀, else 0.
+
+    Args:
+        jacobian: TCP Jacobian in the output frame, shape (6, n).
+        tau: Joint torque [N·m], shape (n,).
+        weight: Per-joint weights (``force_only``), shape (n,).
+        force_only: See above.
+        mu0: Manipulability threshold μ₀.
+        max_damping: λ_max.
+        wrench: Output [N, N·m], shape (6,).
+
+    Returns:
+        The manipulability μ (the damping used is :func:`damping_of` of it).
+    """
+    n = tau.size
+    jjt = jacobian @ jacobian.T
+    mu = np.sqrt(max(np.linalg.det(jjt), 0.0))
+    lam2 = damping_of(mu, mu0, max_damping) ** 2
+    if force_only:
+        a = np.zeros((3, 3))
+        b = np.zeros(3)
+        for r in range(3):
+            for c in range(3):
+                s = 0.0
+                for k in range(n):
+                    s += jacobian[r, k] * jacobian[c, k] * weight[k] * weight[k]
+                a[r, c] = s + (lam2 if r == c else 0.0)
+            s = 0.0
+            for k in range(n):
+                s += jacobian[r, k] * weight[k] * weight[k] * tau[k]
+            b[r] = s
+        f = np.linalg.solve(a, b)
+        for r in range(3):
+            wrench[r] = f[r]
+            wrench[r + 3] = 0.0
+    else:
+        for r in range(6):
+            jjt[r, r] += lam2
+        w = np.linalg.solve(jjt, jacobian @ tau)
+        for r in range(6):
+            wrench[r] = w[r]
+    return mu
