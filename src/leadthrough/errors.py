@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "ControlError",
     "DataError",
     "DataWarning",
     "LeadthroughError",
@@ -76,6 +77,11 @@ class DataError(LeadthroughError):
 
 class SimulationError(LeadthroughError):
     """The simulated robot was configured with invalid settings."""
+
+
+class ControlError(LeadthroughError):
+    """The guiding controller was configured with invalid settings or started from an invalid
+    state (pose outside the joint limits or the workspace box, missing optional package)."""
 
 
 def check_fields(prefix: str, obj: Any, checks: list[tuple[str, bool, str]],

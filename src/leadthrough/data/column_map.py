@@ -26,6 +26,26 @@ al. (headerless, 31 columns, current × drive gain = joint torque)::
 
     [q_cmd]                         # optional, like [q]
 
+Logs split over several files, one per signal, as some controllers write them (each file with
+its own time column, rows not aligned across files): give each signal table a ``file`` (relative
+to the recording folder, which is what you then load) and the rows are joined on equal time::
+
+    delimiter = ","
+    drop_unterminated_last_row = true   # optional: a last line without newline was cut off
+    join_tolerance_s = 1e-6             # optional: times closer than this are equal [s]
+
+    [time]
+    column = 0                          # the time column of every file
+    unit = "s"
+
+    [q]
+    file = "log_q_actual.csv"
+    columns = [1, 2, 3, 4, 5, 6]
+
+    [current]
+    file = "log_i_actual.csv"
+    columns = [1, 2, 3, 4, 5, 6]
+
 MATLAB files (``format = "mat"``) name a struct and, per signal, a field holding a
 (joints, samples) or (samples, joints) array instead of columns::
 
@@ -71,12 +91,15 @@ class Signal:
         factor: Multiplier to SI (unit × scale), shape (joints,) or (1,).
         offset: Added after scaling, same shape.
         field: Struct field name (MAT files), else None.
+        file: File holding the signal, relative to the recording folder (logs split over
+            several files), else None.
     """
 
     columns: tuple[int, ...]
     factor: NDArray[np.float64]
     offset: NDArray[np.float64]
     field: str | None = None
+    file: str | None = None
 
     def extract(self, table: NDArray[np.float64]) -> NDArray[np.float64]:
         """Scaled columns of a (rows, cols) table, shape (rows, len(columns))."""
@@ -96,6 +119,10 @@ class ColumnMap:
         drop_abs_above: Rows with any |value| above this are dropped (None: keep all).
         drop_non_increasing_time: Drop rows whose time does not increase.
         signals: Mapped signals by name: time, q, and current or torque, optionally q_cmd.
+        drop_unterminated_last_row: Drop a last line that does not end with a newline (a log
+            cut off while being written: its last value may be truncated yet still parse).
+        join_tolerance_s: Logs split over several files: rows whose times differ by at most
+            this are joined [s].
     """
 
     path: Path
@@ -106,11 +133,24 @@ class ColumnMap:
     drop_abs_above: float | None
     drop_non_increasing_time: bool
     signals: dict[str, Signal]
+    drop_unterminated_last_row: bool = False
+    join_tolerance_s: float = 1e-6
 
     @property
     def max_column(self) -> int:
         """Largest column index used (−1 for MAT files)."""
         return max((max(s.columns) for s in self.signals.values() if s.columns), default=-1)
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        """Files of a log split over several files, that of [q] first; empty for one file."""
+        names = [self.signals["q"].file] + [s.file for s in self.signals.values()]
+        return tuple(dict.fromkeys(f for f in names if f is not None))
+
+    def max_column_in(self, file: str) -> int:
+        """Largest column index used in ``file`` of a split log (its time column included)."""
+        cols = [max(s.columns) for s in self.signals.values() if s.file == file]
+        return max([*cols, max(self.signals["time"].columns)])
 
 
 def _vector(path: Path, field: str, value: Any, size: int, default: float) -> NDArray[np.float64]:
@@ -152,7 +192,14 @@ def _signal(path: Path, name: str, table: Any, mat: bool = False, joints: int = 
                         else "a list of 0-based column indices, one per joint")
     scale = _vector(path, f"{name}.scale", table.get("scale"), len(cols), 1.0)
     offset = _vector(path, f"{name}.offset", table.get("offset"), len(cols), 0.0)
-    return Signal(columns=tuple(cols), factor=scale * _UNITS[name][unit], offset=offset)
+    file = table.get("file")
+    if file is not None and (name == "time" or not isinstance(file, str) or not file
+                             or Path(file).is_absolute() or ".." in Path(file).parts):
+        raise DataError("malformed", source=path, field=f"{name}.file", value=file,
+                        expected="no file for [time] (it is the time column of every file)"
+                        if name == "time" else "a file name inside the recording folder")
+    return Signal(columns=tuple(cols), factor=scale * _UNITS[name][unit], offset=offset,
+                  file=file)
 
 
 def parse_column_map(path: str | Path) -> ColumnMap:
@@ -198,6 +245,20 @@ def parse_column_map(path: str | Path) -> ColumnMap:
             raise DataError("joint count differs from [q]", source=path,
                             field=f"{name}.columns", value=list(sig.columns),
                             expected=f"{n} columns")
+    with_file = [name for name, sig in signals.items() if sig.file is not None]
+    if with_file and len(with_file) != len(signals) - 1:
+        missing = sorted(set(signals) - set(with_file) - {"time"})
+        raise DataError("some signals name a file and others do not", source=path,
+                        field=f"{missing[0]}.file", expected="a file for every signal table "
+                        "(a log split over several files) or for none")
+    join_tol = doc.get("join_tolerance_s", 1e-6)
+    if isinstance(join_tol, bool) or not isinstance(join_tol, int | float) or not join_tol >= 0:
+        raise DataError("malformed", source=path, field="join_tolerance_s", value=join_tol,
+                        expected="a number >= 0 [s]")
+    unterminated = doc.get("drop_unterminated_last_row", False)
+    if not isinstance(unterminated, bool):
+        raise DataError("malformed", source=path, field="drop_unterminated_last_row",
+                        value=unterminated, expected="true or false")
     delimiter = doc.get("delimiter", ",")
     skip = doc.get("skip_rows", 0)
     drop_abs = doc.get("drop_abs_above")
@@ -216,5 +277,6 @@ def parse_column_map(path: str | Path) -> ColumnMap:
         delimiter=delimiter, skip_rows=skip,
         drop_abs_above=None if drop_abs is None else float(drop_abs),
         drop_non_increasing_time=bool(doc.get("drop_non_increasing_time", False)),
-        signals=signals,
+        signals=signals, drop_unterminated_last_row=unterminated,
+        join_tolerance_s=float(join_tol),
     )

@@ -1,5 +1,8 @@
 """Read and write recordings: our CSV (header with units), Parquet, and any log with a column map.
 
+A column map may also describe a log split over several files (one per signal, each with its
+own time column, as the UR5 logs of Kufieta 2014): load its folder, the rows are joined on time.
+
 Our CSV::
 
     # leadthrough recording
@@ -103,6 +106,15 @@ def _assemble(columns: dict[str, Array], source: str, robot: str | None) -> Reco
 
 def _finite_recording(arrays: dict[str, Array], source: str, robot: str | None,
                       extra_bad: NDArray[np.bool_] | None = None, why: str = "") -> Recording:
+    cut = _clean_rows(arrays, source, extra_bad, why)
+    return Recording(time=cut["time"], q=cut["q"], current=cut.get("current"),
+                     torque=cut.get("torque"), q_cmd=cut.get("q_cmd"), robot=robot,
+                     source=source)
+
+
+def _clean_rows(arrays: dict[str, Array], source: str,
+                extra_bad: NDArray[np.bool_] | None = None, why: str = "") -> dict[str, Array]:
+    """Drop rows with non-finite values or marked bad, with a DataWarning counting them."""
     rows = arrays["time"].shape[0]
     good = np.ones(rows, dtype=bool)
     for v in arrays.values():
@@ -115,23 +127,31 @@ def _finite_recording(arrays: dict[str, Array], source: str, robot: str | None,
         detail = f"{dropped} with non-finite values" + (f", {total - dropped} {why}" if why
                                                          and total > dropped else "")
         warnings.warn(f"{source}: dropped {total} of {rows} rows ({detail})", DataWarning,
-                      stacklevel=3)
-    cut = {k: v[good] for k, v in arrays.items()}
-    return Recording(time=cut["time"], q=cut["q"], current=cut.get("current"),
-                     torque=cut.get("torque"), q_cmd=cut.get("q_cmd"), robot=robot,
-                     source=source)
+                      stacklevel=4)
+    return {k: v[good] for k, v in arrays.items()}
 
 
-def _read_csv_table(path: Path, delimiter: str, skip_rows: int, header: bool) -> pa.Table:
+def _read_csv_table(path: Path, delimiter: str, skip_rows: int, header: bool,
+                    drop_unterminated: bool = False) -> pa.Table:
     invalid = [0]
 
     def skip_invalid(row: object) -> str:
         invalid[0] += 1
         return "skip"
 
+    source: Path | pa.BufferReader = path
+    if drop_unterminated:
+        try:
+            data = path.read_bytes()
+        except OSError as e:
+            raise DataError(f"cannot read: {e}", source=path) from e
+        if data and not data.endswith(b"\n"):
+            warnings.warn(f"{path}: dropped the unterminated last line (log cut off while "
+                          "being written)", DataWarning, stacklevel=5)
+            source = pa.BufferReader(data[:data.rfind(b"\n") + 1])
     try:
         table = pacsv.read_csv(
-            path,
+            source,
             read_options=pacsv.ReadOptions(skip_rows=skip_rows,
                                            autogenerate_column_names=not header),
             parse_options=pacsv.ParseOptions(delimiter=delimiter,
@@ -210,17 +230,18 @@ def _load_mat(path: Path, cmap: ColumnMap) -> Recording:
     return _finite_recording(arrays, str(path), None)
 
 
-def _load_mapped(path: Path, cmap: ColumnMap) -> Recording:
-    if cmap.format == "mat":
-        return _load_mat(path, cmap)
-    table = _read_csv_table(path, cmap.delimiter, cmap.skip_rows, header=False)
-    if table.num_columns <= cmap.max_column:
+def _read_mapped(path: Path, cmap: ColumnMap, names: list[str], max_column: int
+                 ) -> tuple[dict[str, Array], NDArray[np.bool_], str]:
+    """Time and the named signals of one delimited file, the rows to drop and why."""
+    table = _read_csv_table(path, cmap.delimiter, cmap.skip_rows, header=False,
+                            drop_unterminated=cmap.drop_unterminated_last_row)
+    if table.num_columns <= max_column:
         raise DataError("log has fewer columns than the column map uses", source=path,
                         field="columns", value=table.num_columns,
-                        expected=f"more than {cmap.max_column} (see {cmap.path})")
+                        expected=f"more than {max_column} (see {cmap.path})")
     cols = _to_float(table, path)
     raw = np.column_stack([cols[name] for name in table.column_names])
-    arrays = {name: sig.extract(raw) for name, sig in cmap.signals.items()}
+    arrays = {name: cmap.signals[name].extract(raw) for name in ("time", *names)}
     arrays["time"] = arrays["time"][:, 0]
     bad = np.zeros(raw.shape[0], dtype=bool)
     reasons = []
@@ -235,14 +256,77 @@ def _load_mapped(path: Path, cmap: ColumnMap) -> Recording:
         prev = np.concatenate([[-np.inf], running[:-1]])
         bad |= finite & (t <= prev)
         reasons.append("non-increasing time")
-    return _finite_recording(arrays, str(path), None, bad, " or ".join(reasons))
+    return arrays, bad, " or ".join(reasons)
+
+
+def _load_mapped(path: Path, cmap: ColumnMap) -> Recording:
+    if cmap.format == "mat":
+        return _load_mat(path, cmap)
+    names = [n for n in cmap.signals if n != "time"]
+    arrays, bad, why = _read_mapped(path, cmap, names, cmap.max_column)
+    return _finite_recording(arrays, str(path), None, bad, why)
+
+
+def _load_split(folder: Path, cmap: ColumnMap) -> Recording:
+    """A log split over several files (one per signal): read each, join the rows on time."""
+    parts: list[dict[str, Array]] = []
+    for file in cmap.files:
+        path = folder / file
+        field = next(n for n, s in cmap.signals.items() if s.file == file)
+        if not path.is_file():
+            raise DataError("file of the column map not found", source=folder,
+                            field=f"{field}.file", value=file,
+                            expected=f"an existing file in the folder (see {cmap.path})")
+        names = [n for n, s in cmap.signals.items() if s.file == file]
+        arrays, bad, why = _read_mapped(path, cmap, names, cmap.max_column_in(file))
+        part = _clean_rows(arrays, str(path), bad, why)
+        t = part["time"]
+        if t.size < 2 or np.any(np.diff(t) <= 0):
+            raise DataError("time is not strictly increasing" if t.size >= 2 else
+                            "fewer than 2 usable rows", source=path, field="time",
+                            expected="increasing times (set drop_non_increasing_time = true "
+                                     f"in {cmap.path} to drop the others)")
+        parts.append(part)
+    return _finite_recording(_join_on_time(parts, cmap.join_tolerance_s, str(folder)),
+                             str(folder), None)
+
+
+def _join_on_time(parts: list[dict[str, Array]], tolerance: float, source: str
+                  ) -> dict[str, Array]:
+    """Inner join of per-file signals on their (strictly increasing) time columns.
+
+    Rows of the first part are kept where every other part has a row within ``tolerance``
+    seconds; the count of rows without a partner goes into a DataWarning.
+    """
+    t = parts[0]["time"]
+    keep = np.ones(t.size, dtype=bool)
+    matches: list[NDArray[np.intp]] = []
+    for part in parts[1:]:
+        other = part["time"]
+        k = np.clip(np.searchsorted(other, t), 1, other.size - 1)
+        k = k - ((t - other[k - 1]) < (other[k] - t))
+        keep &= np.abs(other[k] - t) <= tolerance
+        matches.append(k)
+    if keep.sum() < 2:
+        raise DataError("the files share fewer than 2 sample times", source=source,
+                        field="time", expected="files logged over the same times (or a larger "
+                                               "join_tolerance_s)")
+    if not keep.all():
+        warnings.warn(f"{source}: dropped {int((~keep).sum())} of {t.size} rows of "
+                      f"{len(parts)} files that have no partner at the same time", DataWarning,
+                      stacklevel=4)
+    joined = {name: v[keep] for name, v in parts[0].items()}
+    for part, k in zip(parts[1:], matches, strict=True):
+        joined.update({name: v[k[keep]] for name, v in part.items() if name != "time"})
+    return joined
 
 
 def load_recording(path: str | Path, columns: str | Path | None = None) -> Recording:
     """Load a recording.
 
     Args:
-        path: Our CSV, a Parquet file, or any delimited log when ``columns`` is given.
+        path: Our CSV, a Parquet file, or any delimited log when ``columns`` is given (the
+            log's folder when the column map names a file per signal).
         columns: Column-map TOML for logs in a controller's own format.
 
     Returns:
@@ -252,10 +336,19 @@ def load_recording(path: str | Path, columns: str | Path | None = None) -> Recor
         DataError: Missing or malformed file, or columns that do not fit.
     """
     path = Path(path)
+    if columns is not None:
+        cmap = parse_column_map(columns)
+        if cmap.files:
+            if not path.is_dir():
+                raise DataError("a log split over several files is loaded from its folder",
+                                source=path, expected=f"the folder holding "
+                                                      f"{', '.join(cmap.files)}")
+            return _load_split(path, cmap)
+        if not path.is_file():
+            raise DataError("recording not found", source=path, expected="an existing file")
+        return _load_mapped(path, cmap)
     if not path.is_file():
         raise DataError("recording not found", source=path, expected="an existing file")
-    if columns is not None:
-        return _load_mapped(path, parse_column_map(columns))
     suffix = path.suffix.lower()
     if suffix == ".csv":
         return _load_native_csv(path)

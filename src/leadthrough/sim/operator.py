@@ -3,6 +3,10 @@
 An operator returns the wrench it applies at the TCP, in the base frame, as
 ``[Fx, Fy, Fz, Tx, Ty, Tz]`` [N, N·m]. The simulator calls it once per physics step with the
 simulation time and the TCP position, so it may react to the motion (a hand impedance, say).
+
+A :class:`ScriptedOperator` also has a name, a session length and the times (:class:`Mark`) at
+which the operator presses the "mark point" button; the scripts are in
+:mod:`leadthrough.sim.operator_scripts`.
 """
 
 from __future__ import annotations
@@ -11,11 +15,11 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from leadthrough.errors import SimulationError
 
-__all__ = ["ConstantWrench", "NoOperator", "Operator"]
+__all__ = ["ConstantWrench", "Mark", "NoOperator", "Operator", "ScriptedOperator", "vector3"]
 
 Array = NDArray[np.float64]
 
@@ -31,6 +35,39 @@ class Operator(Protocol):
             t: Simulation time [s].
             tcp_position_base: TCP position in the base frame [m], shape (3,).
         """
+        ...
+
+
+@dataclass(frozen=True)
+class Mark:
+    """The operator presses the "mark point" button.
+
+    Attributes:
+        t: Time of the press [s] (simulation time, the clock of :meth:`Operator.wrench`).
+        label: Name of the marked point, e.g. ``"P1"``.
+    """
+
+    t: float
+    label: str
+
+
+@runtime_checkable
+class ScriptedOperator(Operator, Protocol):
+    """An :class:`Operator` with a script: name, session length and button presses."""
+
+    @property
+    def name(self) -> str:
+        """Script name."""
+        ...
+
+    @property
+    def duration_s(self) -> float:
+        """Sensible session length [s], including time to come to rest after the release."""
+        ...
+
+    @property
+    def marks(self) -> tuple[Mark, ...]:
+        """Times the "mark point" button is pressed, in time order."""
         ...
 
 
@@ -68,3 +105,15 @@ class ConstantWrench:
     def wrench(self, t: float, tcp_position_base: Array) -> Array:
         """The wrench while t_start <= t < t_end, else zero."""
         return self._w if self.t_start <= t < self.t_end else np.zeros(6)
+
+
+def vector3(value: ArrayLike, name: str) -> Array:
+    """``value`` as a finite 3-vector, or a SimulationError naming ``name``."""
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        v = np.empty(0)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise SimulationError("must be 3 finite numbers", field=name, value=value,
+                              expected="(x, y, z) in metres or newtons, base frame")
+    return v

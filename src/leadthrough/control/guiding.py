@@ -1,0 +1,324 @@
+"""The guiding controller: force in, joint position commands out, every 10 ms (ruckig style).
+
+    ctl = GuidingController(robot, GuidingConfig())
+    inp, out = ctl.make_input(), ctl.make_output()
+    interp = HermiteInterpolator(robot.n, ctl.config.dt)        # 10 ms → 1 ms
+    ctl.reset(q0); interp.reset(q0)
+    every 10 ms:
+        inp.t, inp.sequence, inp.deadman = ...
+        inp.q[:], inp.current[:], inp.wrench_base[:] = ...     # measured q, i; estimated wrench
+        status = ctl.update(inp, out)                           # out.q, out.qd: the setpoint
+        interp.set_target(out.q, out.qd)
+        every 1 ms: interp.update(cmd); send cmd.q, cmd.qd to the position-mode servo
+
+One cycle:
+
+1. safety checks of the feedback (:mod:`leadthrough.control.safety`), kinematics at the
+   commanded joint position (Pinocchio), motion checks (singularity, joint limit, IK residual),
+   deadman transitions;
+2. GUIDING: the estimated wrench, rotated into the controller's frame (``"base"``: base axes at
+   the TCP; ``"tool"``: tool axes) and masked by ``axes_enabled``, drives the law, virtual
+   friction (eq. 31–33, :mod:`~leadthrough.control.virtual_friction`) or the velocity baseline
+   [14] (:mod:`~leadthrough.control.velocity_baseline`), with fixed friction or eq. 36
+   (:mod:`~leadthrough.control.auto_friction`); then the speed and acceleration limits
+   (:mod:`~leadthrough.control.limits`, speed scaled down near singularities). STOPPING and
+   FAULT: decelerate to zero at the acceleration limit; IDLE: at rest;
+3. the twist is integrated into the commanded TCP pose (tool frame: T·exp6(ν·dt); base frame:
+   p + v·dt, exp3(ω·dt)·R); if the TCP could not stop inside the workspace box (less a 1 mm
+   margin for the IK's residual) from there, WORKSPACE fault and a stop instead;
+4. differential IK (:mod:`~leadthrough.control.ik`) to the joint setpoint. A twist of exactly
+   zero skips the IK: the joint setpoint is held bit for bit and q̇ = 0.0 exactly.
+
+``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio and
+``numpy.linalg`` allocate their results; a state transition appends one event to the log).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from leadthrough.control.admittance import AdmittanceLaw
+from leadthrough.control.auto_friction import AutoFriction
+from leadthrough.control.guiding_types import (
+    CONTROLLERS,
+    GuidingConfig,
+    GuidingInput,
+    GuidingOutput,
+    Status,
+)
+from leadthrough.control.ik import DifferentialIK
+from leadthrough.control.limits import TwistLimiter
+from leadthrough.control.safety import Event, Fault, SafetySupervisor, State
+from leadthrough.control.velocity_baseline import VelocityBaseline
+from leadthrough.control.virtual_friction import VirtualFriction
+from leadthrough.errors import ControlError
+from leadthrough.robot.description import Robot
+
+__all__ = [
+    "CONTROLLERS",
+    "GuidingConfig",
+    "GuidingController",
+    "GuidingInput",
+    "GuidingOutput",
+    "Status",
+]
+
+Array = NDArray[np.float64]
+
+class GuidingController:
+    """Hand-guiding controller: law + limits + safety + differential IK, one call per cycle.
+
+    Args:
+        robot: The robot.
+        config: Settings.
+        noise_mean: Identified τ̄_ω per joint [N·m], shape (n,); required for
+            ``friction_mode="auto"``.
+        noise_std: Identified σ of τ_ω per joint [N·m], shape (n,); required for the auto
+            friction's ``"std"`` and ``"mean+std"`` bases.
+
+    Raises:
+        ControlError: Invalid settings or noise vectors.
+    """
+
+    def __init__(self, robot: Robot, config: GuidingConfig | None = None,
+                 noise_mean: Array | None = None, noise_std: Array | None = None) -> None:
+        self.config = cfg = config if config is not None else GuidingConfig()
+        self.robot = robot
+        self.n = n = robot.n
+        self._law: AdmittanceLaw = (
+            VirtualFriction(cfg.virtual_friction, cfg.dt) if cfg.controller == "virtual-friction"
+            else VelocityBaseline(cfg.velocity_baseline, cfg.dt))
+        self._auto: AutoFriction | None = None
+        if cfg.friction_mode == "auto":
+            if noise_mean is None:
+                raise ControlError("needed for automatic friction", field="noise_mean",
+                                   expected="τ̄_ω per joint (params file [noise] mean)")
+            self._auto = AutoFriction(noise_mean, noise_std, cfg.auto_friction)
+            if self._auto.n != n:
+                raise ControlError("wrong size", field="noise_mean", value=self._auto.n,
+                                   expected=f"{n} values")
+        self._limiter = TwistLimiter(cfg.limits, cfg.dt)
+        self._ik = DifferentialIK(robot, cfg.ik, cfg.dt)
+        self._ik_result = self._ik.make_result()
+        self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
+        self._tool = cfg.frame == "tool"
+        self._mask = np.array([1.0 if a else 0.0 for a in cfg.axes_enabled])
+        self._friction = np.asarray(cfg.virtual_friction.friction, dtype=float).copy()
+        self._stop_friction = np.asarray(cfg.virtual_friction.stopping_friction,
+                                         dtype=float).copy()
+        self._twist = np.zeros(6)
+        self._twist_des = np.zeros(6)
+        self._twist_new = np.zeros(6)
+        self._wrench = np.zeros(6)
+        self._vdt = np.zeros(6)
+        self._R = np.zeros((3, 3))
+        self._p = np.zeros(3)
+        self._Jc = np.zeros((6, n))
+        self._q_cmd = np.zeros(n)
+        self._qd_cmd = np.zeros(n)
+        self._T_cmd = pin.SE3.Identity()
+        self._resync = False
+        self._started = False
+
+    # ----------------------------------------------------------------- set-up
+    def make_input(self) -> GuidingInput:
+        """A preallocated input."""
+        n = self.n
+        return GuidingInput(t=0.0, sequence=0, q=np.zeros(n), current=np.zeros(n),
+                            wrench_base=np.zeros(6))
+
+    def make_output(self) -> GuidingOutput:
+        """A preallocated output."""
+        n = self.n
+        return GuidingOutput(q=np.zeros(n), qd=np.zeros(n), transform_tool_to_base=np.eye(4),
+                             twist_base=np.zeros(6), twist_tool=np.zeros(6),
+                             wrench=np.zeros(6), friction=self._friction.copy(),
+                             stopping_friction=self._stop_friction.copy())
+
+    def reset(self, q: Array, t: float = 0.0) -> None:
+        """(Re)start at rest at joint position ``q``, IDLE, any fault cleared.
+
+        Pass the last commanded position (``out.q``) to continue without a step, or the measured
+        one when the robot is away from the command (e.g. after a following-error fault).
+
+        Args:
+            q: Joint position [rad], shape (n,), within the joint limits.
+            t: Time of the reset [s] (logged).
+
+        Raises:
+            ControlError: ``q`` of the wrong shape, not finite, outside the joint limits, or the
+                TCP outside the workspace box (less its margin).
+        """
+        q = np.asarray(q, dtype=float)
+        r = self.robot
+        if q.shape != (self.n,) or not np.isfinite(q).all():
+            raise ControlError("wrong size or not finite", field="q", value=q.tolist(),
+                               expected=f"{self.n} finite joint positions [rad]")
+        if np.any(q < r.lower_limits) or np.any(q > r.upper_limits):
+            raise ControlError("outside the joint limits", field="q", value=q.tolist(),
+                               expected=f"within {r.lower_limits.tolist()} .. "
+                                        f"{r.upper_limits.tolist()} rad")
+        self._ik.compute_kinematics(q)
+        p = self._ik.transform_tool_to_base.translation
+        if self._safety.workspace_clearance(p, 0.0) < 0.0:
+            sc = self.config.safety
+            raise ControlError("TCP outside the workspace box", field="q", value=p.tolist(),
+                               expected=f"TCP within {sc.workspace_min} .. {sc.workspace_max} m, "
+                                        f"{sc.workspace_margin} m inside")
+        self._q_cmd[:] = q
+        self._qd_cmd[:] = 0.0
+        self._twist[:] = 0.0
+        self._T_cmd = self._ik.transform_tool_to_base.copy()
+        self._resync = False
+        self._started = True
+        self._safety.reset(t)
+
+    def clear_fault(self, t: float = 0.0) -> bool:
+        """Clear a latched fault once the robot is held at rest (FAULT → IDLE).
+
+        The joint setpoint is kept; use :meth:`reset` to restart from another position.
+
+        Returns:
+            Whether the fault was cleared (False while still decelerating, or if not in FAULT).
+        """
+        ok = self._safety.clear_fault(t, not self._twist.any())
+        if ok:
+            self._resync = True
+        return ok
+
+    @property
+    def state(self) -> State:
+        """Current safety state."""
+        return self._safety.state
+
+    @property
+    def events(self) -> list[Event]:
+        """The logged state transitions, oldest first (a copy)."""
+        return list(self._safety.events)
+
+    @property
+    def events_dropped(self) -> int:
+        """Number of events dropped from the bounded log."""
+        return self._safety.events_dropped
+
+    # ----------------------------------------------------------------- real time
+    def update(self, inp: GuidingInput, out: GuidingOutput) -> Status:
+        """One controller cycle; fills ``out``; never raises.
+
+        Args:
+            inp: Measured feedback, estimated wrench and deadman.
+            out: Setpoint, commanded pose and twist, state.
+
+        Returns:
+            ``Status.OK``, or ``Status.FAULT`` while a fault is latched.
+        """
+        sup, ik, t = self._safety, self._ik, inp.t
+        if not self._started:
+            # no setpoint yet: hold wherever the robot is
+            sup.trip(t, Fault.NOT_STARTED)
+            self._write(out, 1.0)
+            if np.isfinite(inp.q).all():
+                out.q[:] = inp.q
+            return out.status
+        sup.check_feedback(t, inp.sequence, inp.q, inp.current, inp.wrench_base, self._q_cmd)
+        ik.compute_kinematics(self._q_cmd)
+        T_fk = ik.transform_tool_to_base
+        if self._resync:
+            self._T_cmd = T_fk.copy()
+            self._resync = False
+        err = pin.log6(T_fk.actInv(self._T_cmd)).vector
+        residual = math.sqrt(float(np.dot(err, err)))
+        mu = ik.manipulability
+        sup.check_motion(t, mu, self._q_cmd, self._qd_cmd, residual)
+        sup.deadman(t, inp.deadman)
+        scale = sup.speed_scale(mu)
+        self._control_wrench(inp.wrench_base, T_fk.rotation)
+        twist, new = self._twist, self._twist_new
+        T_new = self._T_cmd
+        if sup.state == State.GUIDING:
+            if self._auto is not None:
+                ik.jacobian_in_frame(self.config.frame, self._Jc)
+                self._auto.update(self._Jc, mu, self._friction, self._stop_friction)
+            self._law.step(twist, self._wrench, self._friction, self._stop_friction,
+                           self._twist_des)
+            self._limiter.limit(twist, self._twist_des, scale, new)
+            T_new = self._integrate(new)
+            speed = math.sqrt(float(new[0]) ** 2 + float(new[1]) ** 2 + float(new[2]) ** 2)
+            clearance = sup.workspace_clearance(T_new.translation, speed)
+            if clearance < 0.0:
+                sup.trip(t, Fault.WORKSPACE, clearance)
+        if sup.state != State.GUIDING:
+            self._limiter.decelerate(twist, new)
+            T_new = self._integrate(new)
+        at_rest = not new.any()
+        sup.stopped(t, at_rest)
+        twist[:] = new
+        res = self._ik_result
+        if at_rest:
+            # hold: the setpoint stays bit for bit, the target is the pose of the setpoint
+            self._qd_cmd[:] = 0.0
+            self._T_cmd = T_fk
+            res.scale, res.residual = 1.0, residual
+        else:
+            self._T_cmd = T_new
+            ik.solve(self._q_cmd, self._qd_cmd, T_new, res)
+            self._q_cmd[:] = res.q
+            self._qd_cmd[:] = res.qd
+            self._resync = res.limited
+        out.manipulability = mu
+        out.ik_residual = residual
+        self._write(out, scale)
+        return out.status
+
+    def _control_wrench(self, wrench_base: Array, R: Array) -> None:
+        w = self._wrench
+        if not self._safety.inputs_finite:
+            w[:] = math.nan                                 # unknown (and the law is not run)
+            return
+        if self._tool:
+            np.matmul(wrench_base[:3], R, out=w[:3])      # Rᵀ·f
+            np.matmul(wrench_base[3:], R, out=w[3:])      # Rᵀ·m
+        else:
+            w[:] = wrench_base
+        w *= self._mask
+
+    def _integrate(self, twist: Array) -> pin.SE3:
+        """Pose after one cycle of ``twist``: tool frame T·exp6(ν·dt); base frame (axes of the
+        base at the TCP) p + v·dt and exp3(ω·dt)·R (the TCP point moves with v)."""
+        np.multiply(twist, self.config.dt, out=self._vdt)
+        T = self._T_cmd
+        if self._tool:
+            return T * pin.exp6(self._vdt)
+        np.matmul(pin.exp3(self._vdt[3:]), T.rotation, out=self._R)
+        np.add(T.translation, self._vdt[:3], out=self._p)
+        return pin.SE3(self._R, self._p)
+
+    def _write(self, out: GuidingOutput, scale: float) -> None:
+        sup = self._safety
+        T = self._T_cmd
+        R = T.rotation
+        out.q[:] = self._q_cmd
+        out.qd[:] = self._qd_cmd
+        out.transform_tool_to_base[:3, :3] = R
+        out.transform_tool_to_base[:3, 3] = T.translation
+        tw = self._twist
+        if self._tool:
+            out.twist_tool[:] = tw
+            np.matmul(R, tw[:3], out=out.twist_base[:3])
+            np.matmul(R, tw[3:], out=out.twist_base[3:])
+        else:
+            out.twist_base[:] = tw
+            np.matmul(tw[:3], R, out=out.twist_tool[:3])
+            np.matmul(tw[3:], R, out=out.twist_tool[3:])
+        out.wrench[:] = self._wrench
+        out.friction[:] = self._friction
+        out.stopping_friction[:] = self._stop_friction
+        out.state = sup.state
+        out.fault = sup.fault
+        out.status = Status.FAULT if sup.state == State.FAULT else Status.OK
+        out.speed_scale = scale
+        out.ik_scale = self._ik_result.scale

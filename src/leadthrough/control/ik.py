@@ -1,0 +1,273 @@
+"""Differential inverse kinematics: damped least squares with joint limits (Pinocchio).
+
+One call per controller cycle (dt = 10 ms) turns the Cartesian TCP target into a joint velocity:
+
+* error: e = log6(T(q)⁻¹·T_target), the twist in tool axes (``pin.LOCAL``) that moves the
+  current TCP onto the target in unit time; ν = e/dt (feed-forward and correction in one);
+* damped least squares: q̇ = Jᵀ(J Jᵀ + λ²·1)⁻¹·ν, with J the tool-frame Jacobian and
+  λ² = λ_max²·(1 − (μ/μ₀)²) when the manipulability μ = √det(J Jᵀ) is below μ₀ (0 otherwise),
+  the damping the estimator uses for its Jᵀ inverse;
+* joint acceleration: if a joint's velocity would change by more than its acceleration limit
+  times dt, the change is shortened (the same fraction for all joints);
+* joint velocity and position: joint j may move toward its limit (shrunk by a margin) at most at
+  min(v_max, v_brake(d)), d the distance left and v_brake the largest speed from which the
+  discrete stop (speed lowered by a·dt per cycle, a the joint's acceleration limit) ends within
+  d (≈ √(2·a·d)), so a joint brakes at its acceleration limit and stops on the margin, never
+  beyond; the whole q̇ is scaled by one factor so that the TCP keeps its direction and only
+  slows down.
+
+When a bound shortens the step (``IKResult.limited``) the Cartesian target is not reached; the
+guiding controller then re-synchronises its target with the reached pose so that the IK never
+has to catch up with a large error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from leadthrough.errors import ControlError, check_fields
+from leadthrough.robot.description import Robot
+
+__all__ = ["DifferentialIK", "IKConfig", "IKResult", "dls_damping"]
+
+Array = NDArray[np.float64]
+
+
+def dls_damping(manipulability: float, threshold: float, max_damping: float) -> float:
+    """Damping λ of a damped pseudo-inverse, growing as the manipulability drops below μ₀.
+
+    Args:
+        manipulability: μ = √det(J Jᵀ).
+        threshold: μ₀ below which damping starts.
+        max_damping: λ_max, the damping at μ = 0.
+
+    Returns:
+        λ = λ_max·√(1 − (μ/μ₀)²) if μ < μ₀, else 0.
+    """
+    if manipulability >= threshold or threshold <= 0.0:
+        return 0.0
+    r = manipulability / threshold
+    return max_damping * math.sqrt(1.0 - r * r)
+
+
+@dataclass(frozen=True)
+class IKConfig:
+    """Settings of the differential IK, validated once.
+
+    Attributes:
+        manipulability_threshold: μ₀ below which the least squares are damped.
+        max_damping: λ_max [m, rad mixed: same units as the twist].
+        joint_limit_margin: The IK stops each joint this far inside its position limits [rad].
+        velocity_scale: Fraction of the robot's joint speed limits used, in (0, 1].
+        acceleration_scale: Fraction of the robot's joint acceleration limits used (braking at
+            the position limits, and the per-cycle change of q̇), in (0, 1].
+    """
+
+    manipulability_threshold: float = 0.02
+    max_damping: float = 0.05
+    joint_limit_margin: float = 0.01
+    velocity_scale: float = 1.0
+    acceleration_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_fields("ik", self, [
+            ("manipulability_threshold", self.manipulability_threshold > 0,
+             "> 0 (keeps J Jᵀ + λ² invertible)"),
+            ("max_damping", self.max_damping > 0, "> 0 (keeps J Jᵀ + λ² invertible)"),
+            ("joint_limit_margin", 0 <= self.joint_limit_margin < 0.5, "0 <= margin < 0.5 rad"),
+            ("velocity_scale", 0 < self.velocity_scale <= 1, "0 < scale <= 1"),
+            ("acceleration_scale", 0 < self.acceleration_scale <= 1, "0 < scale <= 1"),
+        ], ControlError)
+
+
+@dataclass
+class IKResult:
+    """One IK step, preallocated by :meth:`DifferentialIK.make_result` and filled in place.
+
+    Attributes:
+        qd: Joint velocity over the cycle [rad/s], shape (n,).
+        q: Joint position at the end of the cycle, q + q̇·dt [rad], shape (n,).
+        scale: Fraction of the DLS step kept by the joint bounds (1 = none active).
+        limited: Whether a joint bound shortened the step.
+        residual: ‖log6(T(q)⁻¹·T_target)‖ before the step [m and rad, mixed].
+    """
+
+    qd: Array
+    q: Array
+    scale: float = 1.0
+    limited: bool = False
+    residual: float = 0.0
+
+
+class DifferentialIK:
+    """Damped-least-squares differential IK of the TCP with joint limits.
+
+    Usage, per cycle: ``compute_kinematics(q)`` (Jacobian, TCP pose, μ at q), then read
+    ``transform_tool_to_base`` / ``manipulability`` as needed, then ``solve(...)`` at the same q.
+
+    Args:
+        robot: The robot (Pinocchio model, TCP frame, joint limits).
+        config: Settings.
+        dt: Controller cycle [s].
+
+    Raises:
+        ControlError: ``dt`` not positive, or the margin leaves no room between the limits.
+    """
+
+    def __init__(self, robot: Robot, config: IKConfig | None = None, dt: float = 0.01) -> None:
+        self.config = cfg = config if config is not None else IKConfig()
+        if not (math.isfinite(dt) and dt > 0):
+            raise ControlError("out of range", field="dt", value=dt, expected="finite and > 0 s")
+        lo = robot.lower_limits + cfg.joint_limit_margin
+        hi = robot.upper_limits - cfg.joint_limit_margin
+        if not np.all(lo < hi):
+            raise ControlError("margin larger than half a joint range",
+                               field="ik.joint_limit_margin", value=cfg.joint_limit_margin,
+                               expected="less than half of every joint's range")
+        self.robot = robot
+        self.dt = dt
+        self.n = n = robot.n
+        self._model = robot.model
+        self._data = robot.model.createData()
+        self._fid = robot.tcp_frame_id
+        #: Joint position bounds of the IK (the robot limits shrunk by the margin) [rad].
+        self.lower = lo
+        self.upper = hi
+        self._vmax = robot.velocity_limit * cfg.velocity_scale
+        self._amax = robot.acceleration_limit * cfg.acceleration_scale
+        self._dv = self._amax * dt
+        #: Frame Jacobian of the TCP in tool axes (``pin.LOCAL``), shape (6, n), at the last q.
+        self.jacobian = np.zeros((6, n))
+        #: TCP pose at the last q.
+        self.transform_tool_to_base = pin.SE3.Identity()
+        #: μ = √det(J Jᵀ) at the last q.
+        self.manipulability = 0.0
+        #: λ of the damped least squares at the last q.
+        self.damping = 0.0
+        self._JJt = np.zeros((6, 6))
+        self._A = np.zeros((6, 6))
+        self._nu = np.zeros(6)
+        self._tmp = np.zeros(n)
+        self._abs = np.zeros(n)
+        self._dist = np.zeros(n)
+        self._half_inv_a = 0.5 / self._amax
+        self._neg = np.zeros(n, dtype=bool)
+        self._ok = np.zeros(n, dtype=bool)
+
+    def make_result(self) -> IKResult:
+        """A preallocated result."""
+        return IKResult(qd=np.zeros(self.n), q=np.zeros(self.n))
+
+    def compute_kinematics(self, q: Array) -> None:
+        """Jacobian, TCP pose, manipulability and damping at ``q`` (shape (n,) [rad])."""
+        m, d = self._model, self._data
+        pin.computeJointJacobians(m, d, q)
+        self.transform_tool_to_base = pin.updateFramePlacement(m, d, self._fid)
+        self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
+        np.matmul(self.jacobian, self.jacobian.T, out=self._JJt)
+        det = float(np.linalg.det(self._JJt))
+        self.manipulability = math.sqrt(det) if det > 0.0 else 0.0
+        self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
+                                   self.config.max_damping)
+
+    def jacobian_in_frame(self, frame: str, out: Array) -> None:
+        """The TCP Jacobian at the last q in the controller's frame.
+
+        Args:
+            frame: ``"tool"`` (tool axes, ``pin.LOCAL``) or ``"base"`` (base axes at the TCP,
+                ``pin.LOCAL_WORLD_ALIGNED``): blockdiag(R, R)·J_tool with R the TCP rotation.
+            out: Result, shape (6, n); Jᵀ·w maps a wrench w in that frame to joint torques.
+        """
+        if frame == "tool":
+            out[:] = self.jacobian
+            return
+        R = self.transform_tool_to_base.rotation
+        np.matmul(R, self.jacobian[:3], out=out[:3])
+        np.matmul(R, self.jacobian[3:], out=out[3:])
+
+    def solve(self, q: Array, qd_previous: Array, target: pin.SE3, out: IKResult) -> None:
+        """One DLS step toward ``target`` from ``q`` (after ``compute_kinematics(q)``).
+
+        Args:
+            q: Joint position [rad], shape (n,): the one given to ``compute_kinematics``.
+            qd_previous: Joint velocity of the last cycle [rad/s], shape (n,).
+            target: TCP pose to reach at the end of the cycle.
+            out: Result, filled in place.
+        """
+        err = pin.log6(self.transform_tool_to_base.actInv(target)).vector
+        out.residual = math.sqrt(float(np.dot(err, err)))
+        np.multiply(err, 1.0 / self.dt, out=self._nu)
+        A = self._JJt
+        if self.damping > 0.0:
+            A = self._A
+            A[:] = self._JJt
+            A.flat[::7] += self.damping * self.damping
+        y = np.linalg.solve(A, self._nu)
+        qd = out.qd
+        np.matmul(self.jacobian.T, y, out=qd)
+        scale = 1.0
+        # joint acceleration: shorten the change of q̇ (one factor for all joints)
+        np.subtract(qd, qd_previous, out=self._tmp)
+        np.abs(self._tmp, out=self._abs)
+        np.divide(self._abs, self._dv, out=self._abs)
+        ratio = float(self._abs.max())
+        if ratio > 1.0:
+            self._tmp *= 1.0 / ratio
+            np.add(qd_previous, self._tmp, out=qd)
+            scale = 1.0 / ratio
+        # joint speed and position: braking distance to the margin, one factor for all joints
+        s = self._bound_scale(q, qd)
+        if s < 1.0:
+            qd *= s
+            scale *= s
+        out.scale = scale
+        out.limited = scale < 1.0
+        np.multiply(qd, self.dt, out=out.q)
+        out.q += q
+
+    def _braking_speed(self, dist: float, dv: float) -> float:
+        """Largest speed from which the discrete stop ends within ``dist``.
+
+        Lowering the speed v by dv = a·dt per cycle (position advanced with the new speed of each
+        cycle) travels dt·Σ_i max(v − i·dv, 0). Writing v = dv·(m + f), m integer, f ∈ [0, 1],
+        that is a·dt²·(m + 1)(m/2 + f); solved for the largest v with D = dist/(a·dt²). From
+        there the next cycle's bound is exactly v − dv, so braking never exceeds a.
+        """
+        D = dist / (dv * self.dt)
+        m = math.floor(0.5 * (math.sqrt(1.0 + 8.0 * D) - 1.0))
+        f = min(max(D / (m + 1) - 0.5 * m, 0.0), 1.0)
+        return dv * (m + f)
+
+    def _bound_scale(self, q: Array, qd: Array) -> float:
+        # fast path: every joint within its speed limit and at least v²/(2a) + |v|·dt (an upper
+        # bound of the discrete braking distance) from its bound in the direction it moves
+        ab, d, t = self._abs, self._dist, self._tmp
+        np.abs(qd, out=ab)
+        np.subtract(self.upper, q, out=d)
+        np.subtract(q, self.lower, out=t)
+        np.copyto(d, t, where=np.less(qd, 0.0, out=self._neg))
+        np.multiply(ab, self._half_inv_a, out=t)
+        t += self.dt
+        t *= ab
+        if not (np.less_equal(t, d, out=self._ok).all()
+                and np.less_equal(ab, self._vmax, out=self._ok).all()):
+            return self._bound_scale_exact(q, qd)
+        return 1.0
+
+    def _bound_scale_exact(self, q: Array, qd: Array) -> float:
+        s = 1.0
+        for j in range(self.n):
+            v = float(qd[j])
+            if v == 0.0:
+                continue
+            dist = float(self.upper[j] - q[j]) if v > 0.0 else float(q[j] - self.lower[j])
+            dist = max(dist, 0.0)
+            bound = min(float(self._vmax[j]), self._braking_speed(dist, float(self._dv[j])))
+            if abs(v) > bound:
+                s = min(s, bound / abs(v))
+        return s

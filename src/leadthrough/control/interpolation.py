@@ -1,0 +1,189 @@
+"""From 10 ms joint setpoints to 1 ms position-mode commands (position and velocity, no steps).
+
+The guiding controller produces, every controller cycle T (10 ms), the joint position q_k it
+wants at the end of the cycle and the joint velocity q̇_k it moves with. The servo wants a command
+every 1 ms. :class:`HermiteInterpolator` joins consecutive setpoints by cubic Hermite segments:
+
+    q(s) = p₀ + h₀₁(s)·(p₁ − p₀) + T·(h₁₀(s)·v₀ + h₁₁(s)·v₁),  s = (t − t_k)/T ∈ [0, 1]
+    h₀₁ = 3s² − 2s³,  h₁₀ = s³ − 2s² + s,  h₁₁ = s³ − s²
+
+from the last command (p₀, v₀) to the new setpoint (p₁, v₁): position and velocity are continuous
+at every 1 ms sample (C¹), and a held setpoint (p₁ = p₀, v = 0) gives exactly constant commands and
+exactly zero velocity. With v₁ the segment's own mean velocity (the IK's q̇, which moves p₀ to p₁)
+the path departs from the straight segment by at most 4/27·T·|v₀ − v₁|, a fraction of a
+milliradian at the joint acceleration limits, well inside the IK's joint-limit margin.
+
+:class:`leadthrough.control.jerk_limit.JerkLimitedInterpolator` has the same interface and adds
+jerk limits (``ruckig``, optional). Both take the setpoint once per cycle (``set_target``) and
+produce one command per ``update``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.errors import ControlError
+
+__all__ = [
+    "CommandBuffer",
+    "HermiteInterpolator",
+    "InterpolatorStatus",
+    "JointCommand",
+    "JointInterpolator",
+]
+
+Array = NDArray[np.float64]
+
+
+class InterpolatorStatus(IntEnum):
+    """Result of one interpolator update."""
+
+    #: A command inside the current segment.
+    WORKING = 0
+    #: The command is the segment's end point (the next setpoint is due).
+    FINISHED = 1
+    #: Called again after the end without a new setpoint: holds the end position, q̇ = 0.
+    STARVED = -1
+    #: The interpolator failed (jerk-limited version only): holds the last command, q̇ = 0.
+    ERROR = -2
+
+
+@dataclass
+class JointCommand:
+    """One servo command, filled in place by an interpolator.
+
+    Attributes:
+        q: Joint position command [rad], shape (n,).
+        qd: Joint velocity feed-forward [rad/s], shape (n,).
+    """
+
+    q: Array
+    qd: Array
+
+
+class CommandBuffer(Protocol):
+    """What ``update`` writes into: anything with preallocated ``q`` and ``qd`` arrays of shape
+    (n,) (a :class:`JointCommand`, or a driver's own command object)."""
+
+    q: Array
+    qd: Array
+
+
+class JointInterpolator(Protocol):
+    """Interface of the 10 ms → 1 ms interpolators."""
+
+    def make_command(self) -> JointCommand:
+        """A preallocated command."""
+        ...
+
+    def reset(self, q: Array) -> None:
+        """Hold ``q`` at rest (shape (n,) [rad])."""
+        ...
+
+    def set_target(self, q: Array, qd: Array) -> None:
+        """Start a new segment toward setpoint (q, q̇), reached one controller cycle later."""
+        ...
+
+    def update(self, out: CommandBuffer) -> InterpolatorStatus:
+        """Advance by one servo period and write the command into ``out.q``, ``out.qd``."""
+        ...
+
+
+class HermiteInterpolator:
+    """Cubic Hermite interpolation of controller setpoints (C¹, no steps).
+
+    Args:
+        n: Number of joints.
+        period: Controller cycle T [s].
+        substeps: Servo commands per controller cycle (10 for 10 ms → 1 ms).
+
+    Raises:
+        ControlError: ``period`` not positive or ``substeps`` < 1.
+    """
+
+    def __init__(self, n: int, period: float = 0.01, substeps: int = 10) -> None:
+        if not (math.isfinite(period) and period > 0):
+            raise ControlError("out of range", field="period", value=period,
+                               expected="finite and > 0 s")
+        if substeps < 1:
+            raise ControlError("out of range", field="substeps", value=substeps,
+                               expected=">= 1")
+        self.n = n
+        self.period = period
+        self.substeps = substeps
+        s = np.arange(1, substeps + 1) / substeps
+        # position basis (h01 and T·h10, T·h11) and velocity basis (h'/T)
+        self._c01 = (3 * s**2 - 2 * s**3).tolist()
+        self._c10 = (period * (s**3 - 2 * s**2 + s)).tolist()
+        self._c11 = (period * (s**3 - s**2)).tolist()
+        self._d01 = ((6 * s - 6 * s**2) / period).tolist()
+        self._d10 = (3 * s**2 - 4 * s + 1).tolist()
+        self._d11 = (3 * s**2 - 2 * s).tolist()
+        self._p0 = np.zeros(n)
+        self._v0 = np.zeros(n)
+        self._p1 = np.zeros(n)
+        self._v1 = np.zeros(n)
+        self._dp = np.zeros(n)
+        self._tmp = np.zeros(n)
+        self._q = np.zeros(n)       # last command
+        self._qd = np.zeros(n)
+        self._k = substeps
+
+    def make_command(self) -> JointCommand:
+        """A preallocated command."""
+        return JointCommand(q=np.zeros(self.n), qd=np.zeros(self.n))
+
+    def reset(self, q: Array) -> None:
+        """Hold ``q`` at rest (shape (n,) [rad])."""
+        self._q[:] = q
+        self._qd[:] = 0.0
+        self._p1[:] = q
+        self._v1[:] = 0.0
+        self._k = self.substeps
+
+    def set_target(self, q: Array, qd: Array) -> None:
+        """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each."""
+        self._p0[:] = self._q
+        self._v0[:] = self._qd
+        self._p1[:] = q
+        self._v1[:] = qd
+        np.subtract(self._p1, self._p0, out=self._dp)
+        self._k = 0
+
+    def update(self, out: CommandBuffer) -> InterpolatorStatus:
+        """Advance one servo period and write the command into ``out.q``, ``out.qd``."""
+        k = self._k
+        if k >= self.substeps:
+            # no new setpoint: hold the end position at rest
+            self._qd[:] = 0.0
+            out.q[:] = self._q
+            out.qd[:] = 0.0
+            return InterpolatorStatus.STARVED
+        self._k = k + 1
+        if k == self.substeps - 1:
+            self._q[:] = self._p1
+            self._qd[:] = self._v1
+            status = InterpolatorStatus.FINISHED
+        else:
+            q, qd, tmp = self._q, self._qd, self._tmp
+            np.multiply(self._dp, self._c01[k], out=q)
+            np.multiply(self._v0, self._c10[k], out=tmp)
+            q += tmp
+            np.multiply(self._v1, self._c11[k], out=tmp)
+            q += tmp
+            q += self._p0
+            np.multiply(self._dp, self._d01[k], out=qd)
+            np.multiply(self._v0, self._d10[k], out=tmp)
+            qd += tmp
+            np.multiply(self._v1, self._d11[k], out=tmp)
+            qd += tmp
+            status = InterpolatorStatus.WORKING
+        out.q[:] = self._q
+        out.qd[:] = self._qd
+        return status

@@ -1,0 +1,142 @@
+"""Cartesian speed and acceleration limits of the commanded TCP twist (paper Table IV).
+
+Twists are 6-vectors in Pinocchio's order, linear first: ``(vx, vy, vz, ωx, ωy, ωz)`` [m/s,
+rad/s]. The limits apply to the Euclidean norm of the linear part and of the angular part
+separately (a per-axis clamp would allow √3 × the speed along a diagonal):
+
+* speed: ‖v‖ ≤ v_max·s and ‖ω‖ ≤ ω_max·s, s ∈ [0, 1] a speed scale (singularity slow-down);
+* acceleration: ‖Δv‖ ≤ a_max·dt and ‖Δω‖ ≤ α_max·dt per cycle.
+
+The limiter first clips the desired twist to the speed ball, then moves from the previous twist
+toward it by at most the acceleration step. Both balls are convex, so the result is inside the
+speed ball whenever the previous twist was (a lowered speed scale is reached by decelerating at
+a_max, never by a jump). :meth:`TwistLimiter.decelerate` is the same step toward zero: a stop
+along a straight line in velocity space at the acceleration limit, which is how every stop
+(fault, deadman release) is made.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.errors import ControlError, check_fields
+
+__all__ = ["CartesianLimits", "TwistLimiter"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CartesianLimits:
+    """Speed and acceleration limits of the TCP, validated once (defaults: paper Table IV).
+
+    Attributes:
+        max_linear_speed: v_max [m/s].
+        max_angular_speed: ω_max [rad/s].
+        max_linear_acceleration: a_max [m/s²].
+        max_angular_acceleration: α_max [rad/s²].
+    """
+
+    max_linear_speed: float = 0.2
+    max_angular_speed: float = 0.2
+    max_linear_acceleration: float = 0.4
+    max_angular_acceleration: float = 0.4
+
+    def __post_init__(self) -> None:
+        check_fields("limits", self, [
+            (name, math.isfinite(getattr(self, name)) and getattr(self, name) > 0,
+             "finite and > 0")
+            for name in ("max_linear_speed", "max_angular_speed", "max_linear_acceleration",
+                         "max_angular_acceleration")
+        ], ControlError)
+
+    def braking_distance(self, linear_speed: float) -> float:
+        """Distance the TCP travels while stopping from ``linear_speed`` at a_max [m].
+
+        The discrete stop of :meth:`TwistLimiter.decelerate` (speed lowered by a_max·dt each
+        cycle, position advanced with the new speed) travels at most v²/(2·a_max).
+
+        Args:
+            linear_speed: ‖v‖ [m/s].
+        """
+        return linear_speed * linear_speed / (2.0 * self.max_linear_acceleration)
+
+
+def _norm3(x: Array, i: int) -> float:
+    a, b, c = float(x[i]), float(x[i + 1]), float(x[i + 2])
+    return math.sqrt(a * a + b * b + c * c)
+
+
+class TwistLimiter:
+    """Applies :class:`CartesianLimits` to a commanded twist, one controller cycle at a time.
+
+    Args:
+        limits: The limits.
+        dt: Controller cycle [s].
+
+    Raises:
+        ControlError: ``dt`` not finite and positive.
+    """
+
+    def __init__(self, limits: CartesianLimits, dt: float) -> None:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ControlError("out of range", field="dt", value=dt, expected="finite and > 0 s")
+        self.limits = limits
+        self.dt = dt
+        self._speed = (limits.max_linear_speed, limits.max_angular_speed)
+        self._step = (limits.max_linear_acceleration * dt, limits.max_angular_acceleration * dt)
+        self._delta = np.zeros(6)
+
+    def limit(self, previous: Array, desired: Array, speed_scale: float, out: Array) -> bool:
+        """Limit speed and acceleration.
+
+        Args:
+            previous: Twist of the last cycle, shape (6,) [m/s, rad/s].
+            desired: Twist asked for, shape (6,) (not modified).
+            speed_scale: s ∈ [0, 1] multiplying both speed limits.
+            out: Result, shape (6,); may be ``desired`` but not ``previous``.
+
+        Returns:
+            Whether a limit was active.
+        """
+        if out is not desired:
+            out[:] = desired
+        active = False
+        for part in (0, 1):
+            i = 3 * part
+            cap = self._speed[part] * speed_scale
+            norm = _norm3(out, i)
+            if norm > cap:
+                out[i:i + 3] *= cap / norm          # norm > cap >= 0
+                active = True
+        np.subtract(out, previous, out=self._delta)
+        for part in (0, 1):
+            i = 3 * part
+            step = self._step[part]
+            norm = _norm3(self._delta, i)
+            if norm > step:
+                self._delta[i:i + 3] *= step / norm
+                active = True
+        np.add(previous, self._delta, out=out)
+        return active
+
+    def decelerate(self, previous: Array, out: Array) -> None:
+        """One cycle of a stop at the acceleration limit (exactly zero once reached).
+
+        Args:
+            previous: Twist of the last cycle, shape (6,).
+            out: Result, shape (6,); may be ``previous``.
+        """
+        for part in (0, 1):
+            i = 3 * part
+            step = self._step[part]
+            norm = _norm3(previous, i)
+            if norm <= step:
+                out[i:i + 3] = 0.0
+            else:
+                out[i:i + 3] = previous[i:i + 3]
+                out[i:i + 3] *= 1.0 - step / norm

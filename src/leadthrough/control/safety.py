@@ -1,0 +1,403 @@
+"""Safety layer of hand guiding: states, faults, and the log of every transition.
+
+States::
+
+    IDLE ──deadman pressed──▶ GUIDING ──deadman released──▶ STOPPING ──at rest──▶ IDLE
+      any state ──fault──▶ FAULT (latched) ──clear_fault() at rest──▶ IDLE
+
+* Guiding needs the enabling input (deadman) held. By default a press only counts after the
+  deadman was seen released (after start-up, a reset or a cleared fault), so nothing starts by
+  itself.
+* STOPPING and FAULT both decelerate the commanded twist to zero at the acceleration limit (never
+  a position jump; the guiding controller does the motion); FAULT then holds and latches until
+  :meth:`SafetySupervisor.clear_fault`.
+* Faults (:class:`Fault`): non-finite input; measured position or current out of range; stale
+  feedback (sequence number not advancing for N cycles); following error (measured vs commanded
+  joint position); estimated wrench above a collision threshold; a joint near its limit and
+  moving toward it; the workspace box (the TCP plus its braking distance would come closer to
+  a face than a small margin); singularity (manipulability below a stop threshold and falling;
+  below a higher threshold the speed is scaled down); the IK not reaching its target. The first
+  fault is latched with the offending value and index; later ones are not recorded.
+
+Every transition is logged as an :class:`Event` (time, from, to, cause, fault, value, index).
+Transitions are rare, so the log is a ``collections.deque`` bounded at ``max_events`` (oldest
+dropped, counted in ``events_dropped``): appending an event is the only allocation of our own in
+the real-time path, and happens only on a transition.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.control.limits import CartesianLimits
+from leadthrough.errors import ControlError, check_fields
+from leadthrough.robot.description import Robot
+
+__all__ = ["Cause", "Event", "Fault", "SafetyConfig", "SafetySupervisor", "State"]
+
+Array = NDArray[np.float64]
+_INF3 = (math.inf,) * 3
+
+
+class State(IntEnum):
+    """State of the guiding controller."""
+
+    IDLE = 0
+    GUIDING = 1
+    STOPPING = 2
+    FAULT = 3
+
+
+class Fault(IntEnum):
+    """Why the controller is in FAULT (``NONE`` otherwise)."""
+
+    NONE = 0
+    #: t, q, current or wrench not finite (value: NaN, index: -1).
+    NONFINITE_INPUT = 1
+    #: Measured joint position outside its limits by more than the tolerance (value: q [rad]).
+    POSITION_RANGE = 2
+    #: |measured current| above max_current·factor (value: current [A]).
+    CURRENT_RANGE = 3
+    #: Sequence number not advancing for ``stale_cycles`` cycles (value: the sequence number).
+    STALE_FEEDBACK = 4
+    #: |q_measured − q_commanded| above the limit (value: the error [rad]).
+    FOLLOWING_ERROR = 5
+    #: ‖force‖ or ‖torque‖ of the estimated wrench above the threshold (value: the norm, index
+    #: 0 force, 1 torque).
+    COLLISION = 6
+    #: A commanded joint within the margin of its limit and moving toward it (value: q [rad]).
+    JOINT_LIMIT = 7
+    #: The TCP plus its braking distance would leave the workspace box (value: clearance [m]).
+    WORKSPACE = 8
+    #: Manipulability below the stop threshold and falling (value: μ).
+    SINGULARITY = 9
+    #: The IK residual above its limit (value: ‖log6‖ [m, rad]).
+    TRACKING = 10
+    #: ``update`` called before the first ``reset`` (no commanded position yet).
+    NOT_STARTED = 11
+
+
+class Cause(IntEnum):
+    """Cause of a state transition."""
+
+    DEADMAN_PRESSED = 0
+    DEADMAN_RELEASED = 1
+    STOPPED = 2
+    FAULT = 3
+    FAULT_CLEARED = 4
+    RESET = 5
+
+
+@dataclass(frozen=True)
+class Event:
+    """One logged state transition.
+
+    Attributes:
+        t: Time of the cycle [s] (the input's t).
+        from_state: State before.
+        to_state: State after.
+        cause: Why.
+        fault: The fault, for ``cause == FAULT``.
+        value: The offending value (see :class:`Fault`), NaN if none.
+        index: Joint or axis index, -1 if none.
+    """
+
+    t: float
+    from_state: State
+    to_state: State
+    cause: Cause
+    fault: Fault = Fault.NONE
+    value: float = math.nan
+    index: int = -1
+
+
+def _finite(values: tuple[float, ...], n: int) -> bool:
+    return len(values) == n and all(not math.isnan(v) for v in values)
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Thresholds of the safety layer, validated once.
+
+    Attributes:
+        stale_cycles: Faults after this many consecutive cycles without a new sequence number.
+        following_error_limit: Max |q_measured − q_commanded| per joint [rad].
+        max_force: Collision threshold on ‖force‖ of the estimated wrench [N].
+        max_torque: Collision threshold on ‖torque‖ of the estimated wrench [N·m].
+        current_range_factor: Measured |current| above factor·max_current is out of range.
+        position_tolerance: Measured q beyond a joint limit by more than this is out of range
+            [rad].
+        joint_limit_margin: A commanded joint this close to its limit and moving toward it
+            faults [rad]; larger than the IK's own margin, so the stop is a controlled one.
+        workspace_min: Lower corner of the TCP workspace box in the base frame [m] (−inf: none).
+        workspace_max: Upper corner [m] (+inf: none).
+        workspace_margin: The commanded TCP is kept this far inside the box [m]; it absorbs the
+            IK's residual (micrometres), so that the joint commands too, not only the Cartesian
+            command, stay inside.
+        slow_manipulability: Below this μ the speed limits are scaled down linearly.
+        stop_manipulability: Below this μ, while μ is falling, the controller faults.
+        min_speed_scale: Scale at (and below) ``stop_manipulability`` (> 0, so that the arm can
+            be moved out of a singular pose after a reset).
+        tracking_error_limit: Max ‖log6(T(q)⁻¹·T_target)‖ of the IK [m and rad, mixed].
+        require_deadman_edge: Guiding starts only on a press seen after a release.
+        max_events: Length of the transition log (oldest dropped).
+    """
+
+    stale_cycles: int = 3
+    following_error_limit: float = 0.05
+    max_force: float = 150.0
+    max_torque: float = 50.0
+    current_range_factor: float = 1.1
+    position_tolerance: float = 0.01
+    joint_limit_margin: float = 0.05
+    workspace_min: tuple[float, float, float] = (-math.inf, -math.inf, -math.inf)
+    workspace_max: tuple[float, float, float] = _INF3
+    workspace_margin: float = 0.001
+    slow_manipulability: float = 0.04
+    stop_manipulability: float = 0.01
+    min_speed_scale: float = 0.1
+    tracking_error_limit: float = 0.005
+    require_deadman_edge: bool = True
+    max_events: int = 1000
+
+    def __post_init__(self) -> None:
+        pos = [(name, math.isfinite(getattr(self, name)) and getattr(self, name) > 0,
+                "finite and > 0")
+               for name in ("following_error_limit", "max_force", "max_torque",
+                            "tracking_error_limit")]
+        check_fields("safety", self, [
+            ("stale_cycles", self.stale_cycles >= 1, ">= 1"),
+            *pos,
+            ("current_range_factor", self.current_range_factor >= 1, ">= 1"),
+            ("position_tolerance", self.position_tolerance >= 0, ">= 0 rad"),
+            ("joint_limit_margin", 0 <= self.joint_limit_margin < 0.5, "0 <= margin < 0.5 rad"),
+            ("workspace_min", _finite(self.workspace_min, 3), "3 values (−inf for none) [m]"),
+            ("workspace_max", _finite(self.workspace_max, 3) and all(
+                lo < hi for lo, hi in zip(self.workspace_min, self.workspace_max, strict=True)),
+             "3 values > workspace_min (+inf for none) [m]"),
+            ("workspace_margin", 0 <= self.workspace_margin < 0.5 * min(
+                hi - lo for lo, hi in zip(self.workspace_min, self.workspace_max, strict=True)),
+             ">= 0 and less than half the box [m]"),
+            ("stop_manipulability", self.stop_manipulability >= 0, ">= 0"),
+            ("slow_manipulability", self.slow_manipulability > self.stop_manipulability,
+             "> stop_manipulability"),
+            ("min_speed_scale", 0 < self.min_speed_scale <= 1, "0 < scale <= 1"),
+            ("max_events", self.max_events >= 1, ">= 1"),
+        ], ControlError)
+
+
+class SafetySupervisor:
+    """The state machine and the fault checks (no motion: the guiding controller moves).
+
+    Args:
+        robot: The robot (joint limits, max currents).
+        config: Thresholds.
+        limits: Cartesian limits (braking distance for the workspace box).
+    """
+
+    def __init__(self, robot: Robot, config: SafetyConfig, limits: CartesianLimits) -> None:
+        self.config = cfg = config
+        self.limits = limits
+        n = robot.n
+        self._mid = 0.5 * (robot.lower_limits + robot.upper_limits)
+        self._half_tol = 0.5 * (robot.upper_limits - robot.lower_limits) + cfg.position_tolerance
+        self._lo_margin = robot.lower_limits + cfg.joint_limit_margin
+        self._hi_margin = robot.upper_limits - cfg.joint_limit_margin
+        self._max_current = robot.max_current * cfg.current_range_factor
+        self._box_lo = np.asarray(cfg.workspace_min, dtype=float)
+        self._box_hi = np.asarray(cfg.workspace_max, dtype=float)
+        self._has_box = bool(np.isfinite(self._box_lo).any() or np.isfinite(self._box_hi).any())
+        self._b = np.zeros(n, dtype=bool)
+        self._b6 = np.zeros(6, dtype=bool)
+        self._x = np.zeros(n)
+        self.state = State.IDLE
+        self.fault = Fault.NONE
+        self.fault_value = math.nan
+        self.fault_index = -1
+        self.events: deque[Event] = deque(maxlen=cfg.max_events)
+        self.events_dropped = 0
+        self._armed = not cfg.require_deadman_edge
+        self._last_seq: int | None = None
+        self._missed = 0
+        self._mu_prev = math.nan
+        #: Whether t, q, current and wrench of the last ``check_feedback`` were all finite.
+        self.inputs_finite = True
+
+    # ----------------------------------------------------------------- transitions
+    def _go(self, t: float, to: State, cause: Cause, fault: Fault = Fault.NONE,
+            value: float = math.nan, index: int = -1) -> None:
+        if len(self.events) == self.events.maxlen:
+            self.events_dropped += 1
+        self.events.append(Event(t, self.state, to, cause, fault, value, index))
+        self.state = to
+
+    def reset(self, t: float) -> None:
+        """Back to IDLE, fault cleared, counters restarted (logged as RESET)."""
+        self.fault, self.fault_value, self.fault_index = Fault.NONE, math.nan, -1
+        self._restart()
+        self._go(t, State.IDLE, Cause.RESET)
+
+    def _restart(self) -> None:
+        self._armed = not self.config.require_deadman_edge
+        self._last_seq = None
+        self._missed = 0
+        self._mu_prev = math.nan
+
+    def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
+        """Enter FAULT (no-op if already there: the first fault is kept)."""
+        if self.state == State.FAULT:
+            return
+        self.fault, self.fault_value, self.fault_index = fault, value, index
+        self._go(t, State.FAULT, Cause.FAULT, fault, value, index)
+
+    def clear_fault(self, t: float, at_rest: bool) -> bool:
+        """Leave FAULT for IDLE, only once the commanded motion is at rest.
+
+        Returns:
+            Whether the fault was cleared.
+        """
+        if self.state != State.FAULT or not at_rest:
+            return False
+        self.fault, self.fault_value, self.fault_index = Fault.NONE, math.nan, -1
+        self._restart()
+        self._go(t, State.IDLE, Cause.FAULT_CLEARED)
+        return True
+
+    def deadman(self, t: float, held: bool) -> None:
+        """IDLE → GUIDING on a press, GUIDING → STOPPING on a release."""
+        if self.state == State.IDLE:
+            if held and self._armed:
+                self._go(t, State.GUIDING, Cause.DEADMAN_PRESSED)
+            elif not held:
+                self._armed = True
+        elif self.state == State.GUIDING and not held:
+            self._armed = True
+            self._go(t, State.STOPPING, Cause.DEADMAN_RELEASED)
+        elif not held:
+            self._armed = True
+
+    def stopped(self, t: float, at_rest: bool) -> None:
+        """STOPPING → IDLE once the commanded motion is at rest."""
+        if self.state == State.STOPPING and at_rest:
+            self._go(t, State.IDLE, Cause.STOPPED)
+
+    # ----------------------------------------------------------------- checks
+    def check_feedback(self, t: float, sequence: int, q: Array, current: Array, wrench: Array,
+                       q_commanded: Array) -> None:
+        """Input faults: non-finite, stale, out of range, following error, collision.
+
+        Args:
+            t: Time [s].
+            sequence: Feedback sequence number (must advance every cycle).
+            q: Measured joint positions [rad], shape (n,).
+            current: Measured motor currents [A], shape (n,).
+            wrench: Estimated wrench [N, N·m], shape (6,), force first (any frame: norms only).
+            q_commanded: Joint position commanded for now [rad], shape (n,).
+        """
+        b = self._b
+        self.inputs_finite = bool(
+            math.isfinite(t) and np.isfinite(q, out=b).all()
+            and np.isfinite(current, out=b).all() and np.isfinite(wrench, out=self._b6).all())
+        if self.state == State.FAULT:
+            return
+        if not self.inputs_finite:
+            self.trip(t, Fault.NONFINITE_INPUT)
+            return
+        if self._last_seq is not None and sequence <= self._last_seq:
+            self._missed += 1
+            if self._missed >= self.config.stale_cycles:
+                self.trip(t, Fault.STALE_FEEDBACK, float(sequence))
+                return
+        else:
+            self._missed = 0
+            self._last_seq = sequence
+        x = self._x
+        # |q − mid| > half range + tolerance: outside the limits by more than the tolerance
+        np.subtract(q, self._mid, out=x)
+        np.abs(x, out=x)
+        x -= self._half_tol
+        if float(x.max()) > 0.0:
+            j = self._worst(x)
+            self.trip(t, Fault.POSITION_RANGE, float(q[j]), j)
+            return
+        np.abs(current, out=x)
+        x -= self._max_current
+        if float(x.max()) > 0.0:
+            j = self._worst(x)
+            self.trip(t, Fault.CURRENT_RANGE, float(current[j]), j)
+            return
+        np.subtract(q, q_commanded, out=x)
+        np.abs(x, out=x)
+        if float(x.max()) > self.config.following_error_limit:
+            j = self._worst(x)
+            self.trip(t, Fault.FOLLOWING_ERROR, float(x[j]), j)
+            return
+        f, m = wrench[:3], wrench[3:]
+        force = math.sqrt(float(np.dot(f, f)))
+        torque = math.sqrt(float(np.dot(m, m)))
+        if force > self.config.max_force:
+            self.trip(t, Fault.COLLISION, force, 0)
+        elif torque > self.config.max_torque:
+            self.trip(t, Fault.COLLISION, torque, 1)
+
+    @staticmethod
+    def _worst(x: Array) -> int:
+        return int(np.argmax(x))
+
+    def check_motion(self, t: float, manipulability: float, q_commanded: Array,
+                     qd_commanded: Array, residual: float) -> None:
+        """Motion faults: singularity, joint limit, IK tracking.
+
+        Args:
+            t: Time [s].
+            manipulability: μ at the commanded joint position.
+            q_commanded: Commanded joint position [rad], shape (n,).
+            qd_commanded: Commanded joint velocity of the last cycle [rad/s], shape (n,).
+            residual: IK residual ‖log6(T(q)⁻¹·T_target)‖ [m, rad].
+        """
+        mu_prev, self._mu_prev = self._mu_prev, manipulability
+        if self.state == State.FAULT:
+            return
+        if manipulability < self.config.stop_manipulability and manipulability < mu_prev:
+            self.trip(t, Fault.SINGULARITY, manipulability)
+            return
+        for j in range(q_commanded.shape[0]):
+            v = float(qd_commanded[j])
+            qj = float(q_commanded[j])
+            if (v > 0.0 and qj >= self._hi_margin[j]) or (v < 0.0 and qj <= self._lo_margin[j]):
+                self.trip(t, Fault.JOINT_LIMIT, qj, j)
+                return
+        if residual > self.config.tracking_error_limit:
+            self.trip(t, Fault.TRACKING, residual)
+
+    def speed_scale(self, manipulability: float) -> float:
+        """Factor of the speed limits near a singularity, in [min_speed_scale, 1]."""
+        cfg = self.config
+        s = (manipulability - cfg.stop_manipulability) / (cfg.slow_manipulability
+                                                          - cfg.stop_manipulability)
+        return min(1.0, max(cfg.min_speed_scale, s))
+
+    def workspace_clearance(self, position: Array, linear_speed: float) -> float:
+        """Distance left between the TCP's braking ball and the workspace box [m].
+
+        Args:
+            position: TCP position in the base frame [m], shape (3,).
+            linear_speed: ‖v‖ of the TCP [m/s].
+
+        Returns:
+            min over the faces of (distance to the face) − margin − v²/(2·a_max); negative: the
+            TCP could not stop inside the box (less the margin). +inf without a box.
+        """
+        if not self._has_box:
+            return math.inf
+        c = math.inf
+        for i in range(3):
+            p = float(position[i])
+            c = min(c, p - float(self._box_lo[i]), float(self._box_hi[i]) - p)
+        return c - self.config.workspace_margin - self.limits.braking_distance(linear_speed)

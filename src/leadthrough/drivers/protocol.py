@@ -1,0 +1,138 @@
+"""The driver protocol: how the guiding loop talks to a position-mode robot controller.
+
+A driver delivers feedback samples (time, encoder joint positions, measured motor currents,
+sequence number) and takes a joint position + velocity command every servo period ``dt``
+(1 ms). Nothing is allocated in the loop: the caller makes one :class:`DriverFeedback` and one
+:class:`JointCommand` with :meth:`Driver.make_feedback` and :meth:`Driver.make_command` and the
+driver fills or reads them in place (ruckig-style).
+
+The loop, for every driver::
+
+    fb, cmd = drv.make_feedback(), drv.make_command()
+    drv.step()                      # first sample (the robot holds its last command)
+    drv.read(fb)
+    cmd.q[:] = fb.q; cmd.qd[:] = 0.0
+    while running:
+        drv.write(cmd)              # command for the coming period
+        drv.step()                  # advance one servo period
+        if not drv.read(fb):        # no new sample: fb still holds the previous one
+            ...                     # stale feedback: count it, stop after a few
+        ...                         # compute the next cmd from fb
+
+Pacing: :meth:`Driver.step` is where the loop waits for the next servo period. A simulated
+driver (``simulated`` true) advances its physics by one period and returns at once, so a
+simulated session runs as fast as the CPU allows (pace it with the wall clock only to watch
+it); a real driver's ``step`` blocks until the controller's next cycle, which paces the loop in
+real time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["Driver", "DriverFeedback", "JointCommand"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(slots=True, eq=False)
+class DriverFeedback:
+    """One feedback sample, preallocated and filled in place by :meth:`Driver.read`.
+
+    Attributes:
+        t: Sample time on the controller clock [s] (NaN before the first sample).
+        q: Encoder joint positions [rad], shape (n,) (NaN before the first sample).
+        current: Measured motor currents [A], shape (n,) (NaN before the first sample).
+        sequence: Controller sample counter: +1 per servo period, a jump means missed samples
+            (-1 before the first sample).
+    """
+
+    t: float
+    q: Array
+    current: Array
+    sequence: int
+
+    @classmethod
+    def empty(cls, n: int) -> DriverFeedback:
+        """A feedback for ``n`` joints that holds no sample yet (NaN, sequence -1)."""
+        return cls(t=float("nan"), q=np.full(n, np.nan), current=np.full(n, np.nan),
+                   sequence=-1)
+
+
+@dataclass(slots=True, eq=False)
+class JointCommand:
+    """The command of one servo period for a position-mode servo, written by
+    :meth:`Driver.write`.
+
+    Attributes:
+        q: Commanded joint positions [rad], shape (n,).
+        qd: Commanded joint velocities (velocity feed-forward) [rad/s], shape (n,).
+    """
+
+    q: Array
+    qd: Array
+
+    @classmethod
+    def zeros(cls, n: int) -> JointCommand:
+        """A command for ``n`` joints, all zero (fill ``q`` before writing it)."""
+        return cls(q=np.zeros(n), qd=np.zeros(n))
+
+
+@runtime_checkable
+class Driver(Protocol):
+    """A position-mode robot controller stepped at ``dt`` (see the module doc for the loop)."""
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        ...
+
+    @property
+    def dt(self) -> float:
+        """Servo period [s]."""
+        ...
+
+    @property
+    def simulated(self) -> bool:
+        """True when :meth:`step` advances a simulation instead of waiting for the robot."""
+        ...
+
+    def make_feedback(self) -> DriverFeedback:
+        """A feedback to fill with :meth:`read`, shapes (n,), holding no sample yet."""
+        ...
+
+    def make_command(self) -> JointCommand:
+        """A command to fill and pass to :meth:`write`, shapes (n,)."""
+        ...
+
+    def read(self, fb: DriverFeedback) -> bool:
+        """Fill ``fb`` with the newest sample if one arrived since the last read.
+
+        Args:
+            fb: Preallocated feedback (from :meth:`make_feedback`), filled in place.
+
+        Returns:
+            True if a new sample was written into ``fb``; False if none arrived (stale
+            feedback, or no sample yet), in which case ``fb`` is left untouched.
+        """
+        ...
+
+    def write(self, cmd: JointCommand) -> None:
+        """Send the joint position [rad] and velocity [rad/s] command for the coming period.
+
+        The robot keeps the last command until the next write. The arrays are copied, so
+        ``cmd`` may be refilled at once.
+
+        Args:
+            cmd: The command, shapes (n,), finite.
+        """
+        ...
+
+    def step(self) -> None:
+        """Wait for the next servo period: a simulation advances one ``dt`` and returns at
+        once; a real controller blocks until its next cycle."""
+        ...

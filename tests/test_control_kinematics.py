@@ -1,0 +1,250 @@
+"""Differential IK (DLS, joint limits) and the automatic friction of eq. 36, on the er20."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from leadthrough.control import AutoFriction, AutoFrictionConfig, DifferentialIK, IKConfig
+from leadthrough.control.ik import dls_damping
+from leadthrough.errors import ControlError
+from leadthrough.robot import Robot
+
+DT = 0.01
+Q_WORK = np.array([0.3, -0.6, 0.9, 0.4, 0.8, 0.2])
+Q_WRIST_SINGULAR = np.array([0.0, -0.6, 0.9, 0.0, 0.0, 0.0])
+
+
+def _fk(robot: Robot, q: np.ndarray) -> pin.SE3:
+    d = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, d, q)
+    return d.oMf[robot.tcp_frame_id].copy()
+
+
+def _random_poses(robot: Robot, k: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    lo, hi = robot.lower_limits + 0.2, robot.upper_limits - 0.2
+    return rng.uniform(lo, hi, size=(k, robot.n))
+
+
+@pytest.mark.parametrize("frame", ["tool", "base"])
+def test_jacobian_matches_finite_differences(er20: Robot, frame: str) -> None:
+    """The Jacobian used by the IK (tool) and by eq. 36 (base axes at the TCP) vs central
+    differences of the forward kinematics."""
+    ik = DifferentialIK(er20, dt=DT)
+    J = np.zeros((6, er20.n))
+    h = 1e-6
+    for q in _random_poses(er20, 5, seed=3):
+        ik.compute_kinematics(q)
+        ik.jacobian_in_frame(frame, J)
+        T0 = _fk(er20, q)
+        fd = np.zeros_like(J)
+        for j in range(er20.n):
+            e = np.zeros(er20.n)
+            e[j] = h
+            Tp, Tm = _fk(er20, q + e), _fk(er20, q - e)
+            if frame == "tool":
+                fd[:, j] = (pin.log6(T0.actInv(Tp)).vector
+                            - pin.log6(T0.actInv(Tm)).vector) / (2 * h)
+            else:
+                fd[:3, j] = (Tp.translation - Tm.translation) / (2 * h)
+                fd[3:, j] = (pin.log3(Tp.rotation @ T0.rotation.T)
+                             - pin.log3(Tm.rotation @ T0.rotation.T)) / (2 * h)
+        np.testing.assert_allclose(J, fd, atol=1e-8)
+
+
+def test_manipulability_and_damping(er20: Robot) -> None:
+    ik = DifferentialIK(er20, dt=DT)
+    ik.compute_kinematics(Q_WORK)
+    J = ik.jacobian
+    assert ik.manipulability == pytest.approx(np.sqrt(np.linalg.det(J @ J.T)), rel=1e-10)
+    assert ik.manipulability > 0.02 and ik.damping == 0.0
+    ik.compute_kinematics(Q_WRIST_SINGULAR)
+    assert ik.manipulability < 1e-6
+    assert ik.damping == pytest.approx(0.05, rel=1e-6)
+    assert dls_damping(0.01, 0.02, 0.05) == pytest.approx(0.05 * np.sqrt(0.75))
+    assert dls_damping(0.03, 0.02, 0.05) == 0.0
+
+
+def test_ik_step_reaches_a_nearby_target(er20: Robot) -> None:
+    """One undamped step toward a target 2–3 mm / mrad away (0.2 m/s, 0.2 rad/s for 10 ms) is
+    q̇ = J⁻¹·ν and leaves a second-order residual (halving the step quarters it); a few steps
+    converge to machine precision."""
+    ik = DifferentialIK(er20, dt=DT)
+    res = ik.make_result()
+    nu = np.array([0.2, -0.1, 0.05, 0.1, 0.15, -0.05])
+    tested = 0
+    for q in _random_poses(er20, 20, seed=4):
+        ik.compute_kinematics(q)
+        if ik.manipulability < 0.05:                 # well-conditioned poses only
+            continue
+        tested += 1
+        after = []
+        for scale in (1.0, 0.5):
+            target = _fk(er20, q) * pin.exp6(scale * nu * DT)
+            # q̇ = J⁻¹·ν, given as the previous q̇ so that no acceleration bound applies
+            expected = np.linalg.solve(ik.jacobian,
+                                       pin.log6(_fk(er20, q).actInv(target)).vector / DT)
+            ik.solve(q, expected, target, res)
+            assert res.residual == pytest.approx(np.linalg.norm(scale * nu * DT), rel=1e-9)
+            assert not res.limited
+            np.testing.assert_allclose(res.qd, expected, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(res.q, q + res.qd * DT, rtol=0, atol=1e-15)
+            after.append(np.linalg.norm(pin.log6(_fk(er20, res.q).actInv(target)).vector))
+        assert after[0] < 0.1 * np.linalg.norm(nu * DT)
+        assert 3.0 < after[0] / after[1] < 5.0       # second order
+        qk = res.q.copy()
+        for _ in range(4):                           # static target: Newton iterations
+            ik.compute_kinematics(qk)
+            ik.solve(qk, np.zeros(er20.n), target, res)
+            qk = res.q.copy()
+        assert np.linalg.norm(pin.log6(_fk(er20, qk).actInv(target)).vector) < 1e-12
+    assert tested >= 5
+
+
+def test_ik_stops_on_the_joint_limit_margin_braking_at_the_joint_limit(er20: Robot) -> None:
+    """A target out of reach pulls joint 3 onto its lower limit: the joint stops on the margin,
+    never beyond, at no more than its acceleration limit; all joints scale together."""
+    cfg = IKConfig(joint_limit_margin=0.01)
+    ik = DifferentialIK(er20, cfg, dt=DT)
+    res = ik.make_result()
+    q = np.array([0.0, -0.6, 0.9, 0.0, 0.8, 0.0])
+    qd = np.zeros(er20.n)
+    start = _fk(er20, q)
+    lo = er20.lower_limits[2] + 0.01
+    traj, vel, scales = [], [], []
+    for k in range(600):
+        # a target moving along +x at 0.3 m/s, far beyond the reach of the arm
+        target = pin.SE3(start.rotation, start.translation + np.array([0.3 * DT * (k + 1), 0, 0]))
+        ik.compute_kinematics(q)
+        ik.solve(q, qd, target, res)
+        q, qd = res.q.copy(), res.qd.copy()
+        traj.append(q)
+        vel.append(qd)
+        scales.append(res.scale)
+    traj, vel = np.array(traj), np.array(vel)
+    assert np.all(traj[:, 2] >= lo - 1e-12)
+    assert np.all(traj >= ik.lower - 1e-12) and np.all(traj <= ik.upper + 1e-12)
+    assert traj[-1, 2] == pytest.approx(lo, abs=1e-6)            # it did reach the margin
+    assert np.all(np.abs(vel) <= er20.velocity_limit * (1 + 1e-12))
+    acc = np.abs(np.diff(vel[:, 2])) / DT
+    assert acc.max() <= er20.acceleration_limit[2] * (1 + 1e-9)
+    assert min(scales) < 1.0
+
+
+def test_ik_scaling_keeps_the_direction(er20: Robot) -> None:
+    """With a joint speed bound active, q̇ is the DLS solution scaled by one factor."""
+    slow = DifferentialIK(er20, IKConfig(velocity_scale=0.05), dt=DT)
+    free = DifferentialIK(er20, dt=DT)
+    a, b = slow.make_result(), free.make_result()
+    target = _fk(er20, Q_WORK) * pin.exp6(np.array([0.2, 0.1, 0.0, 0.0, 0.0, 0.1]) * DT)
+    free.compute_kinematics(Q_WORK)
+    free.solve(Q_WORK, np.zeros(er20.n), target, b)        # from rest: acceleration-bounded
+    assert b.limited
+    qd_dls = b.qd / b.scale
+    free.solve(Q_WORK, qd_dls, target, b)                   # already moving: unbounded
+    slow.compute_kinematics(Q_WORK)
+    slow.solve(Q_WORK, qd_dls, target, a)
+    assert a.limited and not b.limited
+    np.testing.assert_allclose(a.qd, a.scale * b.qd, rtol=1e-12, atol=1e-15)
+    assert np.all(np.abs(a.qd) <= 0.05 * er20.velocity_limit * (1 + 1e-12))
+
+
+def test_ik_is_finite_at_a_singularity(er20: Robot) -> None:
+    ik = DifferentialIK(er20, dt=DT)
+    res = ik.make_result()
+    target = _fk(er20, Q_WRIST_SINGULAR) * pin.exp6(np.array([0, 0, 0, 0.2, 0, 0]) * DT)
+    ik.compute_kinematics(Q_WRIST_SINGULAR)
+    ik.solve(Q_WRIST_SINGULAR, np.zeros(er20.n), target, res)
+    assert np.isfinite(res.qd).all()
+    assert np.all(np.abs(res.qd) <= er20.velocity_limit * (1 + 1e-12))
+
+
+def test_ik_config_errors(er20: Robot) -> None:
+    with pytest.raises(ControlError, match=r"ik.velocity_scale"):
+        IKConfig(velocity_scale=0.0)
+    with pytest.raises(ControlError, match="dt"):
+        DifferentialIK(er20, dt=-1.0)
+
+
+# --------------------------------------------------------------------- eq. 36
+
+
+def _jacobian(er20: Robot, q: np.ndarray, frame: str) -> tuple[np.ndarray, float]:
+    ik = DifferentialIK(er20, dt=DT)
+    ik.compute_kinematics(q)
+    J = np.zeros((6, er20.n))
+    ik.jacobian_in_frame(frame, J)
+    return J, ik.manipulability
+
+
+@pytest.mark.parametrize("frame", ["base", "tool"])
+def test_eq36_is_r_times_inverse_transpose_of_the_mean_noise(er20: Robot, frame: str) -> None:
+    tau_mean = np.array([-4.2, -0.05, 1.25, 0.34, 0.52, -0.37])   # Table II, ols-cv
+    auto = AutoFriction(tau_mean, config=AutoFrictionConfig(guiding_ratio=1.5,
+                                                            stopping_ratio=4.0))
+    J, mu = _jacobian(er20, Q_WORK, frame)
+    delta, delta_s = np.zeros(6), np.zeros(6)
+    auto.update(J, mu, delta, delta_s)
+    expected = np.abs(np.linalg.solve(J.T, tau_mean))
+    np.testing.assert_allclose(delta, 1.5 * expected, rtol=1e-9)
+    np.testing.assert_allclose(delta_s, 4.0 * expected, rtol=1e-9)
+    # the wrench it stands for maps back onto τ̄ through Jᵀ (virtual work)
+    np.testing.assert_allclose(J.T @ np.linalg.solve(J.T, tau_mean), tau_mean, atol=1e-9)
+
+
+def test_eq36_threshold_follows_the_pose(er20: Robot) -> None:
+    tau_mean = np.array([-4.2, -0.05, 1.25, 0.34, 0.52, -0.37])
+    auto = AutoFriction(tau_mean)
+    out = []
+    for q in (Q_WORK, np.array([0.3, -1.0, 1.5, 0.4, 1.2, 0.2])):
+        J, mu = _jacobian(er20, q, "base")
+        d, ds = np.zeros(6), np.zeros(6)
+        auto.update(J, mu, d, ds)
+        out.append(d)
+    assert np.max(np.abs(out[0] - out[1]) / np.maximum(out[0], out[1])) > 0.1
+
+
+def test_eq36_std_basis_is_the_std_of_the_mapped_noise(er20: Robot) -> None:
+    """basis="std": √(Σ_j A_ij²σ_j²) equals the standard deviation of J^(−T)·ε for
+    independent joint noise ε_j ~ N(0, σ_j²) (Monte Carlo, 40 000 samples)."""
+    sigma = np.array([15.0, 19.0, 3.2, 0.9, 1.0, 0.43])            # ≈ 0.85 % of max torque
+    auto = AutoFriction(np.zeros(6), sigma, AutoFrictionConfig(basis="std"))
+    J, mu = _jacobian(er20, Q_WORK, "base")
+    w = np.zeros(6)
+    auto.noise_wrench(J, mu, w)
+    eps = np.random.default_rng(5).normal(0.0, sigma, size=(40000, 6))
+    samples = np.linalg.solve(J.T, eps.T).T
+    np.testing.assert_allclose(w, samples.std(axis=0), rtol=0.02)
+    both = AutoFriction(np.full(6, 1.0), sigma, AutoFrictionConfig(basis="mean+std"))
+    w2 = np.zeros(6)
+    both.noise_wrench(J, mu, w2)
+    np.testing.assert_allclose(w2, w + np.abs(np.linalg.solve(J.T, np.full(6, 1.0))),
+                               rtol=1e-9)
+
+
+def test_eq36_floor_and_singularity(er20: Robot) -> None:
+    auto = AutoFriction(np.zeros(6), config=AutoFrictionConfig(
+        min_friction=(15.0,) * 6, min_stopping_friction=(50.0,) * 6))
+    J, mu = _jacobian(er20, Q_WORK, "base")
+    d, ds = np.zeros(6), np.zeros(6)
+    auto.update(J, mu, d, ds)
+    assert np.all(d == 15.0) and np.all(ds == 50.0)
+    # near a singularity the damped pseudo-inverse keeps the threshold finite
+    auto = AutoFriction(np.full(6, 1.0))
+    J, mu = _jacobian(er20, Q_WRIST_SINGULAR, "base")
+    auto.update(J, mu, d, ds)
+    assert np.isfinite(d).all() and np.isfinite(ds).all()
+    assert d.max() < 1e4
+
+
+def test_eq36_config_errors() -> None:
+    with pytest.raises(ControlError, match=r"auto_friction.guiding_ratio"):
+        AutoFrictionConfig(guiding_ratio=0.5)
+    with pytest.raises(ControlError, match=r"auto_friction.stopping_ratio"):
+        AutoFrictionConfig(stopping_ratio=2.0)
+    with pytest.raises(ControlError, match="noise_std"):
+        AutoFriction(np.zeros(6), config=AutoFrictionConfig(basis="std"))
+    with pytest.raises(ControlError, match="noise_mean"):
+        AutoFriction(np.array([np.nan, 0.0]))

@@ -1,0 +1,167 @@
+"""Control laws: virtual friction (eq. 31–33), velocity baseline [14], Cartesian limits."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from leadthrough.control import (
+    CartesianLimits,
+    VelocityBaseline,
+    VelocityBaselineConfig,
+    VirtualFriction,
+    VirtualFrictionConfig,
+)
+from leadthrough.control.limits import TwistLimiter
+from leadthrough.errors import ControlError
+
+DT = 0.01
+DELTA = np.full(6, 15.0)
+DELTA_S = np.full(6, 50.0)
+
+
+def _run(law: VirtualFriction | VelocityBaseline, wrenches: np.ndarray,
+         delta: np.ndarray = DELTA, delta_s: np.ndarray = DELTA_S) -> np.ndarray:
+    """Twists after each cycle for a (k, 6) wrench sequence (no limits)."""
+    v, new = np.zeros(6), np.zeros(6)
+    out = np.empty_like(wrenches)
+    for k, w in enumerate(wrenches):
+        law.step(v, w, delta, delta_s, new)
+        v[:] = new
+        out[k] = v
+    return out
+
+
+def test_table_iv_defaults() -> None:
+    cfg = VirtualFrictionConfig()
+    assert cfg.mass == (1000.0,) * 6
+    assert cfg.friction == (15.0,) * 6
+    assert cfg.stopping_friction == (50.0,) * 6
+    lim = CartesianLimits()
+    assert (lim.max_linear_speed, lim.max_angular_speed) == (0.2, 0.2)
+    assert (lim.max_linear_acceleration, lim.max_angular_acceleration) == (0.4, 0.4)
+
+
+def test_no_motion_below_friction_is_exactly_zero() -> None:
+    """eq. 33: |F̂| < δ never starts a motion; the velocity is 0.0 exactly, not small."""
+    rng = np.random.default_rng(0)
+    w = rng.uniform(-14.999, 14.999, size=(5000, 6))
+    v = _run(VirtualFriction(dt=DT), w)
+    assert np.all(v == 0.0)
+
+
+def test_breakaway_acceleration_is_force_minus_friction_over_mass() -> None:
+    """eq. 31 + 33: above δ the axis accelerates with (|F̂| − δ)/M, in the force's direction."""
+    w = np.zeros((100, 6))
+    w[:, 0], w[:, 4] = 40.0, -20.0
+    v = _run(VirtualFriction(dt=DT), w)
+    np.testing.assert_allclose(v[:, 0], (40.0 - 15.0) / 1000.0 * DT * np.arange(1, 101),
+                               rtol=1e-12)
+    np.testing.assert_allclose(v[:, 4], -(20.0 - 15.0) / 1000.0 * DT * np.arange(1, 101),
+                               rtol=1e-12)
+    assert np.all(v[:, [1, 2, 3, 5]] == 0.0)
+
+
+def test_moving_friction_opposes_velocity() -> None:
+    """eq. 32: while moving with F̂ ≥ δ the friction is δ·sgn(v) (decelerating a push back)."""
+    law = VirtualFriction(dt=DT)
+    v, out = np.zeros(6), np.zeros(6)
+    v[1] = 0.1
+    w = np.zeros(6)
+    w[1] = 30.0                                   # same direction: a = (30 − 15)/M
+    law.step(v, w, DELTA, DELTA_S, out)
+    assert out[1] == pytest.approx(0.1 + DT * 15.0 / 1000.0, rel=1e-12)
+    w[1] = -30.0                                  # pushing back: a = (−30 − 15)/M
+    law.step(v, w, DELTA, DELTA_S, out)
+    assert out[1] == pytest.approx(0.1 - DT * 45.0 / 1000.0, rel=1e-12)
+
+
+def test_stopping_friction_after_release_stops_exactly_without_reversal() -> None:
+    law = VirtualFriction(dt=DT)
+    w = np.zeros((1000, 6))
+    w[:400, 2] = 60.0
+    w[400:, 2] = 10.0                             # "released": a residual 10 N below δ
+    v = _run(law, w)[:, 2]
+    peak = v[399]
+    assert peak == pytest.approx(400 * DT * 45.0 / 1000.0, rel=1e-12)
+    decel = -np.diff(v[400:])
+    moving = v[401:] > 0
+    # δ_s applies once the force is below δ: a = (10 − 50)/M
+    np.testing.assert_allclose(decel[moving], 40.0 / 1000.0 * DT, rtol=1e-9)
+    assert np.all(v >= 0.0)                       # never reverses
+    stop = 400 + int(np.argmax(v[400:] == 0.0))
+    assert np.all(v[stop:] == 0.0)                # and stays exactly at rest
+    assert (stop - 400) * DT == pytest.approx(peak * 1000.0 / 40.0, abs=DT)
+
+
+def test_config_validation_names_the_field() -> None:
+    with pytest.raises(ControlError, match=r"virtual_friction.stopping_friction"):
+        VirtualFrictionConfig(stopping_friction=(10.0,) * 6)
+    with pytest.raises(ControlError, match=r"virtual_friction.mass"):
+        VirtualFrictionConfig(mass=(1000.0,) * 5)
+    with pytest.raises(ControlError, match=r"velocity_baseline.time_constant"):
+        VelocityBaselineConfig(time_constant=0.0)
+    with pytest.raises(ControlError, match=r"limits.max_linear_speed"):
+        CartesianLimits(max_linear_speed=math.nan)
+    with pytest.raises(ControlError, match="dt"):
+        VirtualFriction(dt=0.0)
+
+
+def test_velocity_baseline_is_a_first_order_lag() -> None:
+    """[14]: v̇ = (K·F − v)/T; exact discretisation, zero target velocity."""
+    cfg = VelocityBaselineConfig(gain=(0.0025,) * 6, time_constant=0.2)
+    w = np.zeros((300, 6))
+    w[:150, 0] = 40.0
+    v = _run(VelocityBaseline(cfg, DT), w)[:, 0]
+    t = DT * np.arange(1, 151)
+    np.testing.assert_allclose(v[:150], 0.1 * (1 - np.exp(-t / 0.2)), rtol=1e-9)
+    np.testing.assert_allclose(v[150:], v[149] * np.exp(-t / 0.2), rtol=1e-9)
+
+
+def test_velocity_baseline_drifts_on_noise_that_virtual_friction_ignores() -> None:
+    rng = np.random.default_rng(1)
+    w = rng.normal(2.0, 3.0, size=(1000, 6))     # a biased, noisy estimate far below δ
+    vf = _run(VirtualFriction(dt=DT), w)
+    vb = _run(VelocityBaseline(dt=DT), w)
+    assert np.all(vf == 0.0)
+    drift = np.sum(vb[:, :3], axis=0) * DT        # TCP displacement over 10 s [m]
+    assert np.all(drift > 0.03)
+
+
+def test_limiter_caps_speed_and_acceleration_by_norm() -> None:
+    lim = TwistLimiter(CartesianLimits(), DT)
+    prev, out = np.zeros(6), np.zeros(6)
+    desired = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 5.0])
+    speeds, accs = [], []
+    for _ in range(200):
+        lim.limit(prev, desired, 1.0, out)
+        accs.append(np.linalg.norm(out[:3] - prev[:3]) / DT)
+        prev[:] = out
+        speeds.append(np.linalg.norm(out[:3]))
+    assert max(speeds) <= 0.2 * (1 + 1e-12)
+    assert max(accs) <= 0.4 * (1 + 1e-12)
+    np.testing.assert_allclose(out[:3], 0.2 / math.sqrt(2) * np.array([1, 1, 0]), rtol=1e-12)
+    assert out[5] == pytest.approx(0.2, rel=1e-12)
+    # a lowered speed scale is reached by decelerating, not by a jump
+    before = out.copy()
+    lim.limit(before, desired, 0.1, out)
+    assert np.linalg.norm(out[:3] - before[:3]) / DT == pytest.approx(0.4, rel=1e-12)
+
+
+def test_decelerate_reaches_exact_zero_at_the_limit() -> None:
+    lim = TwistLimiter(CartesianLimits(), DT)
+    v = np.array([0.12, -0.16, 0.0, 0.05, 0.0, 0.0])
+    direction = v[:3] / np.linalg.norm(v[:3])
+    cycles = 0
+    while v.any() and cycles < 100:
+        cycles += 1
+        before = v.copy()
+        lim.decelerate(before, v)
+        assert np.linalg.norm(v[:3] - before[:3]) <= 0.4 * DT * (1 + 1e-12)
+        assert np.linalg.norm(v[3:] - before[3:]) <= 0.4 * DT * (1 + 1e-12)
+        if np.linalg.norm(v[:3]) > 0:             # straight line in velocity space
+            np.testing.assert_allclose(v[:3] / np.linalg.norm(v[:3]), direction, rtol=1e-12)
+    assert not v.any() and cycles == 50          # 0.2 m/s at 0.4 m/s²: 50 cycles
+    assert CartesianLimits().braking_distance(0.2) == pytest.approx(0.05)
