@@ -176,3 +176,37 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
         rt.torque(q, qd, qdd, out)
         expected = model_torque(er20, params, q[None], qd[None], qdd[None])[0]
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-9)
+
+
+def test_tare_removes_a_static_model_error(er20: Robot) -> None:
+    """A model torque offset shows as a wrench at rest; taring removes it, a push still shows."""
+    from dataclasses import replace
+
+    force = np.array([0.0, 0.0, -50.0])
+    sim = SimRobot(er20, _quiet_config(), q0=Q0,
+                   operator=ConstantWrench((*force, 0, 0, 0), 1.5))
+    log = hold(sim, 3.5)
+    wrong = replace(nominal_drive_parameters(er20), offset=np.array([8.0, -6.0, 4.0, 1, 1, 1]))
+    cfg = EstimatorConfig(tare_s=0.5)
+    results = {}
+    for name, c in (("no tare", EstimatorConfig()), ("tare", cfg)):
+        est = ExternalForceEstimator(er20, wrong, np.zeros(6), c)
+        inp, out = est.make_input(), est.make_output()
+        est.reset(log.q[0])
+        statuses, wrench = [], np.zeros((log.time.size, 6))
+        for k in range(log.time.size):
+            inp.t, inp.q[:], inp.current[:] = log.time[k], log.q[k], log.current[k]
+            statuses.append(est.update(inp, out))
+            wrench[k] = out.wrench
+        results[name] = (np.array(statuses), wrench)
+    statuses, wrench = results["tare"]
+    t = log.time
+    assert np.all(statuses[t < 0.49] == Status.WARMING_UP)
+    assert np.all(statuses[(t > 0.51) & (t < 0.99)] == Status.TARING)
+    assert np.all(statuses[t > 1.01] == Status.OK)
+    rest = (t > 1.2) & (t < 1.5)
+    assert np.linalg.norm(results["no tare"][1][rest, :3], axis=1).min() > 5.0
+    assert np.linalg.norm(wrench[rest, :3], axis=1).max() < 0.5
+    np.testing.assert_allclose(wrench[-1, :3], force, atol=1.0)
+    with pytest.raises(DataError, match="duration_s"):
+        ExternalForceEstimator(er20, wrong, np.zeros(6)).tare(0.0)

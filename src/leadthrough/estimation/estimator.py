@@ -60,6 +60,7 @@ class Status(IntEnum):
 
     OK = 0
     WARMING_UP = 1
+    TARING = 2
     FAULT_NONFINITE = -1
 
 
@@ -82,6 +83,12 @@ class EstimatorConfig:
         manipulability_threshold: μ₀ below which damping starts.
         max_damping: λ_max.
         warm_up_s: Time after reset during which the status is WARMING_UP [s].
+        tare_s: After warm-up, average τ_ext over this long and subtract it from then on
+            (status TARING meanwhile); 0 disables. Like taring a force sensor: the robot must
+            be untouched meanwhile. It removes the static model error at the tare pose (the
+            identified model's gravity error where the excitation did not go, the drives'
+            bias), which eq. 30's global mean cannot; the error returns as the pose changes.
+            :meth:`ExternalForceEstimator.tare` re-tares on request.
         standstill_velocity: v_ε of the smoothed friction sign [rad/s].
     """
 
@@ -95,6 +102,7 @@ class EstimatorConfig:
     manipulability_threshold: float = 0.02
     max_damping: float = 0.05
     warm_up_s: float = 0.5
+    tare_s: float = 0.0
     standstill_velocity: float = 0.02
 
     def __post_init__(self) -> None:
@@ -109,6 +117,7 @@ class EstimatorConfig:
             ("manipulability_threshold", self.manipulability_threshold >= 0, ">= 0"),
             ("max_damping", self.max_damping >= 0, ">= 0"),
             ("warm_up_s", self.warm_up_s >= 0, ">= 0 s"),
+            ("tare_s", self.tare_s >= 0, ">= 0 s"),
             ("standstill_velocity", self.standstill_velocity > 0, "> 0 rad/s"),
         ])
 
@@ -195,6 +204,10 @@ class ExternalForceEstimator:
         self._w = 1.0 / std
         self._samples = 0
         self._warm = round(cfg.warm_up_s / cfg.dt)
+        self._tare = np.zeros(n)
+        self._tare_sum = np.zeros(n)
+        self._tare_len = round(cfg.tare_s / cfg.dt)
+        self._tare_left = self._tare_taken = self._tare_len
         self._fault = False
         self._first = True
 
@@ -208,7 +221,10 @@ class ExternalForceEstimator:
         return EstimatorOutput(tau_ext=np.zeros(n), wrench=np.zeros(6), qd=np.zeros(n))
 
     def reset(self, q: Array) -> None:
-        """Restart at rest at ``q`` (clears a latched fault)."""
+        """Restart at rest at ``q``: clears a latched fault and the tare (re-tares if set)."""
+        self._tare[:] = 0.0
+        self._tare_sum[:] = 0.0
+        self._tare_left = self._tare_taken = self._tare_len
         self._diff.reset(q)
         self._lpf.reset(np.zeros(self.robot.n))
         self._integral[:] = 0.0
@@ -241,13 +257,44 @@ class ExternalForceEstimator:
                                     self._lpf.value, self._noise_mean, out.tau_ext)
         else:
             self._momentum(q, qd, out.tau_ext)
+        out.tau_ext -= self._tare
         self._wrench(q, out)
         out.qd[:] = qd
         self._last_tau[:] = out.tau_ext
         self._last_wrench[:] = out.wrench
         self._samples += 1
-        out.status = Status.OK if self._samples > self._warm else Status.WARMING_UP
+        if self._samples <= self._warm:
+            out.status = Status.WARMING_UP
+        elif self._tare_left > 0:
+            self._tare_sum += out.tau_ext
+            self._tare_left -= 1
+            if self._tare_left == 0:
+                self._tare_sum *= 1.0 / self._tare_taken
+                self._tare += self._tare_sum
+            out.status = Status.TARING
+        else:
+            out.status = Status.OK
         return out.status
+
+    def tare(self, duration_s: float) -> None:
+        """Start taring now: average τ_ext over ``duration_s`` and subtract it from then on.
+
+        The robot must be untouched meanwhile (status TARING). Call outside the hot path (it
+        validates its argument).
+
+        Raises:
+            DataError: Duration not positive.
+        """
+        if not (np.isfinite(duration_s) and duration_s > 0):
+            raise DataError("tare duration must be > 0", field="duration_s", value=duration_s,
+                            expected="> 0 s")
+        self._tare_sum[:] = 0.0
+        self._tare_left = self._tare_taken = max(1, round(duration_s / self.config.dt))
+
+    @property
+    def tare_torque(self) -> Array:
+        """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
+        return self._tare.copy()
 
     def _momentum(self, q: Array, qd: Array, tau_ext: Array) -> None:
         mdl = self.model

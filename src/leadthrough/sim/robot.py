@@ -98,7 +98,8 @@ class SimTruth:
         phi: True standard link parameters, shape (10·n,).
         drive: True drive-train parameters.
         current_bias: Current-sensor bias [A], shape (n,).
-        current_noise: Current-sensor noise σ (white and slow parts combined) [A], shape (n,).
+        current_noise: Current-sensor noise σ in motion (white and slow parts combined) [A],
+            shape (n,).
     """
 
     inertias: tuple[pin.Inertia, ...]
@@ -181,6 +182,7 @@ class SimRobot:
         self._wrench = np.zeros(6)
         self._i_true = np.zeros(n)
         self._i_meas = np.zeros(n)
+        self._speed = np.zeros(n)
         self._seq = 0
         self._build()
         self.reset(robot.neutral() if q0 is None else q0)
@@ -269,7 +271,8 @@ class SimRobot:
         q_meas = self._quantise(d.qpos)
         current = self._servo.update(q_meas, self._q_cmd, self._qd_ff, dt)
         self._i_true[:] = current
-        self._i_meas[:] = self._sensor.read(current)
+        np.abs(d.qvel, out=self._speed)
+        self._i_meas[:] = self._sensor.read(current, self._speed)
         np.multiply(current, self._tpa, out=self._tau_motor)
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
         m.dof_frictionloss[:] = self._drive.static
