@@ -210,3 +210,26 @@ def test_tare_removes_a_static_model_error(er20: Robot) -> None:
     np.testing.assert_allclose(wrench[-1, :3], force, atol=1.0)
     with pytest.raises(DataError, match="duration_s"):
         ExternalForceEstimator(er20, wrong, np.zeros(6)).tare(0.0)
+
+
+def test_friction_can_follow_the_commanded_velocity(er20: Robot) -> None:
+    """friction_velocity="command": the friction term uses the servo's velocity command."""
+    from dataclasses import replace
+
+    n = er20.n
+    params = replace(nominal_drive_parameters(er20), coulomb=np.full(n, 10.0),
+                     viscous=np.full(n, 4.0))
+    qd_cmd = np.array([0.5, -0.5, 0.5, -0.5, 0.5, -0.5])
+    tau = {}
+    for mode in ("measured", "command"):
+        est = ExternalForceEstimator(er20, params, np.zeros(n),
+                                     EstimatorConfig(friction_velocity=mode, warm_up_s=0.0))
+        inp, out = est.make_input(), est.make_output()
+        est.reset(Q0)
+        for k in range(3000):  # the robot stands still at Q0; the command says it moves
+            inp.t, inp.q[:], inp.qd_cmd[:] = k * 1e-3, Q0, qd_cmd
+            inp.current[:] = 0.0
+            est.update(inp, out)
+        tau[mode] = out.tau_ext.copy()
+    np.testing.assert_allclose(tau["command"] - tau["measured"],
+                               np.sign(qd_cmd) * 10.0 + 4.0 * qd_cmd, atol=1e-6)

@@ -90,6 +90,12 @@ class EstimatorConfig:
             bias), which eq. 30's global mean cannot; the error returns as the pose changes.
             :meth:`ExternalForceEstimator.tare` re-tares on request.
         standstill_velocity: v_ε of the smoothed friction sign [rad/s].
+        friction_velocity: Velocity the friction term uses: ``"measured"`` (estimated from
+            the encoders) or ``"command"`` (``EstimatorInput.qd_cmd``, the joint velocity
+            commanded to the position servo). While guiding, the robot moves because it is
+            commanded to, and at the low speeds of a start the measured velocity is mostly
+            noise while the drive's friction is at its highest (Stribeck): the command gives
+            friction its true direction and the identified Stribeck curve its level.
     """
 
     method: str = "direct"
@@ -104,6 +110,7 @@ class EstimatorConfig:
     warm_up_s: float = 0.5
     tare_s: float = 0.0
     standstill_velocity: float = 0.02
+    friction_velocity: str = "measured"
 
     def __post_init__(self) -> None:
         check_fields("estimator", self, [
@@ -119,6 +126,8 @@ class EstimatorConfig:
             ("warm_up_s", self.warm_up_s >= 0, ">= 0 s"),
             ("tare_s", self.tare_s >= 0, ">= 0 s"),
             ("standstill_velocity", self.standstill_velocity > 0, "> 0 rad/s"),
+            ("friction_velocity", self.friction_velocity in ("measured", "command"),
+             "'measured' or 'command'"),
         ])
 
 
@@ -130,11 +139,14 @@ class EstimatorInput:
         t: Time [s].
         q: Joint positions [rad], shape (n,).
         current: Motor currents [A], shape (n,).
+        qd_cmd: Joint velocity commanded to the servo for this period [rad/s], shape (n,)
+            (used with ``friction_velocity="command"``).
     """
 
     t: float
     q: Array
     current: Array
+    qd_cmd: Array = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -195,6 +207,7 @@ class ExternalForceEstimator:
         self._work = np.zeros(n)
         self._direct = cfg.method == "direct"
         self._force_only = cfg.axes == "force"
+        self._fric_cmd = cfg.friction_velocity == "command"
         self._last_tau = np.zeros(n)
         self._last_wrench = np.zeros(6)
         std = np.ones(n) if noise_std is None else np.asarray(noise_std, dtype=float)
@@ -213,7 +226,8 @@ class ExternalForceEstimator:
 
     def make_input(self) -> EstimatorInput:
         """A preallocated input."""
-        return EstimatorInput(t=0.0, q=np.zeros(self.robot.n), current=np.zeros(self.robot.n))
+        n = self.robot.n
+        return EstimatorInput(t=0.0, q=np.zeros(n), current=np.zeros(n), qd_cmd=np.zeros(n))
 
     def make_output(self) -> EstimatorOutput:
         """A preallocated output."""
@@ -252,11 +266,12 @@ class ExternalForceEstimator:
         mdl = self.model
         if self._direct:
             rnea = pin.rnea(mdl.model, mdl.data, q, qd, qdd)
-            kernels.direct_residual(rnea, qd, qdd, self._tau_j, mdl.friction_rows,
+            qd_friction = inp.qd_cmd if self._fric_cmd else qd
+            kernels.direct_residual(rnea, qd_friction, qdd, self._tau_j, mdl.friction_rows,
                                     mdl.stribeck, mdl.rotor, mdl.offset, self._lpf.alpha,
                                     self._lpf.value, self._noise_mean, out.tau_ext)
         else:
-            self._momentum(q, qd, out.tau_ext)
+            self._momentum(q, qd, inp.qd_cmd if self._fric_cmd else qd, out.tau_ext)
         out.tau_ext -= self._tare
         self._wrench(q, out)
         out.qd[:] = qd
@@ -296,14 +311,14 @@ class ExternalForceEstimator:
         """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
         return self._tare.copy()
 
-    def _momentum(self, q: Array, qd: Array, tau_ext: Array) -> None:
+    def _momentum(self, q: Array, qd: Array, qd_friction: Array, tau_ext: Array) -> None:
         mdl = self.model
         m, d = mdl.model, mdl.data
         M = pin.crba(m, d, q)  # upper triangle only
         C = pin.computeCoriolisMatrix(m, d, q, qd)
         g = pin.computeGeneralizedGravity(m, d, q)
-        kernels.momentum_step(M, mdl.rotor, C, g, qd, self._tau_j, mdl.friction_rows,
-                              mdl.stribeck, mdl.offset, self.config.dt, self._k_obs,
+        kernels.momentum_step(M, mdl.rotor, C, g, qd, qd_friction, self._tau_j,
+                              mdl.friction_rows, mdl.stribeck, mdl.offset, self.config.dt, self._k_obs,
                               self._samples == 0, self._p0, self._integral, self._r,
                               self._work, self._noise_mean, tau_ext)
 

@@ -85,7 +85,7 @@ def friction_torque(qd: Array, fp: Array, stribeck: bool, out: Array) -> None:
 
 
 @njit(cache=True, nogil=True)
-def direct_residual(rnea: Array, qd: Array, qdd: Array, tau_j: Array, fp: Array,
+def direct_residual(rnea: Array, qd_friction: Array, qdd: Array, tau_j: Array, fp: Array,
                     stribeck: bool, rotor: Array, offset: Array, alpha: float,
                     filtered: Array, noise_mean: Array, tau_ext: Array) -> None:
     """Eq. 27 and 30 for one sample: τ_ext = LPF(τ̂_d − τ̂_j) + τ̄_ω (in place).
@@ -94,7 +94,8 @@ def direct_residual(rnea: Array, qd: Array, qdd: Array, tau_j: Array, fp: Array,
 
     Args:
         rnea: Rigid-body torque of the identified links [N·m], shape (n,).
-        qd: Joint velocities [rad/s], shape (n,).
+        qd_friction: Joint velocities of the friction term [rad/s], shape (n,) (the estimated
+            or the commanded velocity).
         qdd: Joint accelerations [rad/s²], shape (n,).
         tau_j: Torque from current [N·m], shape (n,).
         fp: Friction rows, shape (8, n).
@@ -106,8 +107,8 @@ def direct_residual(rnea: Array, qd: Array, qdd: Array, tau_j: Array, fp: Array,
         noise_mean: τ̄_ω added back (zeros to skip) [N·m], shape (n,).
         tau_ext: Output [N·m], shape (n,).
     """
-    friction_torque(qd, fp, stribeck, tau_ext)
-    for j in range(qd.size):
+    friction_torque(qd_friction, fp, stribeck, tau_ext)
+    for j in range(qdd.size):
         raw = rnea[j] + tau_ext[j] + rotor[j] * qdd[j] + offset[j] - tau_j[j]
         filtered[j] += alpha * (raw - filtered[j])
         tau_ext[j] = filtered[j] + noise_mean[j]
@@ -115,8 +116,8 @@ def direct_residual(rnea: Array, qd: Array, qdd: Array, tau_j: Array, fp: Array,
 
 @njit(cache=True, nogil=True)
 def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Array,
-                  qd: Array, tau_j: Array, fp: Array, stribeck: bool, offset: Array,
-                  dt: float, gain: float, first: bool, p0: Array, integral: Array,
+                  qd: Array, qd_friction: Array, tau_j: Array, fp: Array, stribeck: bool,
+                  offset: Array, dt: float, gain: float, first: bool, p0: Array, integral: Array,
                   r: Array, work: Array, noise_mean: Array, tau_ext: Array) -> None:
     """One step of De Luca's generalized-momentum observer (in place).
 
@@ -130,6 +131,7 @@ def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Arr
         coriolis: C(q, q̇), shape (n, n).
         gravity: g(q) [N·m], shape (n,).
         qd: Joint velocities [rad/s], shape (n,).
+        qd_friction: Joint velocities of the friction term [rad/s], shape (n,).
         tau_j: Torque from current [N·m], shape (n,).
         fp: Friction rows, shape (8, n).
         stribeck: Friction model flag.
@@ -145,7 +147,7 @@ def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Arr
         tau_ext: Output [N·m], shape (n,).
     """
     n = qd.size
-    friction_torque(qd, fp, stribeck, work)
+    friction_torque(qd_friction, fp, stribeck, work)
     for i in range(n):
         p = rotor[i] * qd[i]
         ctq = 0.0

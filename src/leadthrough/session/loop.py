@@ -1,0 +1,231 @@
+"""The real-time guiding loop: driver → estimator (1 ms) → controller (10 ms) → interpolator →
+driver, recording everything.
+
+Per servo period (``driver.dt``, 1 ms):
+
+1. write the interpolated joint command, ``driver.step()`` (a simulated driver advances one
+   period; a real one blocks until the next), ``driver.read(fb)``;
+2. a new sample goes through the external force estimator (eq. 27–30);
+3. every ``controller_every`` periods (10 ms), the guiding controller takes the measured state,
+   the estimated wrench and the enabling input and produces a joint setpoint; the interpolator
+   turns it into 1 ms position + velocity commands;
+4. the row is recorded (preallocated arrays) and the compute time of steps 2–3 is measured.
+
+The enabling input is held only once the estimator reports OK (after its warm-up and tare):
+guiding with an estimate that has not settled would start the robot on filter transients.
+
+The loop itself reads the clock, to pace (``paced=True``) and to measure; the algorithms it
+drives never do. It never raises once running: a driver or controller problem shows as a
+fault state in the record.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from leadthrough.control.guiding import GuidingController
+from leadthrough.control.interpolation import JointInterpolator
+from leadthrough.control.safety import Event
+from leadthrough.drivers.protocol import Driver
+from leadthrough.errors import ControlError
+from leadthrough.estimation.estimator import ExternalForceEstimator, Status
+from leadthrough.session.record import SessionEvent, SessionLog
+from leadthrough.sim.operator import Mark
+
+__all__ = ["LoopResult", "run_session"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LoopResult:
+    """A finished session.
+
+    Attributes:
+        log: Everything recorded.
+        cycle_us: Compute time of each controller cycle's servo period (estimator +
+            controller + IK + limits + interpolation) [µs], shape (cycles,).
+        servo_us: Compute time of the other servo periods (estimator + interpolation) [µs].
+    """
+
+    log: SessionLog
+    cycle_us: Array
+    servo_us: Array
+
+
+def run_session(
+    driver: Driver,
+    estimator: ExternalForceEstimator,
+    controller: GuidingController,
+    interpolator: JointInterpolator,
+    duration_s: float,
+    *,
+    deadman: Callable[[float], bool] | None = None,
+    marks: Sequence[Mark] = (),
+    applied_wrench: Callable[[], Array] | None = None,
+    paced: bool = False,
+    settings: dict[str, object] | None = None,
+) -> LoopResult:
+    """Run a guiding session.
+
+    Args:
+        driver: The robot (simulated or real).
+        estimator: External force estimator, configured with ``frame="base"`` and the driver's
+            period.
+        controller: Guiding controller; its cycle must be a multiple of the driver's period.
+        interpolator: Controller cycle → servo period interpolation.
+        duration_s: Session length [s].
+        deadman: Enabling input as a function of time (default: held throughout).
+        marks: Operator "mark point" presses, recorded as events.
+        applied_wrench: Simulator truth: the wrench applied this period (base frame), recorded
+            for plots; None for a real robot.
+        paced: Pace the loop to the wall clock (real time) instead of running flat out.
+        settings: Recorded in the session file.
+
+    Returns:
+        The recording and the compute times.
+
+    Raises:
+        ControlError: Mismatched periods or frames (checked before anything runs).
+    """
+    dt = driver.dt
+    every = round(controller.config.dt / dt)
+    if every < 1 or abs(every * dt - controller.config.dt) > 1e-9:
+        raise ControlError("controller cycle must be a multiple of the servo period",
+                           field="controller.dt", value=controller.config.dt,
+                           expected=f"k × {dt} s")
+    if abs(estimator.config.dt - dt) > 1e-12 or estimator.config.frame != "base":
+        raise ControlError("estimator must run at the servo period in the base frame",
+                           field="estimator", value=(estimator.config.dt, estimator.config.frame),
+                           expected=f"(dt={dt}, frame='base')")
+    if not (np.isfinite(duration_s) and duration_s > 0):
+        raise ControlError("must be > 0", field="duration_s", value=duration_s,
+                           expected="> 0 s")
+    n, steps = driver.n, round(duration_s / dt)
+    rec = _Buffers(steps, n, applied_wrench is not None)
+    fb, cmd = driver.make_feedback(), driver.make_command()
+    e_in, e_out = estimator.make_input(), estimator.make_output()
+    c_in, c_out = controller.make_input(), controller.make_output()
+    driver.step()
+    driver.read(fb)
+    q0 = fb.q.copy()
+    estimator.reset(q0)
+    controller.reset(q0, fb.t)
+    interpolator.reset(q0)
+    interpolator.update(cmd)
+    cycle_us = np.zeros(steps // every + 1)
+    servo_us = np.zeros(steps)
+    mark_events = sorted(marks, key=lambda m: m.t)
+    k_cycle = 0
+    t_start = fb.t
+    wall0 = time.perf_counter()
+    for i in range(steps):
+        driver.write(cmd)
+        if paced:
+            _sleep_until(wall0 + (i + 1) * dt)
+        driver.step()
+        fresh = driver.read(fb)
+        t_loop = t_start + (i + 1) * dt  # the loop's clock: advances even if feedback is stale
+        t0 = time.perf_counter()
+        if fresh:
+            e_in.t = fb.t
+            e_in.q[:] = fb.q
+            e_in.current[:] = fb.current
+            e_in.qd_cmd[:] = cmd.qd
+            estimator.update(e_in, e_out)
+        is_cycle = i % every == 0
+        if is_cycle:
+            c_in.t = t_loop
+            c_in.sequence = fb.sequence
+            c_in.q[:] = fb.q
+            c_in.current[:] = fb.current
+            c_in.wrench_base[:] = e_out.wrench
+            held = True if deadman is None else deadman(t_loop)
+            c_in.deadman = held and e_out.status == Status.OK
+            controller.update(c_in, c_out)
+            interpolator.set_target(c_out.q, c_out.qd)
+        interpolator.update(cmd)
+        elapsed = (time.perf_counter() - t0) * 1e6
+        if is_cycle:
+            cycle_us[k_cycle] = elapsed
+            k_cycle += 1
+        servo_us[i] = elapsed
+        rec.store(i, t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
+                  c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
+                  int(c_out.fault), applied_wrench() if applied_wrench is not None else None)
+    events = [_transition(e) for e in controller.events]
+    events += [SessionEvent(t=m.t, kind="mark", label=m.label) for m in mark_events
+               if m.t <= rec.time[-1]]
+    events.sort(key=lambda e: e.t)
+    log = rec.to_log(driver_robot_name(controller), events, settings or {})
+    return LoopResult(log=log, cycle_us=cycle_us[:k_cycle],
+                      servo_us=servo_us[np.arange(steps) % every != 0])
+
+
+def driver_robot_name(controller: GuidingController) -> str:
+    """The robot name recorded in the session."""
+    return controller.robot.name
+
+
+def _transition(e: Event) -> SessionEvent:
+    cause = e.cause.name if e.fault.name == "NONE" else f"{e.cause.name}:{e.fault.name}"
+    return SessionEvent(t=e.t, kind="transition",
+                        label=f"{e.from_state.name}->{e.to_state.name}", cause=cause)
+
+
+def _sleep_until(deadline: float) -> None:
+    remaining = deadline - time.perf_counter()
+    if remaining > 0:
+        time.sleep(remaining)
+
+
+class _Buffers:
+    """Preallocated session arrays."""
+
+    def __init__(self, steps: int, n: int, with_truth: bool) -> None:
+        self.time = np.zeros(steps)
+        self.q = np.zeros((steps, n))
+        self.current = np.zeros((steps, n))
+        self.tau_ext = np.zeros((steps, n))
+        self.wrench = np.zeros((steps, 6))
+        self.q_cmd = np.zeros((steps, n))
+        self.qd_cmd = np.zeros((steps, n))
+        self.tcp = np.zeros((steps, 3))
+        self.rot = np.zeros((steps, 3, 3))
+        self.twist = np.zeros((steps, 6))
+        self.state = np.zeros(steps, dtype=np.int64)
+        self.fault = np.zeros(steps, dtype=np.int64)
+        self.applied = np.zeros((steps, 6)) if with_truth else None
+
+    def store(self, i: int, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
+              q_cmd: Array, qd_cmd: Array, transform: Array, twist: Array, state: int,
+              fault: int, applied: Array | None) -> None:
+        self.time[i] = t
+        self.q[i] = q
+        self.current[i] = current
+        self.tau_ext[i] = tau_ext
+        self.wrench[i] = wrench
+        self.q_cmd[i] = q_cmd
+        self.qd_cmd[i] = qd_cmd
+        self.tcp[i] = transform[:3, 3]
+        self.rot[i] = transform[:3, :3]
+        self.twist[i] = twist
+        self.state[i] = state
+        self.fault[i] = fault
+        if self.applied is not None and applied is not None:
+            self.applied[i] = applied
+
+    def to_log(self, robot: str, events: list[SessionEvent],
+               settings: dict[str, object]) -> SessionLog:
+        quat = Rotation.from_matrix(self.rot).as_quat()  # x, y, z, w
+        return SessionLog(robot=robot, time=self.time, q=self.q, current=self.current,
+                          tau_ext=self.tau_ext, wrench_base=self.wrench, q_cmd=self.q_cmd,
+                          qd_cmd=self.qd_cmd, tcp_cmd_base=self.tcp, tcp_cmd_quat=quat,
+                          twist_cmd_base=self.twist, state=self.state, fault=self.fault,
+                          wrench_applied_base=self.applied, events=events, settings=settings)

@@ -1,0 +1,118 @@
+"""Figures of a guiding session: peak speeds and accelerations, rest drift, faults, cycle time."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.control.safety import State
+from leadthrough.session.loop import LoopResult
+from leadthrough.session.record import SessionLog
+
+__all__ = ["CycleTime", "SessionSummary", "rest_drift", "summarize"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CycleTime:
+    """Compute time per controller cycle (estimator + controller + IK + limits + interpolation).
+
+    Attributes:
+        median: Median [µs].
+        p99: 99th percentile [µs].
+    """
+
+    median: float
+    p99: float
+
+
+@dataclass(frozen=True)
+class SessionSummary:
+    """What a session did.
+
+    Attributes:
+        duration_s: Length [s].
+        max_linear_speed: Peak commanded TCP speed [m/s].
+        max_angular_speed: Peak commanded TCP angular speed [rad/s].
+        max_linear_acc: Peak commanded TCP acceleration [m/s²] (controller cycles).
+        max_angular_acc: Peak commanded TCP angular acceleration [rad/s²].
+        rest_drift_m: Commanded TCP displacement that started while no force was applied (the
+            robot was at rest and nobody pushed) [m]; None without the simulator's truth.
+        faults: Faults that occurred, in order (names).
+        final_state: Safety state at the end (name).
+        cycle_time_us: Compute time per controller cycle.
+    """
+
+    duration_s: float
+    max_linear_speed: float
+    max_angular_speed: float
+    max_linear_acc: float
+    max_angular_acc: float
+    rest_drift_m: float | None
+    faults: list[str]
+    final_state: str
+    cycle_time_us: CycleTime
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready dict."""
+        return asdict(self)
+
+
+def rest_drift(log: SessionLog) -> float | None:
+    """Commanded TCP displacement that began with the robot at rest and no force applied.
+
+    Within each interval where the true applied wrench is exactly zero, from the first sample at
+    which the commanded twist is exactly zero (the robot has come to rest; braking after a
+    release is intended motion, not drift), the largest distance of the commanded TCP from
+    where it rested.
+
+    Returns:
+        Drift [m], or None if the session has no applied-wrench truth.
+    """
+    if log.wrench_applied_base is None:
+        return None
+    free = ~np.any(log.wrench_applied_base != 0.0, axis=1)
+    at_rest = ~np.any(log.twist_cmd_base != 0.0, axis=1)
+    drift = 0.0
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        rested = np.flatnonzero(at_rest[start:stop])
+        if rested.size == 0:
+            continue
+        k0 = start + rested[0]
+        d = np.linalg.norm(log.tcp_cmd_base[k0:stop] - log.tcp_cmd_base[k0], axis=1)
+        drift = max(drift, float(d.max()))
+    return drift
+
+
+def summarize(result: LoopResult, controller_dt: float) -> SessionSummary:
+    """Figures of a finished session.
+
+    Args:
+        result: The session.
+        controller_dt: Controller cycle [s] (accelerations are taken per cycle).
+    """
+    log = result.log
+    twist = log.twist_cmd_base
+    dt = float(np.median(np.diff(log.time))) if log.time.size > 1 else controller_dt
+    every = max(1, round(controller_dt / dt))
+    cycles = twist[::every]
+    acc = np.diff(cycles, axis=0) / controller_dt if len(cycles) > 1 else np.zeros((1, 6))
+    faults = [e.cause.split(":", 1)[1] for e in log.events
+              if e.kind == "transition" and ":" in e.cause]
+    us = result.cycle_us if result.cycle_us.size else np.zeros(1)
+    return SessionSummary(
+        duration_s=float(log.time[-1] - log.time[0]) if log.time.size else 0.0,
+        max_linear_speed=float(np.linalg.norm(twist[:, :3], axis=1).max()),
+        max_angular_speed=float(np.linalg.norm(twist[:, 3:], axis=1).max()),
+        max_linear_acc=float(np.linalg.norm(acc[:, :3], axis=1).max()),
+        max_angular_acc=float(np.linalg.norm(acc[:, 3:], axis=1).max()),
+        rest_drift_m=rest_drift(log),
+        faults=faults,
+        final_state=State(int(log.state[-1])).name,
+        cycle_time_us=CycleTime(median=float(np.median(us)),
+                                p99=float(np.percentile(us, 99))),
+    )

@@ -1,0 +1,143 @@
+"""A guiding session on the simulated robot: simulator + scripted operator + estimator +
+controller, wired together and run by :func:`~leadthrough.session.loop.run_session`.
+
+The parameters come from calibration (a params file), never from the simulator's truth: the
+simulated robot is a different, richer plant than the identified model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from leadthrough.control.guiding import GuidingConfig, GuidingController
+from leadthrough.control.interpolation import HermiteInterpolator
+from leadthrough.drivers.sim_driver import Fault, SimDriver
+from leadthrough.errors import ControlError, check_fields
+from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
+from leadthrough.identification.params_file import ParamsFile
+from leadthrough.robot.description import Robot
+from leadthrough.session.loop import LoopResult, run_session
+from leadthrough.session.metrics import SessionSummary, summarize
+from leadthrough.sim.operator_scripts import make_operator
+from leadthrough.sim.robot import SimConfig, SimRobot
+
+__all__ = ["SimSession", "SimSessionConfig", "guide_start_pose", "run_sim_session"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SimSessionConfig:
+    """A simulated guiding session.
+
+    Attributes:
+        operator: Operator script name (``rest``, ``push-x``, ``diagonal``, ``random``,
+            ``seam``).
+        controller: ``"virtual-friction"`` (the paper) or ``"velocity"`` ([14]).
+        duration_s: Session length [s]; None: the script's own length.
+        seed: Simulated robot instance and the operator's random pushes.
+        run: Recording number on that robot (independent sensor noise).
+        q0: Start pose [rad], shape (n,); None: :func:`guide_start_pose`.
+        estimator: Estimator settings (``frame`` must be ``"base"``).
+        guiding: Controller settings.
+        paced: Run in real time instead of as fast as possible.
+        faults: Feedback faults injected by the simulated driver (safety tests).
+    """
+
+    operator: str = "push-x"
+    controller: str = "virtual-friction"
+    duration_s: float | None = None
+    seed: int = 1
+    run: int = 500
+    q0: tuple[float, ...] | None = None
+    estimator: EstimatorConfig = field(
+        default_factory=lambda: EstimatorConfig(axes="force", tare_s=0.5))
+    guiding: GuidingConfig = field(default_factory=GuidingConfig)
+    paced: bool = False
+    faults: tuple[Fault, ...] = ()
+
+    def __post_init__(self) -> None:
+        check_fields("session", self, [
+            ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600,
+             "0 < duration <= 3600 s"),
+            ("seed", isinstance(self.seed, int) and self.seed >= 0, "an integer >= 0"),
+        ], ControlError)
+
+
+@dataclass(frozen=True)
+class SimSession:
+    """A finished simulated session.
+
+    Attributes:
+        result: The recording and compute times.
+        summary: Speeds, accelerations, rest drift, faults, cycle times.
+        p1_base: The operator's target P1 [m] (``seam`` only), shape (3,), or None.
+        p2_base: The operator's target P2 [m] (``seam`` only), shape (3,), or None.
+    """
+
+    result: LoopResult
+    summary: SessionSummary
+    p1_base: Array | None = None
+    p2_base: Array | None = None
+
+
+def guide_start_pose(robot: Robot) -> Array:
+    """A comfortable, non-singular start pose for a 6R arm: shoulder and elbow bent by 0.3 rad,
+    wrist by 0.8 rad from the neutral pose (clipped into the limits) [rad], shape (n,)."""
+    q = robot.neutral()
+    if robot.n >= 5:
+        q[1] -= 0.3
+        q[2] += 0.3
+        q[4] -= 0.8
+    return np.clip(q, robot.lower_limits + 0.05, robot.upper_limits - 0.05)
+
+
+def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) -> SimSession:
+    """Run one guiding session on the simulated robot.
+
+    Args:
+        robot: The robot (the simulator plays it with seed-drawn "true" parameters).
+        params: Identified parameters (from calibration) for the estimator and eq. 36.
+        config: Session settings.
+
+    Returns:
+        The session and its summary.
+
+    Raises:
+        ControlError, SimulationError: Invalid settings (before anything runs).
+    """
+    q0 = guide_start_pose(robot) if config.q0 is None else np.asarray(config.q0, dtype=float)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q0)
+    tcp0 = data.oMf[robot.tcp_frame_id].translation.copy()
+    operator = make_operator(config.operator, seed=config.seed, tcp_start_base=tcp0)
+    duration = operator.duration_s if config.duration_s is None else config.duration_s
+    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run), q0=q0, operator=operator)
+    driver = SimDriver(sim)
+    for fault in config.faults:
+        driver.inject(fault)
+    est_cfg = replace(config.estimator, dt=driver.dt, frame="base")
+    estimator = ExternalForceEstimator(robot, params.params, params.noise_mean, est_cfg,
+                                       noise_std=params.noise_std)
+    guiding = replace(config.guiding, controller=config.controller)
+    controller = GuidingController(robot, guiding, params.noise_mean, params.noise_std)
+    interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / driver.dt))
+    settings: dict[str, object] = {
+        "operator": config.operator, "controller": config.controller, "seed": config.seed,
+        "run": config.run, "duration_s": duration, "params_method": params.method,
+        "estimator": {"method": est_cfg.method, "axes": est_cfg.axes,
+                      "output_cutoff_hz": est_cfg.output_cutoff_hz, "tare_s": est_cfg.tare_s},
+        "friction_mode": guiding.friction_mode,
+    }
+    result = run_session(driver, estimator, controller, interpolator, duration,
+                         marks=operator.marks, applied_wrench=lambda: sim.applied_wrench,
+                         paced=config.paced, settings=settings)
+    p1 = getattr(operator, "p1_base", None)
+    p2 = getattr(operator, "p2_base", None)
+    return SimSession(result=result, summary=summarize(result, guiding.dt),
+                      p1_base=None if p1 is None else np.asarray(p1, dtype=float),
+                      p2_base=None if p2 is None else np.asarray(p2, dtype=float))

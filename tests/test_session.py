@@ -1,0 +1,123 @@
+"""The guiding loop on the simulated robot: rest, faults through the whole chain, session files,
+the ``guide`` CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leadthrough.cli import main
+from leadthrough.control.safety import State
+from leadthrough.drivers.sim_driver import Fault, FaultKind
+from leadthrough.dynamics import nominal_drive_parameters
+from leadthrough.errors import DataError
+from leadthrough.identification.metrics import ResidualStats
+from leadthrough.identification.params_file import ParamsFile, load_params, save_params
+from leadthrough.robot import Robot
+from leadthrough.session.record import load_session, save_session
+from leadthrough.session.sim_session import SimSessionConfig, run_sim_session
+
+LIMIT_ACC = 0.4  # m/s², Table IV
+
+
+@pytest.fixture(scope="module")
+def nominal_params(er20: Robot) -> ParamsFile:
+    """Nominal (CAD) parameters with the noise level of a calibration: enough to run the loop.
+
+    The loop's contract (zero motion at rest, faults, recording) must hold for any parameters;
+    the accuracy of calibrated parameters is covered by the benchmarks.
+    """
+    n = er20.n
+    return ParamsFile(robot="er20", method="nominal", params=nominal_drive_parameters(er20),
+                      noise_mean=np.zeros(n), noise_std=np.full(n, 1.0), J=0.0)
+
+
+def test_rest_session_commands_exactly_zero(er20: Robot, nominal_params: ParamsFile) -> None:
+    """The paper's claim, on the closed loop: nobody pushes, the commands never change."""
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(operator="rest", duration_s=4.0))
+    log = s.result.log
+    assert np.all(log.twist_cmd_base == 0.0)
+    assert np.all(log.qd_cmd == 0.0)
+    assert np.all(log.q_cmd == log.q_cmd[0])
+    assert s.summary.rest_drift_m == 0.0
+    assert s.summary.faults == []
+    assert State(int(log.state[-1])) is State.GUIDING  # it was guiding, not idle
+
+
+@pytest.mark.parametrize("kind", [FaultKind.STALE, FaultKind.NAN_CURRENT, FaultKind.Q_OFFSET])
+def test_injected_feedback_fault_stops_the_push_and_latches(er20: Robot,
+                                                            nominal_params: ParamsFile,
+                                                            kind: FaultKind) -> None:
+    fault = Fault(kind, t_start=3.0, offset=0.2)
+    s = run_sim_session(er20, nominal_params,
+                        SimSessionConfig(operator="push-x", duration_s=5.5, faults=(fault,)))
+    log = s.result.log
+    state = log.state
+    first = int(np.argmax(state == int(State.FAULT)))
+    assert first > 0 and log.time[first] >= 3.0
+    assert np.all(state[first:] == int(State.FAULT))  # latched
+    assert s.summary.faults  # reported with its cause
+    v = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    assert v[-1] == 0.0
+    cycles = log.twist_cmd_base[::10, :3]
+    acc = np.linalg.norm(np.diff(cycles, axis=0), axis=1) / 0.01
+    assert acc.max() <= LIMIT_ACC + 1e-9
+    assert np.all(np.abs(np.diff(log.q_cmd, axis=0)) < 1e-3)  # no position jump at 1 ms
+
+
+def test_session_file_round_trip(er20: Robot, nominal_params: ParamsFile,
+                                 tmp_path: Path) -> None:
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(operator="diagonal",
+                                                               duration_s=1.5))
+    path = save_session(s.result.log, tmp_path / "s.parquet")
+    back = load_session(path)
+    log = s.result.log
+    assert back.robot == "er20" and back.n == 6
+    np.testing.assert_array_equal(back.q, log.q)
+    np.testing.assert_array_equal(back.twist_cmd_base, log.twist_cmd_base)
+    np.testing.assert_array_equal(back.state, log.state)
+    assert back.wrench_applied_base is not None
+    assert [m.label for m in back.marks] == ["P1"]  # P2 comes after 1.5 s
+    assert back.events == log.events
+    assert back.settings["operator"] == "diagonal"
+
+
+def test_corrupt_or_foreign_session_files_are_clear_errors(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.parquet"
+    bad.write_bytes(b"not parquet at all")
+    with pytest.raises(DataError, match=r"bad\.parquet"):
+        load_session(bad)
+    with pytest.raises(DataError, match="file not found"):
+        load_session(tmp_path / "missing.parquet")
+
+
+def test_guide_cli(er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
+                   capsys: pytest.CaptureFixture[str]) -> None:
+    params = tmp_path / "params.toml"
+    n = er20.n
+    stats = ResidualStats(mean=np.zeros(n), std=np.ones(n), std_pct_max=np.ones(n),
+                          rms=np.ones(n), rel_error_pct=1.0, J=float(n), k_omega=1.0,
+                          samples=np.full(n, 100))
+    save_params(params, er20, "nominal", nominal_params.params, stats)
+    assert load_params(params, er20).method == "nominal"
+    out = tmp_path / "s.parquet"
+    code = main(["guide", "--params", str(params), "--operator", "rest", "--duration", "2",
+                 "-o", str(out), "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert {"max_linear_speed", "max_angular_speed", "max_linear_acc", "rest_drift_m",
+            "faults", "cycle_time_us"} <= summary.keys()
+    assert summary["rest_drift_m"] == 0.0 and summary["max_linear_speed"] == 0.0
+    assert set(summary["cycle_time_us"]) == {"median", "p99"}
+    assert out.is_file()
+    # bad input: one line, exit 2, nothing written
+    missing = tmp_path / "nowhere" / "s.parquet"
+    assert main(["guide", "--params", str(params), "-o", str(missing)]) == 2
+    assert main(["guide", "--params", str(tmp_path / "none.toml"), "-o",
+                 str(tmp_path / "x.parquet")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("leadthrough: error:") for line in err)
+    assert not (tmp_path / "x.parquet").exists()
