@@ -318,8 +318,8 @@ class ExternalForceEstimator:
         C = pin.computeCoriolisMatrix(m, d, q, qd)
         g = pin.computeGeneralizedGravity(m, d, q)
         kernels.momentum_step(M, mdl.rotor, C, g, qd, qd_friction, self._tau_j,
-                              mdl.friction_rows, mdl.stribeck, mdl.offset, self.config.dt, self._k_obs,
-                              self._samples == 0, self._p0, self._integral, self._r,
+                              mdl.friction_rows, mdl.stribeck, mdl.offset, self.config.dt,
+                              self._k_obs, self._samples == 0, self._p0, self._integral, self._r,
                               self._work, self._noise_mean, tau_ext)
 
     def _wrench(self, q: Array, out: EstimatorOutput) -> None:

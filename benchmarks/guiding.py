@@ -1,0 +1,123 @@
+"""Force following on the simulated er20 (issue 6): rest, push +x (Fig. 4), diagonal and seam
+(Fig. 5), and the full cycle time. Parameters come from calibration (consistent method, 60 s,
+seed 1), never from the simulator's truth.
+
+    python benchmarks/guiding.py [--poses 20] [--rest-seconds 10] [--out benchmarks/out]
+
+1. Rest: no force, ``--poses`` random poses × ``--rest-seconds``, both controllers: peak
+   commanded speed and rest drift (virtual friction: exactly 0; the velocity baseline drifts).
+2. Push +x with 40 N for 3 s (the ``push-x`` script), both controllers: peak speed along x,
+   off-axis / main-axis speed, overshoot of the 0.2 m/s cap, speed at the end; Fig. 4 PNG.
+3. Diagonal and seam sessions: Fig. 5 PNG.
+4. Cycle time of the loop's controller periods (estimator + controller + IK + limits +
+   interpolation), median and p99, and as a multiple of one ``pin.rnea`` call.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from leadthrough.excitation.design import ExcitationConfig
+from leadthrough.identification.api import identify
+from leadthrough.identification.params_file import ParamsFile
+from leadthrough.robot import load_robot
+from leadthrough.session.plots import plot_force_velocity, plot_path_3d
+from leadthrough.session.sim_session import SimSessionConfig, run_sim_session
+from leadthrough.sim.calibration_set import record_calibration_set
+
+CONTROLLERS = ("virtual-friction", "velocity")
+
+
+def rnea_time_us(robot_name: str = "er20", repeats: int = 20000) -> float:
+    """Median time of one pin.rnea call [µs]."""
+    robot = load_robot(robot_name)
+    m, d = robot.model, robot.model.createData()
+    q, v, a = robot.neutral(), np.full(robot.n, 0.1), np.full(robot.n, 0.2)
+    ts = np.empty(repeats)
+    for i in range(repeats):
+        t0 = time.perf_counter()
+        pin.rnea(m, d, q, v, a)
+        ts[i] = time.perf_counter() - t0
+    return float(np.median(ts) * 1e6)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--poses", type=int, default=20)
+    parser.add_argument("--rest-seconds", type=float, default=10.0)
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/out"))
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    robot = load_robot("er20")
+    cal = record_calibration_set(robot, seed=1, duration=60.0,
+                                 excitation_config=ExcitationConfig(starts=4))
+    res = identify(cal.identification.measured, robot, "consistent")
+    pf = ParamsFile(robot="er20", method="consistent", params=res.params,
+                    noise_mean=res.stats.mean, noise_std=res.stats.std, J=res.J)
+
+    print(f"\n1. Rest, no force: {args.poses} random poses × {args.rest_seconds:g} s")
+    rng = np.random.default_rng(0)
+    poses = [rng.uniform(0.5 * robot.lower_limits, 0.5 * robot.upper_limits)
+             for _ in range(args.poses)]
+    for ctl in CONTROLLERS:
+        vmax, drift, nonzero, faults = 0.0, 0.0, 0, 0
+        for k, q0 in enumerate(poses):
+            s = run_sim_session(robot, pf, SimSessionConfig(
+                operator="rest", controller=ctl, duration_s=args.rest_seconds,
+                q0=tuple(q0), run=600 + k))
+            vmax = max(vmax, s.summary.max_linear_speed, s.summary.max_angular_speed)
+            drift = max(drift, s.summary.rest_drift_m or 0.0)
+            nonzero += int(np.any(s.result.log.twist_cmd_base != 0.0))
+            faults += len(s.summary.faults)
+        print(f"  {ctl:<17} peak commanded speed {vmax:.4f} (m/s | rad/s), sessions with "
+              f"any nonzero command {nonzero}/{args.poses}, max rest drift "
+              f"{1000 * drift:.2f} mm, faults {faults}")
+
+    print("\n2. Push +x, 40 N from 1 s to 4 s")
+    logs = {}
+    for ctl in CONTROLLERS:
+        s = run_sim_session(robot, pf, SimSessionConfig(operator="push-x", controller=ctl))
+        log = logs[ctl] = s.result.log
+        v = log.twist_cmd_base[:, :3]
+        main_peak = float(np.abs(v[:, 0]).max())
+        off = float(np.linalg.norm(v[:, 1:], axis=1).max())
+        end = float(np.linalg.norm(v[-1]))
+        ratio = off / max(main_peak, 1e-12)
+        over = max(0.0, main_peak - 0.2)
+        print(f"  {ctl:<17} peak vx {main_peak:.3f} m/s, off-axis/main {ratio:.3f}, "
+              f"overshoot of 0.2 m/s {over:.3f}, |v| at end {end:.3f} m/s, "
+              f"faults {s.summary.faults or 'none'}")
+        err = log.wrench_base[:, :3] - log.wrench_applied_base[:, :3]  # type: ignore[index]
+        print(f"  {'':<17} force estimate error RMS {np.sqrt(np.mean(np.sum(err**2, 1))):.1f} N")
+    print("  ->", plot_force_velocity({"virtual friction": logs["virtual-friction"],
+                                      "velocity [14]": logs["velocity"]},
+                                     args.out / "fig4_push_x.png"))
+
+    print("\n3. Diagonal and seam sessions (virtual friction)")
+    paths, targets, cycle = {}, {}, []
+    for op in ("diagonal", "seam"):
+        s = run_sim_session(robot, pf, SimSessionConfig(operator=op))
+        paths[op] = s.result.log
+        cycle.append(s.result.cycle_us)
+        if s.p1_base is not None and s.p2_base is not None:
+            targets.update({"P1": s.p1_base, "P2": s.p2_base})
+        print(f"  {op:<9} max speed {s.summary.max_linear_speed:.3f} m/s, faults "
+              f"{s.summary.faults or 'none'}")
+    print("  ->", plot_path_3d(paths, args.out / "fig5_paths.png", targets=targets))
+
+    us = np.concatenate(cycle)
+    r = rnea_time_us()
+    print(f"\n4. Cycle time (estimator + controller + IK + limits + interpolation): median "
+          f"{np.median(us):.1f} µs, p99 {np.percentile(us, 99):.1f} µs "
+          f"({np.median(us) / r:.0f}× / {np.percentile(us, 99) / r:.0f}× one pin.rnea of "
+          f"{r:.2f} µs); goal p99 <= 50 µs")
+
+
+if __name__ == "__main__":
+    main()
