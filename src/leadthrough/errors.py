@@ -17,6 +17,7 @@ __all__ = [
     "LeadthroughError",
     "RobotFileError",
     "SimulationError",
+    "TeachError",
     "UnknownRobotError",
     "check_fields",
 ]
@@ -77,6 +78,11 @@ class DataError(LeadthroughError):
 
 class SimulationError(LeadthroughError):
     """The simulated robot was configured with invalid settings."""
+
+
+class TeachError(LeadthroughError):
+    """A taught path cannot be made or exported: missing or ambiguous marks, a degenerate welding
+    line, or a waypoint outside the joint position or speed limits at the programmed speed."""
 
 
 class ControlError(LeadthroughError):

@@ -11,7 +11,14 @@ import sys
 from collections.abc import Sequence
 
 from leadthrough import __version__
-from leadthrough.cli import calibration_cmds, demo_cmd, payload_cmd, robots_cmd
+from leadthrough.cli import (
+    calibration_cmds,
+    demo_cmd,
+    guide_cmd,
+    payload_cmd,
+    robots_cmd,
+    teach_cmd,
+)
 from leadthrough.errors import LeadthroughError
 
 __all__ = ["build_parser", "main"]
@@ -25,6 +32,8 @@ _EPILOG = """examples:
   leadthrough identify rec.parquet --robot er20 --method proposed -o params.toml
   leadthrough validate params.toml heldout.parquet --robot er20
   leadthrough payload loaded.parquet --robot er20 --params params.toml
+  leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
+  leadthrough teach seam.parquet -o seam.json --csv seam.csv
 """
 
 
@@ -51,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     robots_cmd.register(sub)
     calibration_cmds.register(sub)
     payload_cmd.register(sub)
+    guide_cmd.register(sub)
+    teach_cmd.register(sub)
     demo_cmd.register(sub)
     return parser
 
