@@ -23,10 +23,23 @@ def test_demo_quick_writes_summary(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main(["demo", "--quick", "--out", str(tmp_path), "--json"]) == 0
     printed = json.loads(capsys.readouterr().out)
     saved = json.loads((tmp_path / "summary.json").read_text())
-    assert printed["base_parameters"] == saved["base_parameters"] == 36
-    assert saved["regressor_rel_error"]["rnea"] < 1e-9
-    assert saved["hold"]["max_joint_error_rad"] < 1e-4
-    assert max(saved["push_50N_x"]["current_error_sigma"]) < 0.5
+    checks = saved["checks"]
+    assert printed["checks"]["base_parameters"] == checks["base_parameters"] == 36
+    assert checks["regressor_rel_error"]["rnea"] < 1e-9
+    assert checks["hold"]["max_joint_error_rad"] < 1e-4
+    assert max(checks["push_50N_x"]["current_error_sigma"]) < 0.5
+    # every step left its result: Table II/III, sessions, the taught path, the report
+    assert {"ols-cv", "proposed", "consistent"} <= set(saved["table2"]["held-out"])
+    assert len(saved["table3"]["consistent"]) == 4
+    assert all(abs(r["error_pct"]) < 10 for r in saved["table3"]["consistent"])
+    rest = saved["guiding"]["rest/virtual-friction"]
+    assert rest["max_linear_speed"] == 0.0 and rest["rest_drift_m"] == 0.0
+    assert saved["guiding"]["rest/velocity"]["rest_drift_m"] > 0.0  # the baseline drifts
+    for name in ("report.html", "report.md", "path.json", "path.csv", "fig3.png", "fig4.png",
+                 "fig5.png", "fig6.png", "params_consistent.toml",
+                 "session_seam_virtual-friction.parquet"):
+        assert (tmp_path / name).is_file(), name
+    assert saved["teach"]["waypoints"] >= 2
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp files left
 
 

@@ -1,0 +1,118 @@
+"""Demo steps after calibration: the payload test (Table III) and the guiding sessions (Fig. 4,
+Fig. 5), on the simulated robot with calibrated parameters."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.estimation.payload import estimate_payload
+from leadthrough.identification.params_file import ParamsFile
+from leadthrough.robot.description import Robot
+from leadthrough.session.plots import plot_force_velocity, plot_path_3d
+from leadthrough.session.record import SessionLog, save_session
+from leadthrough.session.sim_session import SimSession, SimSessionConfig, run_sim_session
+from leadthrough.sim.calibration_set import CalibrationSet, record_excitation
+from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.robot import SimConfig
+
+__all__ = ["PAPER_WEIGHTS_N", "PAPER_WORST", "GuidingDemo", "PayloadRow", "payload_table",
+           "run_guiding_demo"]
+
+Array = NDArray[np.float64]
+
+#: The paper's Table III payload weights [N].
+PAPER_WEIGHTS_N = (71.54, 101.92, 120.54, 154.84)
+#: The paper's worst Table III error: 7.84 N, 5.6 %.
+PAPER_WORST = "up to 7.84 N, 5.6 %"
+
+
+@dataclass(frozen=True)
+class PayloadRow:
+    """One row of Table III.
+
+    Attributes:
+        true_n: Payload weight [N].
+        estimated_n: Estimated weight [N].
+        error_pct: Relative error [%].
+    """
+
+    true_n: float
+    estimated_n: float
+    error_pct: float
+
+
+def payload_table(robot: Robot, cal: CalibrationSet, params: ParamsFile, seed: int,
+                  seconds: float) -> list[PayloadRow]:
+    """Table III: each payload on its own run of the held-out trajectory, weight from motion.
+
+    Args:
+        robot: The robot.
+        cal: The calibration set (its held-out trajectory is reused with the payloads).
+        params: Parameters identified on the unloaded robot.
+        seed: Simulated robot instance.
+        seconds: Length of each payload run [s].
+    """
+    g = float(np.linalg.norm(robot.model.gravity.linear))
+    rows = []
+    for k, weight in enumerate(PAPER_WEIGHTS_N):
+        rec = record_excitation(robot, cal.held_out_excitation, seconds,
+                                SimConfig(seed=seed, run=10 + k),
+                                payload=Payload(weight / g, (0.0, 0.0, 0.1))).measured
+        est = estimate_payload(rec, robot, params.params, "motion")
+        rows.append(PayloadRow(true_n=weight, estimated_n=est.weight_n,
+                               error_pct=100.0 * (est.weight_n - weight) / weight))
+    return rows
+
+
+@dataclass(frozen=True)
+class GuidingDemo:
+    """The demo's guiding sessions.
+
+    Attributes:
+        sessions: Name (``"<operator>/<controller>"``) → session.
+        fig4: Fig. 4 PNG.
+        fig5: Fig. 5 PNG.
+        seam_path: The seam session's Parquet file (input of the teach-in).
+    """
+
+    sessions: dict[str, SimSession]
+    fig4: Path
+    fig5: Path
+    seam_path: Path
+
+
+def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
+                     say: Callable[[str], None]) -> GuidingDemo:
+    """Rest and push +x with both controllers, diagonal and seam with virtual friction.
+
+    Writes each session to ``out/session_<operator>_<controller>.parquet`` and Fig. 4 / Fig. 5.
+    """
+    sessions: dict[str, SimSession] = {}
+    plan = [(op, ctl) for op in ("rest", "push-x") for ctl in ("virtual-friction", "velocity")]
+    plan += [("diagonal", "virtual-friction"), ("seam", "virtual-friction")]
+    for op, ctl in plan:
+        s = run_sim_session(robot, params, SimSessionConfig(operator=op, controller=ctl,
+                                                            seed=seed))
+        sessions[f"{op}/{ctl}"] = s
+        save_session(s.result.log, out / f"session_{op}_{ctl}.parquet")
+        sm = s.summary
+        drift = "" if sm.rest_drift_m is None else f", rest drift {1000 * sm.rest_drift_m:.2f} mm"
+        say(f"      {op:<8} {ctl:<16} max {sm.max_linear_speed:.3f} m/s{drift}, "
+            f"faults {', '.join(sm.faults) or 'none'}")
+    logs: dict[str, SessionLog] = {k: v.result.log for k, v in sessions.items()}
+    fig4 = plot_force_velocity({"virtual friction": logs["push-x/virtual-friction"],
+                                "velocity [14]": logs["push-x/velocity"]}, out / "fig4.png")
+    seam = sessions["seam/virtual-friction"]
+    targets = {}
+    if seam.p1_base is not None and seam.p2_base is not None:
+        targets = {"P1": seam.p1_base, "P2": seam.p2_base}
+    fig5 = plot_path_3d({"diagonal": logs["diagonal/virtual-friction"],
+                         "seam": logs["seam/virtual-friction"]}, out / "fig5.png",
+                        targets=targets)
+    return GuidingDemo(sessions=sessions, fig4=fig4, fig5=fig5,
+                       seam_path=out / "session_seam_virtual-friction.parquet")

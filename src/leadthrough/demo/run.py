@@ -1,0 +1,197 @@
+"""The demo pipeline on the built-in simulated robot (``leadthrough demo``).
+
+Steps, each printed as it runs:
+
+1. design the excitation trajectory (after checking the dynamic model and the simulator);
+2. record it (and a held-out trajectory) at 1 kHz;
+3. calibrate with all methods: Table II and Fig. 3;
+4. the payload test: Table III;
+5. guiding sessions with both controllers: Fig. 4, Fig. 5;
+6. a welding-seam session taught and exported: Fig. 6, ``path.json`` / ``path.csv``.
+
+Everything lands in one report folder with ``report.html`` (self-contained), ``report.md``,
+``summary.json``, the params file, the recordings, the sessions and the exported path.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leadthrough.data.io import save_recording
+from leadthrough.data.preprocess import preprocess
+from leadthrough.demo.guiding_steps import GuidingDemo, PayloadRow, payload_table, run_guiding_demo
+from leadthrough.errors import LeadthroughError
+from leadthrough.excitation.design import ExcitationConfig
+from leadthrough.identification.api import METHODS, IdentifyConfig
+from leadthrough.identification.comparison import format_table2, ratio_summary
+from leadthrough.identification.params_file import ParamsFile, save_params
+from leadthrough.identification.plots import plot_torque_fit
+from leadthrough.identification.proposed import ProposedConfig
+from leadthrough.robot.description import Robot
+from leadthrough.session.record import load_session
+from leadthrough.sim.calibration_set import compare_on_calibration_set, record_calibration_set
+from leadthrough.sim.checks import check_hold, check_push, check_regressor
+from leadthrough.sim.robot import SimConfig
+from leadthrough.teach import tcp_path, teach_session, write_program_csv, write_program_json
+from leadthrough.teach.plots import plot_taught_path
+from leadthrough.teach.program import TaughtProgram
+
+__all__ = ["DemoResult", "run_demo"]
+
+DEMO_POSE = (0.3, -0.6, 0.4, 0.5, 0.8, 0.2)
+#: Method whose parameters drive estimation and guiding (lowest held-out J on er20).
+GUIDING_METHOD = "consistent"
+
+
+@dataclass
+class DemoResult:
+    """Everything the demo measured (the report and summary are built from it).
+
+    Attributes:
+        robot: Robot name.
+        seed: Simulated robot instance.
+        quick: Shorter recordings and searches.
+        checks: Model and simulator checks (JSON-ready).
+        table2: Formatted Table II (Markdown).
+        table2_ratios: J ratios per data set.
+        runtimes_s: Identification runtime per method [s].
+        condition_number: Excitation condition number.
+        payload: Table III rows per method.
+        guiding: The guiding sessions.
+        program: The taught seam, or None if the teach-in failed (``teach_error`` says why).
+        teach_error: Why there is no program.
+        seam_target_errors_mm: |P1 − target P1|, |P2 − target P2| [mm].
+        files: Output files by role.
+        total_s: Wall time [s].
+    """
+
+    robot: str
+    seed: int
+    quick: bool
+    checks: dict[str, Any] = field(default_factory=dict)
+    table2: str = ""
+    table2_ratios: dict[str, dict[str, float]] = field(default_factory=dict)
+    runtimes_s: dict[str, float] = field(default_factory=dict)
+    condition_number: float = 0.0
+    payload: dict[str, list[PayloadRow]] = field(default_factory=dict)
+    guiding: GuidingDemo | None = None
+    program: TaughtProgram | None = None
+    teach_error: str = ""
+    seam_target_errors_mm: tuple[float, float] | None = None
+    files: dict[str, Path] = field(default_factory=dict)
+    total_s: float = 0.0
+
+
+def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
+             say: Callable[[str], None]) -> DemoResult:
+    """Run all steps, writing into ``out`` (which must exist)."""
+    t_start = time.perf_counter()
+    res = DemoResult(robot=robot.name, seed=seed, quick=quick)
+    q0 = np.clip(np.resize(np.array(DEMO_POSE), robot.n), robot.lower_limits, robot.upper_limits)
+
+    say("[1/6] excitation design (after checking the model and the simulator) ...")
+    reg = check_regressor(robot, samples=200 if quick else 1000, seed=seed)
+    config = SimConfig(seed=seed)
+    hold = check_hold(robot, config, q0)
+    push = check_push(robot, config, q0, np.array([50.0, 0, 0, 0, 0, 0]))
+    say(f"      base parameters {reg.base_parameters} of {10 * robot.n}; K·φ vs pin.rnea "
+        f"{reg.rel_error_rnea:.1e}, vs MuJoCo {reg.rel_error_mujoco:.1e}; hold "
+        f"{1e3 * hold.max_joint_error.max():.1e} mrad, currents vs gravity "
+        f"{hold.error_in_sigma.max():.2f} σ, 50 N push {push.error_in_sigma.max():.2f} σ")
+    res.checks = {
+        "base_parameters": reg.base_parameters,
+        "regressor_rel_error": {"rnea": reg.rel_error_rnea, "mujoco": reg.rel_error_mujoco,
+                                "base": reg.rel_error_base},
+        "hold": {"max_joint_error_rad": float(hold.max_joint_error.max()),
+                 "current_error_sigma": hold.error_in_sigma.tolist()},
+        "push_50N_x": {"current_error_sigma": push.error_in_sigma.tolist()},
+    }
+    duration = 20.0 if quick else 60.0
+    exc_cfg = ExcitationConfig(starts=1 if quick else 2, seed=0,
+                               max_iterations=60 if quick else 100)
+    say("[2/6] recordings at 1 kHz (identification and held-out trajectories) ...")
+    cal = record_calibration_set(robot, seed=seed, duration=duration, excitation_config=exc_cfg,
+                                 progress=lambda s: say("      " + s))
+    res.condition_number = cal.excitation.condition_number
+    res.files["identification recording"] = save_recording(cal.identification.measured,
+                                                           out / "identification.parquet")
+    res.files["held-out recording"] = save_recording(cal.held_out.measured,
+                                                     out / "held_out.parquet")
+
+    say("[3/6] calibration: " + ", ".join(METHODS) + " ...")
+    cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
+                                                 polish_iterations=150 if quick else 300))
+    comparison = compare_on_calibration_set(robot, cal, METHODS, cfg,
+                                            progress=lambda s: say("      " + s))
+    comp = comparison.comparison
+    res.table2 = format_table2(comp, comparison.floors)
+    res.table2_ratios = ratio_summary(comp, comparison.floors)
+    res.runtimes_s = {m: comp.results[m].runtime_s for m in METHODS}
+    say("\nTable II (mean [N·m], std/max torque [%], J [N·m]):\n" + res.table2 + "\n")
+    params: dict[str, ParamsFile] = {}
+    for m in ("proposed", GUIDING_METHOD):
+        r = comp.results[m]
+        path = save_params(out / f"params_{m}.toml", robot, m, r.params, r.stats)
+        res.files[f"params ({m})"] = path
+        params[m] = ParamsFile(robot=robot.name, method=m, params=r.params,
+                               noise_mean=r.stats.mean, noise_std=r.stats.std, J=r.J, path=path)
+    held = preprocess(cal.held_out.measured, robot, cfg.preprocess)
+    res.files["fig3"] = plot_torque_fit(
+        out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},
+        title=f"{robot.name} (simulated), held-out trajectory")
+
+    say("[4/6] payload test (Table III): weight from motion with the unloaded model ...")
+    for m, pf in params.items():
+        res.payload[m] = payload_table(robot, cal, pf, seed, 20.0 if quick else 60.0)
+    for k, row in enumerate(res.payload[GUIDING_METHOD]):
+        cells = ", ".join(f"{m} {rows[k].estimated_n:7.2f} N ({rows[k].error_pct:+.2f} %)"
+                          for m, rows in res.payload.items())
+        say(f"      {row.true_n:7.2f} N: {cells}")
+
+    say(f"[5/6] guiding sessions ({GUIDING_METHOD} parameters) ...")
+    res.guiding = run_guiding_demo(robot, params[GUIDING_METHOD], seed, out, say)
+    res.files["fig4"] = res.guiding.fig4
+    res.files["fig5"] = res.guiding.fig5
+
+    say("[6/6] teach-in of the welding-seam session ...")
+    _teach(res, robot, out, say)
+    res.total_s = time.perf_counter() - t_start
+    return res
+
+
+def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None]) -> None:
+    if res.guiding is None:
+        return
+    seam = res.guiding.sessions["seam/virtual-friction"]
+    log = load_session(res.guiding.seam_path)
+    try:
+        program = teach_session(log, robot, tolerance_mm=1.0, speed_m_s=0.1)
+    except LeadthroughError as e:  # a session the teach-in rejects is a result, not a crash
+        res.teach_error = str(e)
+        say(f"      no program: {e}")
+        return
+    res.program = program
+    res.files["path (JSON)"] = write_program_json(program, out / "path.json")
+    res.files["path (CSV)"] = write_program_csv(program, out / "path.csv")
+    targets = {}
+    line = program.welding_line
+    if seam.p1_base is not None and seam.p2_base is not None:
+        targets = {"P1": seam.p1_base, "P2": seam.p2_base}
+        if line is not None:
+            res.seam_target_errors_mm = (
+                1e3 * float(np.linalg.norm(line.p1_base - seam.p1_base)),
+                1e3 * float(np.linalg.norm(line.p2_base - seam.p2_base)))
+    full = tcp_path(log, robot, float(log.time[0]), float(log.time[-1]))
+    res.files["fig6"] = plot_taught_path(full, program, out / "fig6.png", targets)
+    if line is not None:
+        errs = "" if res.seam_target_errors_mm is None else (
+            f"; endpoints vs operator targets {res.seam_target_errors_mm[0]:.1f} / "
+            f"{res.seam_target_errors_mm[1]:.1f} mm")
+        say(f"      welding line {1e3 * line.length_m:.1f} mm, max deviation "
+            f"{line.max_deviation_mm:.2f} mm, {len(program.waypoints)} waypoints{errs}")
