@@ -10,6 +10,7 @@ pose that belongs to each recorded ``q`` is the one the robot actually reached.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -56,7 +57,19 @@ class TcpPath:
         return k - 1 if t - self.time[k - 1] <= self.time[k] - t else k
 
 
-def forward_tcp(robot: Robot, q: Array) -> tuple[Array, Array]:
+class TcpPoses(NamedTuple):
+    """TCP poses in the base frame.
+
+    Attributes:
+        position_base: Positions [m], shape (N, 3).
+        quat_xyzw: Unit quaternions (x, y, z, w) with w ≥ 0, shape (N, 4).
+    """
+
+    position_base: Array
+    quat_xyzw: Array
+
+
+def forward_tcp(robot: Robot, q: Array) -> TcpPoses:
     """TCP poses of joint configurations (Pinocchio forward kinematics).
 
     Args:
@@ -64,8 +77,7 @@ def forward_tcp(robot: Robot, q: Array) -> tuple[Array, Array]:
         q: Joint positions [rad], shape (N, n).
 
     Returns:
-        TCP positions in the base frame [m], shape (N, 3), and orientations as unit quaternions
-        (x, y, z, w) with w ≥ 0, shape (N, 4).
+        The TCP positions and orientations.
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     model, data, fid = robot.model, robot.model.createData(), robot.tcp_frame_id
@@ -77,7 +89,7 @@ def forward_tcp(robot: Robot, q: Array) -> tuple[Array, Array]:
         pos[i] = placement.translation
         quat[i] = pin.Quaternion(placement.rotation).coeffs()
     quat[quat[:, 3] < 0.0] *= -1.0
-    return pos, quat
+    return TcpPoses(pos, quat)
 
 
 def check_session_robot(log: SessionLog, robot: Robot, source: str | None = None) -> None:
