@@ -54,7 +54,8 @@ def plot_force_velocity(sessions: Mapping[str, SessionLog], path: str | Path,
 
 
 def plot_path_3d(sessions: Mapping[str, SessionLog], path: str | Path,
-                 arrows: int = 25, targets: Mapping[str, np.ndarray] | None = None) -> Path:
+                 arrows: int = 15, targets: Mapping[str, np.ndarray] | None = None,
+                 scale_m_per_n: float = 0.0005) -> Path:
     """Fig. 5: commanded TCP path in the base frame, with the applied force as arrows.
 
     Args:
@@ -62,6 +63,7 @@ def plot_path_3d(sessions: Mapping[str, SessionLog], path: str | Path,
         path: Output PNG.
         arrows: Number of force arrows per session (where a force is applied).
         targets: Named points to mark (e.g. the operator's P1 and P2) [m], shape (3,) each.
+        scale_m_per_n: Arrow length per newton [m/N].
 
     Returns:
         The path written.
@@ -81,8 +83,7 @@ def plot_path_3d(sessions: Mapping[str, SessionLog], path: str | Path,
         pushed = np.flatnonzero(np.linalg.norm(force[:, :3], axis=1) > 1.0)
         if pushed.size:
             idx = pushed[np.linspace(0, pushed.size - 1, min(arrows, pushed.size)).astype(int)]
-            scale = 0.002  # m per N
-            f = force[idx, :3] * scale
+            f = force[idx, :3] * scale_m_per_n
             ax.quiver(p[idx, 0], p[idx, 1], p[idx, 2], f[:, 0], f[:, 1], f[:, 2],
                       color="tab:red", lw=0.8, arrow_length_ratio=0.2)
     for name, point in (targets or {}).items():
@@ -92,7 +93,8 @@ def plot_path_3d(sessions: Mapping[str, SessionLog], path: str | Path,
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
     ax.legend(fontsize=8)
-    ax.set_title("TCP path and operator force (red, 2 mm/N) (paper Fig. 5)")
+    ax.set_title(f"TCP path and operator force (red, {1e3 * scale_m_per_n:g} mm/N) "
+                 "(paper Fig. 5)")
     fig.tight_layout()
     return _save(fig, path)
 
