@@ -121,3 +121,21 @@ def test_guide_cli(er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("leadthrough: error:") for line in err)
     assert not (tmp_path / "x.parquet").exists()
+
+
+def test_guide_rejects_params_of_another_robot(er20: Robot, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    from leadthrough.robot import load_robot
+
+    ur5 = load_robot("ur5")
+    n = ur5.n
+    stats = ResidualStats(mean=np.zeros(n), std=np.ones(n), std_pct_max=np.ones(n),
+                          rms=np.ones(n), rel_error_pct=1.0, J=float(n), k_omega=1.0,
+                          samples=np.full(n, 100))
+    params = save_params(tmp_path / "ur5.toml", ur5, "nominal", nominal_drive_parameters(ur5),
+                         stats)
+    out = tmp_path / "s.parquet"
+    assert main(["guide", "--robot", "er20", "--params", str(params), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ur5" in err[0] and "Traceback" not in err[0]
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
