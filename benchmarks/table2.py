@@ -1,7 +1,7 @@
 """Table II: the three calibration methods compared, on the simulated ER20-class robot and on
 the real UR10e logs (../shared/data/ur10e), with the simulator's noise floor and Fig. 3.
 
-    python benchmarks/table2.py [--out table2-results] [--seed 1] [--quick]
+    python benchmarks/table2.py [--out benchmarks/out/table2] [--seed 1] [--quick]
 
 Prints the tables and writes table2.md, table2.json and fig3_*.png into --out.
 """
@@ -104,7 +104,7 @@ def real_ur10e(out: Path) -> dict | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=Path("table2-results"))
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/out/table2"))
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--quick", action="store_true")
     args = parser.parse_args()
