@@ -7,6 +7,7 @@ user what to fix. Backend errors (Pinocchio, MuJoCo, TOML parsing) are wrapped w
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ __all__ = [
     "TeachError",
     "UnknownRobotError",
     "check_fields",
+    "check_period",
 ]
 
 
@@ -108,6 +110,22 @@ def check_fields(prefix: str, obj: Any, checks: list[tuple[str, bool, str]],
         if not ok:
             raise cls("out of range", field=f"{prefix}.{name}", value=getattr(obj, name),
                       expected=expected)
+
+
+def check_period(name: str, value: float, error: type[LeadthroughError] | None = None) -> None:
+    """Raise unless a time step is finite and positive.
+
+    Args:
+        name: Field name in the message (e.g. ``"dt"``).
+        value: The time step [s].
+        error: Exception class to raise (default :class:`DataError`).
+
+    Raises:
+        LeadthroughError: Naming the field, the value and "finite and > 0 s".
+    """
+    if not (math.isfinite(value) and value > 0):
+        cls = error if error is not None else DataError
+        raise cls("out of range", field=name, value=value, expected="finite and > 0 s")
 
 
 class DataWarning(UserWarning):

@@ -107,9 +107,8 @@ class GuidingController:
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
         self._tool = cfg.frame == "tool"
         self._mask = np.array([1.0 if a else 0.0 for a in cfg.axes_enabled])
-        self._friction = np.asarray(cfg.virtual_friction.friction, dtype=float).copy()
-        self._stop_friction = np.asarray(cfg.virtual_friction.stopping_friction,
-                                         dtype=float).copy()
+        self._friction = np.array(cfg.virtual_friction.friction, dtype=float)
+        self._stop_friction = np.array(cfg.virtual_friction.stopping_friction, dtype=float)
         self._twist = np.zeros(6)
         self._twist_des = np.zeros(6)
         self._twist_new = np.zeros(6)
@@ -238,7 +237,6 @@ class GuidingController:
         scale = sup.speed_scale(mu)
         self._control_wrench(inp.wrench_base, T_fk.rotation)
         twist, new = self._twist, self._twist_new
-        T_new = self._T_cmd
         if sup.state == State.GUIDING:
             if self._auto is not None:
                 ik.jacobian_in_frame(self.config.frame, self._Jc)
@@ -262,7 +260,7 @@ class GuidingController:
             # hold: the setpoint stays bit for bit, the target is the pose of the setpoint
             self._qd_cmd[:] = 0.0
             self._T_cmd = T_fk
-            res.scale, res.residual = 1.0, residual
+            res.scale = 1.0
         else:
             self._T_cmd = T_new
             ik.solve(self._q_cmd, self._qd_cmd, T_new, res)

@@ -30,7 +30,8 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from leadthrough.errors import ControlError, check_fields
+from leadthrough.errors import ControlError, check_fields, check_period
+from leadthrough.estimation.kernels import damping_of
 from leadthrough.robot.description import Robot
 
 __all__ = ["DifferentialIK", "IKConfig", "IKResult", "dls_damping"]
@@ -38,21 +39,9 @@ __all__ = ["DifferentialIK", "IKConfig", "IKResult", "dls_damping"]
 Array = NDArray[np.float64]
 
 
-def dls_damping(manipulability: float, threshold: float, max_damping: float) -> float:
-    """Damping λ of a damped pseudo-inverse, growing as the manipulability drops below μ₀.
-
-    Args:
-        manipulability: μ = √det(J Jᵀ).
-        threshold: μ₀ below which damping starts.
-        max_damping: λ_max, the damping at μ = 0.
-
-    Returns:
-        λ = λ_max·√(1 − (μ/μ₀)²) if μ < μ₀, else 0.
-    """
-    if manipulability >= threshold or threshold <= 0.0:
-        return 0.0
-    r = manipulability / threshold
-    return max_damping * math.sqrt(1.0 - r * r)
+#: Damping λ of a damped pseudo-inverse (λ_max·√(1 − (μ/μ₀)²) below μ₀, else 0): the estimator's
+#: compiled function, shared so that both use one formula.
+dls_damping = damping_of
 
 
 @dataclass(frozen=True)
@@ -121,8 +110,7 @@ class DifferentialIK:
 
     def __init__(self, robot: Robot, config: IKConfig | None = None, dt: float = 0.01) -> None:
         self.config = cfg = config if config is not None else IKConfig()
-        if not (math.isfinite(dt) and dt > 0):
-            raise ControlError("out of range", field="dt", value=dt, expected="finite and > 0 s")
+        check_period("dt", dt, ControlError)
         lo = robot.lower_limits + cfg.joint_limit_margin
         hi = robot.upper_limits - cfg.joint_limit_margin
         if not np.all(lo < hi):

@@ -20,7 +20,6 @@ produce one command per ``update``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Protocol
@@ -28,7 +27,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.errors import ControlError
+from leadthrough.errors import ControlError, check_period
 
 __all__ = [
     "CommandBuffer",
@@ -108,9 +107,7 @@ class HermiteInterpolator:
     """
 
     def __init__(self, n: int, period: float = 0.01, substeps: int = 10) -> None:
-        if not (math.isfinite(period) and period > 0):
-            raise ControlError("out of range", field="period", value=period,
-                               expected="finite and > 0 s")
+        check_period("period", period, ControlError)
         if substeps < 1:
             raise ControlError("out of range", field="substeps", value=substeps,
                                expected=">= 1")

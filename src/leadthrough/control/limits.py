@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.errors import ControlError, check_fields
+from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["CartesianLimits", "TwistLimiter"]
 
@@ -83,8 +83,7 @@ class TwistLimiter:
     """
 
     def __init__(self, limits: CartesianLimits, dt: float) -> None:
-        if not (math.isfinite(dt) and dt > 0):
-            raise ControlError("out of range", field="dt", value=dt, expected="finite and > 0 s")
+        check_period("dt", dt, ControlError)
         self.limits = limits
         self.dt = dt
         self._speed = (limits.max_linear_speed, limits.max_angular_speed)

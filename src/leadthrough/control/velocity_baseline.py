@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.errors import ControlError, check_fields
+from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["VelocityBaseline", "VelocityBaselineConfig"]
 
@@ -63,8 +63,7 @@ class VelocityBaseline:
     """
 
     def __init__(self, config: VelocityBaselineConfig | None = None, dt: float = 0.01) -> None:
-        if not (math.isfinite(dt) and dt > 0):
-            raise ControlError("out of range", field="dt", value=dt, expected="finite and > 0 s")
+        check_period("dt", dt, ControlError)
         self.config = cfg = config if config is not None else VelocityBaselineConfig()
         self.dt = dt
         self._alpha = 1.0 - math.exp(-dt / cfg.time_constant)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.errors import ControlError, check_fields
+from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["VirtualFriction", "VirtualFrictionConfig"]
 
@@ -84,8 +84,7 @@ class VirtualFriction:
     """
 
     def __init__(self, config: VirtualFrictionConfig | None = None, dt: float = 0.01) -> None:
-        if not (math.isfinite(dt) and dt > 0):
-            raise ControlError("out of range", field="dt", value=dt, expected="finite and > 0 s")
+        check_period("dt", dt, ControlError)
         self.config = cfg = config if config is not None else VirtualFrictionConfig()
         self.dt = dt
         self._dt_over_m = dt / np.asarray(cfg.mass, dtype=float)
