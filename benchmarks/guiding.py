@@ -58,8 +58,7 @@ def main() -> None:
     cal = record_calibration_set(robot, seed=1, duration=60.0,
                                  excitation_config=ExcitationConfig(starts=4))
     res = identify(cal.identification.measured, robot, "consistent")
-    pf = ParamsFile(robot="er20", method="consistent", params=res.params,
-                    noise_mean=res.stats.mean, noise_std=res.stats.std, J=res.J)
+    pf = ParamsFile.from_result(res)
 
     print(f"\n1. Rest, no force: {args.poses} random poses × {args.rest_seconds:g} s")
     rng = np.random.default_rng(0)

@@ -14,17 +14,15 @@ import warnings
 from pathlib import Path
 
 from leadthrough.data.io import load_recording
+from leadthrough.demo.guiding_steps import PAPER_WEIGHTS_N, payload_table
 from leadthrough.errors import DataWarning
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify
 from leadthrough.robot import load_robot
-from leadthrough.sim import Payload, SimConfig
-from leadthrough.sim.calibration_set import record_calibration_set, record_excitation
+from leadthrough.sim.calibration_set import record_calibration_set
 
 ROOT = Path(__file__).resolve().parents[1]
-PAPER_WEIGHTS_N = (71.54, 101.92, 120.54, 154.84)
-G = 9.81
 
 
 def main() -> None:
@@ -41,18 +39,13 @@ def main() -> None:
     print("\nTable III (simulated er20): weight [N] from motion, payload CoM 0.1 m along the "
           "flange axis")
     print(f"{'true [N]':>9} | " + " | ".join(f"{m:>22}" for m in models))
-    worst = {m: 0.0 for m in models}
-    for run, weight in enumerate(PAPER_WEIGHTS_N, start=10):
-        rec = record_excitation(robot, cal.held_out_excitation, args.seconds,
-                                SimConfig(seed=1, run=run),
-                                payload=Payload(weight / G, (0.0, 0.0, 0.1))).measured
-        cells = []
-        for m, res in models.items():
-            est = estimate_payload(rec, robot, res.params, "motion")
-            err = 100.0 * (est.weight_n - weight) / weight
-            worst[m] = max(worst[m], abs(err))
-            cells.append(f"{est.weight_n:8.2f} ({err:+5.2f} %)")
+    table = payload_table(robot, cal, {m: r.params for m, r in models.items()}, seed=1,
+                          seconds=args.seconds)
+    for k, weight in enumerate(PAPER_WEIGHTS_N):
+        cells = [f"{rows[k].estimated_n:8.2f} ({rows[k].error_pct:+5.2f} %)"
+                 for rows in table.values()]
         print(f"{weight:9.2f} | " + " | ".join(f"{c:>22}" for c in cells))
+    worst = {m: max(abs(r.error_pct) for r in rows) for m, rows in table.items()}
     print("worst |error|: " + ", ".join(f"{m} {v:.2f} %" for m, v in worst.items())
           + "   (goal <= 1 %; paper: up to 7.84 N, 5.6 %)")
 

@@ -3,13 +3,15 @@ Fig. 5), on the simulated robot with calibrated parameters."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.data.preprocess import preprocess
+from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
@@ -46,26 +48,34 @@ class PayloadRow:
     error_pct: float
 
 
-def payload_table(robot: Robot, cal: CalibrationSet, params: ParamsFile, seed: int,
-                  seconds: float) -> list[PayloadRow]:
+def payload_table(robot: Robot, cal: CalibrationSet,
+                  params: Mapping[str, DriveModelParameters], seed: int,
+                  seconds: float) -> dict[str, list[PayloadRow]]:
     """Table III: each payload on its own run of the held-out trajectory, weight from motion.
+
+    Each payload is recorded once and estimated with every parameter set.
 
     Args:
         robot: The robot.
         cal: The calibration set (its held-out trajectory is reused with the payloads).
-        params: Parameters identified on the unloaded robot.
+        params: Label (e.g. the method) → parameters identified on the unloaded robot.
         seed: Simulated robot instance.
         seconds: Length of each payload run [s].
+
+    Returns:
+        Label → one row per payload of :data:`PAPER_WEIGHTS_N`.
     """
     g = float(np.linalg.norm(robot.model.gravity.linear))
-    rows = []
+    rows: dict[str, list[PayloadRow]] = {label: [] for label in params}
     for k, weight in enumerate(PAPER_WEIGHTS_N):
         rec = record_excitation(robot, cal.held_out_excitation, seconds,
                                 SimConfig(seed=seed, run=10 + k),
                                 payload=Payload(weight / g, (0.0, 0.0, 0.1))).measured
-        est = estimate_payload(rec, robot, params.params, "motion")
-        rows.append(PayloadRow(true_n=weight, estimated_n=est.weight_n,
-                               error_pct=100.0 * (est.weight_n - weight) / weight))
+        data = preprocess(rec, robot)
+        for label, p in params.items():
+            est = estimate_payload(data, robot, p, "motion")
+            rows[label].append(PayloadRow(true_n=weight, estimated_n=est.weight_n,
+                                          error_pct=100.0 * (est.weight_n - weight) / weight))
     return rows
 
 
@@ -77,13 +87,11 @@ class GuidingDemo:
         sessions: Name (``"<operator>/<controller>"``) → session.
         fig4: Fig. 4 PNG.
         fig5: Fig. 5 PNG.
-        seam_path: The seam session's Parquet file (input of the teach-in).
     """
 
     sessions: dict[str, SimSession]
     fig4: Path
     fig5: Path
-    seam_path: Path
 
 
 def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
@@ -114,5 +122,4 @@ def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
     fig5 = plot_path_3d({"diagonal": logs["diagonal/virtual-friction"],
                          "seam": logs["seam/virtual-friction"]}, out / "fig5.png",
                         targets=targets)
-    return GuidingDemo(sessions=sessions, fig4=fig4, fig5=fig5,
-                       seam_path=out / "session_seam_virtual-friction.parquet")
+    return GuidingDemo(sessions=sessions, fig4=fig4, fig5=fig5)

@@ -9,15 +9,10 @@ from typing import Any
 from leadthrough.demo.guiding_steps import PAPER_WORST
 from leadthrough.demo.run import GUIDING_METHOD, DemoResult
 from leadthrough.fileio import atomic_write_text
+from leadthrough.identification.comparison import table2_markdown
 from leadthrough.report import Figure, Report, Section, Table, write_html, write_markdown
 
 __all__ = ["summary_dict", "write_demo_report"]
-
-
-def _markdown_table(text: str, caption: str, notes: str = "") -> Table:
-    rows = [[c.strip() for c in line.strip().strip("|").split("|")]
-            for line in text.strip().splitlines() if not line.startswith("|---")]
-    return Table(caption=caption, header=rows[0], rows=rows[1:], notes=notes)
 
 
 def summary_dict(res: DemoResult) -> dict[str, Any]:
@@ -54,7 +49,7 @@ def write_demo_report(res: DemoResult, out: Path) -> dict[str, Path]:
                                           json.dumps(summary_dict(res), indent=2))}
     files["table2"] = atomic_write_text(
         out / "table2.md", f"# Table II (simulated {res.robot}, seed {res.seed})\n\n"
-                           f"{res.table2}\n")
+                           f"{table2_markdown(res.table2)}\n")
     ratios = res.table2_ratios
     ratio_text = "; ".join(f"{label}: J(proposed)/J(ols-cv) = {r['proposed/ols-cv']:.2f}"
                            for label, r in ratios.items())
@@ -74,8 +69,8 @@ def write_demo_report(res: DemoResult, out: Path) -> dict[str, Path]:
             f"{res.condition_number:.1f}. Methods fitted on the identification recording and "
             f"evaluated on a held-out trajectory. {ratio_text} (paper: 0.77).",
             "Runtime: " + ", ".join(f"{m} {t:.1f} s" for m, t in res.runtimes_s.items()) + "."],
-            tables=[_markdown_table(res.table2, "Table II: residual mean [N·m], std as % of "
-                                    "max torque, J [N·m]")],
+            tables=[Table("Table II: residual mean [N·m], std as % of max torque, J [N·m]",
+                          res.table2.header, res.table2.rows)],
             figures=_figure(res, "fig3", "Fig. 3: measured vs model torque on the held-out "
                                          "trajectory")),
         Section("Payload (Table III)", paragraphs=[

@@ -29,12 +29,11 @@ from leadthrough.demo.guiding_steps import GuidingDemo, PayloadRow, payload_tabl
 from leadthrough.errors import LeadthroughError
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import METHODS, IdentifyConfig
-from leadthrough.identification.comparison import format_table2, ratio_summary
+from leadthrough.identification.comparison import Table2, ratio_summary, table2, table2_markdown
 from leadthrough.identification.params_file import ParamsFile, save_params
 from leadthrough.identification.plots import plot_torque_fit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot.description import Robot
-from leadthrough.session.record import load_session
 from leadthrough.sim.calibration_set import compare_on_calibration_set, record_calibration_set
 from leadthrough.sim.checks import check_hold, check_push, check_regressor
 from leadthrough.sim.robot import SimConfig
@@ -58,7 +57,7 @@ class DemoResult:
         seed: Simulated robot instance.
         quick: Shorter recordings and searches.
         checks: Model and simulator checks (JSON-ready).
-        table2: Formatted Table II (Markdown).
+        table2: Table II cells.
         table2_ratios: J ratios per data set.
         runtimes_s: Identification runtime per method [s].
         condition_number: Excitation condition number.
@@ -75,7 +74,7 @@ class DemoResult:
     seed: int
     quick: bool
     checks: dict[str, Any] = field(default_factory=dict)
-    table2: str = ""
+    table2: Table2 = field(default_factory=lambda: Table2([], []))
     table2_ratios: dict[str, dict[str, float]] = field(default_factory=dict)
     runtimes_s: dict[str, float] = field(default_factory=dict)
     condition_number: float = 0.0
@@ -130,25 +129,25 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
     comparison = compare_on_calibration_set(robot, cal, METHODS, cfg,
                                             progress=lambda s: say("      " + s))
     comp = comparison.comparison
-    res.table2 = format_table2(comp, comparison.floors)
+    res.table2 = table2(comp, comparison.floors)
     res.table2_ratios = ratio_summary(comp, comparison.floors)
     res.runtimes_s = {m: comp.results[m].runtime_s for m in METHODS}
-    say("\nTable II (mean [N·m], std/max torque [%], J [N·m]):\n" + res.table2 + "\n")
+    say("\nTable II (mean [N·m], std/max torque [%], J [N·m]):\n"
+        + table2_markdown(res.table2) + "\n")
     params: dict[str, ParamsFile] = {}
     for m in ("proposed", GUIDING_METHOD):
         r = comp.results[m]
         path = save_params(out / f"params_{m}.toml", robot, m, r.params, r.stats)
         res.files[f"params ({m})"] = path
-        params[m] = ParamsFile(robot=robot.name, method=m, params=r.params,
-                               noise_mean=r.stats.mean, noise_std=r.stats.std, J=r.J, path=path)
+        params[m] = ParamsFile.from_result(r, path)
     held = preprocess(cal.held_out.measured, robot, cfg.preprocess)
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},
         title=f"{robot.name} (simulated), held-out trajectory")
 
     say("[4/6] payload test (Table III): weight from motion with the unloaded model ...")
-    for m, pf in params.items():
-        res.payload[m] = payload_table(robot, cal, pf, seed, 20.0 if quick else 60.0)
+    res.payload = payload_table(robot, cal, {m: pf.params for m, pf in params.items()}, seed,
+                                20.0 if quick else 60.0)
     for k, row in enumerate(res.payload[GUIDING_METHOD]):
         cells = ", ".join(f"{m} {rows[k].estimated_n:7.2f} N ({rows[k].error_pct:+.2f} %)"
                           for m, rows in res.payload.items())
@@ -169,7 +168,7 @@ def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None])
     if res.guiding is None:
         return
     seam = res.guiding.sessions["seam/virtual-friction"]
-    log = load_session(res.guiding.seam_path)
+    log = seam.result.log
     try:
         program = teach_session(log, robot, tolerance_mm=1.0, speed_m_s=0.1)
     except LeadthroughError as e:  # a session the teach-in rejects is a result, not a crash

@@ -3,8 +3,9 @@
 With six joints, each NumPy call costs more in dispatch (~0.5–1 µs) than in arithmetic, and one
 estimator sample needs dozens of them. These kernels fuse the element-wise work of one sample
 into a single compiled call each, so an update costs a few Pinocchio calls plus two kernel
-calls. They are the only implementation of these formulas: the filter and model classes call
-them too, so offline and real-time results are identical.
+calls. The real-time filter and model classes call them too. The friction here is eq. 15 with
+the smoothed sign; the offline model (:mod:`leadthrough.dynamics.friction`, exact sign) is the
+reference, and ``tests/test_estimation.py`` checks that both agree away from standstill.
 
 All kernels write into preallocated arrays and return nothing (or a float); they never
 allocate on the heap except inside the 6×6 LAPACK solve of :func:`wrench_from_torque`.

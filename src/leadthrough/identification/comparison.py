@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -24,10 +25,13 @@ from leadthrough.robot.description import Robot
 
 __all__ = [
     "MethodComparison",
+    "Table2",
     "compare_methods",
     "format_table2",
     "noise_floor",
     "ratio_summary",
+    "table2",
+    "table2_markdown",
 ]
 
 
@@ -125,31 +129,54 @@ def noise_floor(
     return residual_stats(m.torque, t.torque, m.moving, robot.max_torque, cfg.k_omega)
 
 
-def format_table2(comp: MethodComparison, floors: dict[str, ResidualStats] | None = None) -> str:
+class Table2(NamedTuple):
+    """Table II as cells.
+
+    Attributes:
+        header: Column names with units.
+        rows: One row of formatted cells per data set and method (and noise floor).
+    """
+
+    header: list[str]
+    rows: list[list[str]]
+
+
+def table2(comp: MethodComparison, floors: dict[str, ResidualStats] | None = None) -> Table2:
     """Table II in the paper's layout (mean [N·m], std/max [%], J) per data set.
 
     Args:
         comp: The comparison.
-        floors: Optional noise floor per data-set label, printed beside the methods.
+        floors: Optional noise floor per data-set label, listed beside the methods.
 
     Returns:
-        A plain-text (Markdown-compatible) table.
+        Header and formatted rows.
     """
     n = len(comp.joint_names)
-    head = ("| data | method | " + " | ".join(f"mean{j + 1} [N·m]" for j in range(n)) + " | "
-            + " | ".join(f"std{j + 1}/max [%]" for j in range(n)) + " | J [N·m] |")
-    sep = "|" + "---|" * (2 * n + 3)
-    lines = [head, sep]
+    header = (["data", "method"] + [f"mean{j + 1} [N·m]" for j in range(n)]
+              + [f"std{j + 1}/max [%]" for j in range(n)] + ["J [N·m]"])
 
-    def row(label: str, name: str, s: ResidualStats) -> str:
-        return (f"| {label} | {name} | " + " | ".join(f"{v:.2f}" for v in s.mean) + " | "
-                + " | ".join(f"{v:.2f}" for v in s.std_pct_max) + f" | {s.J:.2f} |")
+    def row(label: str, name: str, s: ResidualStats) -> list[str]:
+        return ([label, name] + [f"{v:.2f}" for v in s.mean]
+                + [f"{v:.2f}" for v in s.std_pct_max] + [f"{s.J:.2f}"])
 
+    rows = []
     for label in comp.labels:
         for m in comp.results:
-            lines.append(row(label, m, comp.stats(m, label)))
+            rows.append(row(label, m, comp.stats(m, label)))
         if floors and label in floors:
-            lines.append(row(label, "noise floor", floors[label]))
+            rows.append(row(label, "noise floor", floors[label]))
+    return Table2(header, rows)
+
+
+def format_table2(comp: MethodComparison, floors: dict[str, ResidualStats] | None = None) -> str:
+    """Table II (:func:`table2`) as a plain-text, Markdown-compatible table."""
+    return table2_markdown(table2(comp, floors))
+
+
+def table2_markdown(t: Table2) -> str:
+    """Table II cells as a plain-text, Markdown-compatible table."""
+    lines = ["| " + " | ".join(t.header) + " |", "|" + "---|" * len(t.header)]
+    lines += ["| " + " | ".join(r) + " |" for r in t.rows]
     return "\n".join(lines)
 
 

@@ -32,7 +32,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,9 @@ from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write_text
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.robot.description import Robot
+
+if TYPE_CHECKING:
+    from leadthrough.identification.api import IdentificationResult
 
 __all__ = ["ParamsFile", "load_params", "save_params"]
 
@@ -77,6 +80,14 @@ class ParamsFile:
     noise_std: Array
     J: float
     path: Path | None = None
+
+    @classmethod
+    def from_result(cls, result: IdentificationResult, path: Path | None = None
+                    ) -> ParamsFile:
+        """The params file an identification result would be saved as (without writing it)."""
+        return cls(robot=result.robot, method=result.method, params=result.params,
+                   noise_mean=result.stats.mean, noise_std=result.stats.std, J=result.J,
+                   path=path)
 
 
 def _fmt(v: float) -> str:

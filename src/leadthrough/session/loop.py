@@ -121,7 +121,6 @@ def run_session(
     interpolator.update(cmd)
     cycle_us = np.zeros(steps // every + 1)
     servo_us = np.zeros(steps)
-    mark_events = sorted(marks, key=lambda m: m.t)
     k_cycle = 0
     t_start = fb.t
     wall0 = time.perf_counter()
@@ -160,17 +159,12 @@ def run_session(
                   c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
                   int(c_out.fault), applied_wrench() if applied_wrench is not None else None)
     events = [_transition(e) for e in controller.events]
-    events += [SessionEvent(t=m.t, kind="mark", label=m.label) for m in mark_events
+    events += [SessionEvent(t=m.t, kind="mark", label=m.label) for m in marks
                if m.t <= rec.time[-1]]
     events.sort(key=lambda e: e.t)
-    log = rec.to_log(driver_robot_name(controller), events, settings or {})
+    log = rec.to_log(controller.robot.name, events, settings or {})
     return LoopResult(log=log, cycle_us=cycle_us[:k_cycle],
                       servo_us=servo_us[np.arange(steps) % every != 0])
-
-
-def driver_robot_name(controller: GuidingController) -> str:
-    """The robot name recorded in the session."""
-    return controller.robot.name
 
 
 def _transition(e: Event) -> SessionEvent:
