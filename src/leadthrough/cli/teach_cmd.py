@@ -10,7 +10,7 @@ from typing import Any
 from leadthrough.errors import DataError, TeachError, UnknownRobotError
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.session.record import SessionLog, load_session
-from leadthrough.teach.export import write_program_csv, write_program_json
+from leadthrough.teach.export import line_to_dict, write_program_csv, write_program_json
 from leadthrough.teach.program import TaughtProgram, teach_session
 
 __all__ = ["register", "summary"]
@@ -113,10 +113,7 @@ def summary(program: TaughtProgram, session: Path, output: Path,
         "program_duration_s": program.limits.program_duration_s,
         "max_joint_speed_ratio": program.limits.max_speed_ratio,
         "welding_line": None if line is None else {
-            "start_label": line.start_label, "end_label": line.end_label,
-            "p1_m": [float(v) for v in line.p1_base], "p2_m": [float(v) for v in line.p2_base],
-            "length_m": line.length_m, "max_deviation_mm": line.max_deviation_mm,
-            "rms_deviation_mm": line.rms_deviation_mm},
+            k: v for k, v in line_to_dict(line).items() if k not in ("direction", "samples")},
         "transitions": [{"t_s": e.t, "label": e.label, "cause": e.cause}
                         for e in program.transitions],
         "output": str(output), "csv": None if csv_path is None else str(csv_path),

@@ -121,7 +121,8 @@ class PushScript:
         times = [m.t for m in self.marks]
         if times != sorted(times) or any(not (0.0 <= t <= self.duration_s) for t in times):
             raise SimulationError("marks out of order or outside the session", field="marks",
-                                  value=times, expected=f"increasing times in [0, {last:g}] s")
+                                  value=times,
+                                  expected=f"increasing times in [0, {self.duration_s:g}] s")
         object.__setattr__(self, "_starts", tuple(p.t_start for p in self.pushes))
 
     def force_at(self, t: float) -> Array:

@@ -30,8 +30,8 @@ from leadthrough.fileio import atomic_write, atomic_write_text
 from leadthrough.teach.line_fit import WeldingLine
 from leadthrough.teach.program import TaughtProgram
 
-__all__ = ["FORMAT_VERSION", "csv_header", "program_to_dict", "write_program_csv",
-           "write_program_json"]
+__all__ = ["FORMAT_VERSION", "csv_header", "line_to_dict", "program_to_dict",
+           "write_program_csv", "write_program_json"]
 
 FORMAT_VERSION = 1
 _UNITS = {
@@ -52,7 +52,8 @@ def _floats(values: Any) -> list[float]:
     return [float(v) for v in values]
 
 
-def _line_dict(line: WeldingLine) -> dict[str, Any]:
+def line_to_dict(line: WeldingLine) -> dict[str, Any]:
+    """The welding line as JSON-ready values (metres, millimetres)."""
     return {"start_label": line.start_label, "end_label": line.end_label,
             "p1_m": _floats(line.p1_base), "p2_m": _floats(line.p2_base),
             "direction": _floats(line.direction_base), "length_m": line.length_m,
@@ -77,7 +78,7 @@ def program_to_dict(program: TaughtProgram) -> dict[str, Any]:
         "program_duration_s": program.limits.program_duration_s,
         "max_joint_speed_ratio": program.limits.max_speed_ratio,
         "welding_line": None if program.welding_line is None
-        else _line_dict(program.welding_line),
+        else line_to_dict(program.welding_line),
         "waypoints": [
             {"index": i, "label": w.labels[i], "sample": int(w.sample[i]),
              "t_s": float(w.time[i]), "q_rad": _floats(w.q[i]),

@@ -20,7 +20,8 @@ from leadthrough.errors import TeachError
 from leadthrough.robot.description import Robot
 from leadthrough.session.record import SessionEvent, SessionLog
 
-__all__ = ["TcpPath", "check_session_robot", "find_mark", "forward_tcp", "tcp_path"]
+__all__ = ["TcpPath", "TcpPoses", "check_mark_time", "check_session_robot", "find_mark",
+           "forward_tcp", "tcp_path"]
 
 Array = NDArray[np.float64]
 
@@ -144,12 +145,20 @@ def find_mark(log: SessionLog, label: str, source: str | None = None) -> Session
         times = ", ".join(f"{m.t:.3f}" for m in found)
         raise TeachError(f"mark pressed {len(found)} times (at {times} s)", source=source,
                          field="marks", value=label, expected="each mark label exactly once")
-    mark = found[0]
+    check_mark_time(log, found[0], source)
+    return found[0]
+
+
+def check_mark_time(log: SessionLog, mark: SessionEvent, source: str | None = None) -> None:
+    """Raise unless a mark lies within the recorded time.
+
+    Raises:
+        TeachError: Naming the mark, its time and the recorded interval.
+    """
     if not (log.time[0] <= mark.t <= log.time[-1]):
         raise TeachError("mark time outside the recorded time", source=source,
-                         field=f"marks.{label}.t", value=mark.t,
+                         field=f"marks.{mark.label}.t", value=mark.t,
                          expected=f"within [{log.time[0]:.3f}, {log.time[-1]:.3f}] s")
-    return mark
 
 
 def tcp_path(log: SessionLog, robot: Robot, t_from: float, t_to: float,

@@ -29,7 +29,7 @@ from leadthrough.robot.description import Robot
 from leadthrough.session.record import SessionEvent, SessionLog
 from leadthrough.teach.limits_check import LimitReport, check_limits
 from leadthrough.teach.line_fit import WeldingLine, fit_welding_line
-from leadthrough.teach.path import check_session_robot, find_mark, tcp_path
+from leadthrough.teach.path import check_mark_time, check_session_robot, find_mark, tcp_path
 from leadthrough.teach.simplify import rdp_indices
 
 __all__ = ["TaughtProgram", "Waypoints", "teach_session"]
@@ -132,10 +132,7 @@ def teach_session(log: SessionLog, robot: Robot, *, tolerance_mm: float = 1.0,
                          expected="at least two operator marks (P1, P2, ...): the taught path "
                                   "runs from the first mark to the last")
     for m in marks:
-        if not (log.time[0] <= m.t <= log.time[-1]):
-            raise TeachError("mark time outside the recorded time", source=source,
-                             field=f"marks.{m.label}.t", value=m.t,
-                             expected=f"within [{log.time[0]:.3f}, {log.time[-1]:.3f}] s")
+        check_mark_time(log, m, source)
     line_times = None
     if line is not None:
         line_times = (find_mark(log, line[0], source).t, find_mark(log, line[1], source).t)
