@@ -12,7 +12,7 @@ from pathlib import Path
 
 from leadthrough.errors import DataError
 
-__all__ = ["atomic_write", "atomic_write_text", "read_comment_header"]
+__all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "require_folder"]
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
@@ -29,10 +29,7 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
         DataError: The folder does not exist or is not writable.
     """
     path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise DataError("output folder does not exist", source=path,
-                        expected="an existing, writable folder")
+    folder = require_folder(path)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=folder)
     os.close(fd)
     tmp = Path(tmp_name)
@@ -43,6 +40,23 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def require_folder(path: str | Path) -> Path:
+    """The folder an output file goes into; check it exists before any work is done.
+
+    Returns:
+        The folder.
+
+    Raises:
+        DataError: The folder does not exist.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise DataError("output folder does not exist", source=path,
+                        expected="an existing, writable folder")
+    return folder
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

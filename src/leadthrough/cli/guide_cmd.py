@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
-from leadthrough.errors import DataError
+from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
 from leadthrough.session.record import save_session
@@ -57,9 +57,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = SimSessionConfig(operator=args.operator, controller=args.controller,
                            duration_s=args.duration, seed=args.seed, paced=args.realtime,
                            guiding=replace(GuidingConfig(), friction_mode=args.friction))
-    if not args.output.parent.is_dir():
-        raise DataError("output folder does not exist", source=args.output,
-                        expected="an existing folder")
+    require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
     save_session(session.result.log, args.output)
     summary = session.summary.to_json()

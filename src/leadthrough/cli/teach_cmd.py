@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from leadthrough.errors import DataError, TeachError, UnknownRobotError
+from leadthrough.fileio import require_folder
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.session.record import SessionLog, load_session
 from leadthrough.teach.export import line_to_dict, write_program_csv, write_program_json
@@ -84,10 +85,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         if path.suffix.lower() != suffix:
             raise DataError("unsupported output file type", source=path, field=flag,
                             value=path.suffix, expected=suffix)
-        folder = path.parent if str(path.parent) else Path(".")
-        if not folder.is_dir():
-            raise DataError("output folder does not exist", source=path,
-                            expected="an existing, writable folder")
+        require_folder(path)
 
 
 def _robot_for(log: SessionLog, spec: str | None, session: Path) -> Robot:
