@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
 
-__all__ = ["LagEstimate", "estimate_lag", "resample"]
+__all__ = ["LagEstimate", "estimate_lag", "interp_columns", "resample"]
 
 Array = NDArray[np.float64]
 
@@ -79,8 +79,22 @@ def resample(t: Array, x: Array, t_new: Array) -> Array:
     """
     t, x2 = _signal("x", t, x)
     t_new = np.asarray(t_new, dtype=float)
-    out = np.column_stack([np.interp(t_new, t, x2[:, j]) for j in range(x2.shape[1])])
+    out = interp_columns(t_new, t, x2)
     return out[:, 0] if np.ndim(x) == 1 else out
+
+
+def interp_columns(t_new: Array, t: Array, x: Array) -> Array:
+    """Linear interpolation of every column (no validation; see :func:`resample`).
+
+    Args:
+        t_new: Times to interpolate at [s], shape (M,).
+        t: Sample times [s], shape (N,), increasing.
+        x: Samples, shape (N, k).
+
+    Returns:
+        Shape (M, k).
+    """
+    return np.column_stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])])
 
 
 def estimate_lag(t_ref: Array, x_ref: Array, t_other: Array, x_other: Array,
@@ -133,8 +147,7 @@ def estimate_lag(t_ref: Array, x_ref: Array, t_other: Array, x_other: Array,
         if inside.mean() < min_overlap:
             continue
         ar = a[inside] - a[inside].mean(axis=0)
-        br = np.column_stack([np.interp(tq[inside], t_other, b[:, j])
-                              for j in range(b.shape[1])])
+        br = interp_columns(tq[inside], t_other, b)
         br -= br.mean(axis=0)
         den = np.sqrt(np.sum(ar * ar) * np.sum(br * br))
         if den > 0:

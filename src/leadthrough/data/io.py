@@ -272,12 +272,11 @@ def _load_split(folder: Path, cmap: ColumnMap) -> Recording:
     parts: list[dict[str, Array]] = []
     for file in cmap.files:
         path = folder / file
-        field = next(n for n, s in cmap.signals.items() if s.file == file)
+        names = [n for n, s in cmap.signals.items() if s.file == file]
         if not path.is_file():
             raise DataError("file of the column map not found", source=folder,
-                            field=f"{field}.file", value=file,
+                            field=f"{names[0]}.file", value=file,
                             expected=f"an existing file in the folder (see {cmap.path})")
-        names = [n for n, s in cmap.signals.items() if s.file == file]
         arrays, bad, why = _read_mapped(path, cmap, names, cmap.max_column_in(file))
         part = _clean_rows(arrays, str(path), bad, why)
         t = part["time"]

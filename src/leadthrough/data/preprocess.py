@@ -18,6 +18,7 @@ import numpy as np
 import scipy.signal
 from numpy.typing import NDArray
 
+from leadthrough.data.align import interp_columns
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError, check_fields
 from leadthrough.robot.description import Robot
@@ -103,9 +104,7 @@ def _uniform(rec: Recording, torque: Array, max_jitter: float) -> tuple[Array, A
     if np.max(np.abs(dt - med)) <= max_jitter * med:
         return rec.time, rec.q, torque
     t = np.arange(rec.time[0], rec.time[-1], med)
-    q = np.column_stack([np.interp(t, rec.time, rec.q[:, j]) for j in range(rec.n)])
-    tau = np.column_stack([np.interp(t, rec.time, torque[:, j]) for j in range(rec.n)])
-    return t, q, tau
+    return t, interp_columns(t, rec.time, rec.q), interp_columns(t, rec.time, torque)
 
 
 def preprocess(rec: Recording, robot: Robot, config: PreprocessConfig | None = None
