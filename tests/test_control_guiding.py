@@ -372,3 +372,22 @@ def test_setup_errors(er20: Robot) -> None:
     with pytest.raises(ControlError, match="workspace box"):
         boxed.reset(Q_WORK)
     assert CartesianLimits().max_linear_speed == 0.2
+
+
+def test_after_a_stop_breaking_away_takes_the_stopping_friction(er20: Robot) -> None:
+    """For settle_s + rezero_s after the motion stops, a push between δ and δ_s moves nothing
+    (the drives are settling); afterwards the same push starts motion again."""
+    q0 = pose_ik(er20, np.array([-np.pi / 2, -0.6, 0.9, 0.0, 0.8, 0.0]), [-0.65, -0.85, 0.31])
+    cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6),
+                        settle_s=0.3, rezero_s=0.2)
+    w = np.zeros((300, 6))
+    w[:50, 0] = 40.0                  # push: moves
+    w[50:, 0] = -30.0                 # then a pull above δ = 15 N but below δ_s = 50 N
+    tr = run(GuidingController(er20, cfg), q0, w, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    stop = 50 + int(np.argmax(vx[50:] == 0.0))
+    assert vx[49] > 0.0 and stop > 50
+    hold = round((cfg.settle_s + cfg.rezero_s) / DT)
+    assert np.all(vx[stop:stop + hold] == 0.0)          # held while settling
+    assert vx[stop + hold + 1] < 0.0                      # then the pull moves it
+    assert np.all(tr.fault == Fault.NONE)

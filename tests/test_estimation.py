@@ -233,3 +233,72 @@ def test_friction_can_follow_the_commanded_velocity(er20: Robot) -> None:
         tau[mode] = out.tau_ext.copy()
     np.testing.assert_allclose(tau["command"] - tau["measured"],
                                np.sign(qd_cmd) * 10.0 + 4.0 * qd_cmd, atol=1e-6)
+
+
+def test_commanded_friction_keeps_its_value_after_a_stop(er20: Robot) -> None:
+    """friction_velocity="command": the Coulomb part turns over a few z₀ of commanded motion and
+    keeps its last value once the command stops (Dahl/LuGre memory), unlike sgn(0) = 0."""
+    from dataclasses import replace
+
+    n = er20.n
+    params = replace(nominal_drive_parameters(er20), coulomb=np.full(n, 10.0),
+                     viscous=np.zeros(n))
+    z0 = 2e-4
+    v = 0.01  # rad/s: 1e-5 rad per 1 ms step, so z₀ takes 20 steps
+    taus = {}
+    for speed in (0.0, v):
+        est = ExternalForceEstimator(er20, params, np.zeros(n), EstimatorConfig(
+            friction_velocity="command", warm_up_s=0.0, presliding_rad=z0,
+            output_cutoff_hz=400.0))
+        inp, out = est.make_input(), est.make_output()
+        est.reset(Q0)
+        rows = []
+        for k in range(400):  # the robot stands still at Q0; the command moves, then stops
+            inp.t, inp.q[:], inp.current[:] = k * 1e-3, Q0, 0.0
+            inp.qd_cmd[:] = speed if k < 200 else 0.0
+            est.update(inp, out)
+            rows.append(out.tau_ext.copy())
+        taus[speed] = np.array(rows)
+    friction = taus[v] - taus[0.0]  # τ̂_d differs by the friction term only
+    # after 20 steps (0.2 mrad = z₀) the friction is at 1 − e⁻¹ of its level (the 400 Hz
+    # output filter lags it by ~0.4 ms), after 200 steps (10·z₀) at the level, and it stays there
+    # after the command stops
+    np.testing.assert_allclose(friction[20], 10.0 * (1.0 - np.exp(-1.0)), rtol=0.05)
+    np.testing.assert_allclose(friction[199], 10.0, rtol=1e-3)
+    np.testing.assert_allclose(friction[399], 10.0, rtol=1e-3)
+
+
+def test_rezero_zeroes_a_constant_error_and_cancel_keeps_the_tare(er20: Robot) -> None:
+    """A zero-velocity update averages τ_ext and subtracts it, the status staying OK."""
+    from dataclasses import replace
+
+    n = er20.n
+    wrong = replace(nominal_drive_parameters(er20), offset=np.array([8.0, -6.0, 4.0, 1, 1, 1]))
+    est = ExternalForceEstimator(er20, wrong, np.zeros(n), EstimatorConfig(warm_up_s=0.0))
+    gravity = est.model  # current that exactly holds the identified model with no offset
+    inp, out = est.make_input(), est.make_output()
+    est.reset(Q0)
+    tau_hold = np.zeros(n)
+    gravity.torque(Q0, np.zeros(n), np.zeros(n), tau_hold)
+    tau_hold -= wrong.offset
+    current = er20.torque_to_current(tau_hold)
+
+    def run(samples: int) -> None:
+        for _ in range(samples):
+            inp.q[:], inp.current[:] = Q0, current
+            assert est.update(inp, out) == Status.OK
+
+    run(2000)
+    np.testing.assert_allclose(out.tau_ext, wrong.offset, atol=1e-6)
+    est.rezero(100)
+    run(50)
+    assert est.rezeroing
+    est.cancel_rezero()
+    run(100)
+    assert not est.rezeroing
+    np.testing.assert_allclose(out.tau_ext, wrong.offset, atol=1e-6)   # unchanged
+    est.rezero(100)
+    run(100)
+    assert not est.rezeroing
+    run(1)  # the sample that completes the window still reports the old tare
+    np.testing.assert_allclose(out.tau_ext, 0.0, atol=1e-6)

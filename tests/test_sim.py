@@ -121,7 +121,7 @@ def test_bad_settings_raise() -> None:
     with pytest.raises(SimulationError):
         SimConfig(timestep=0.0)
     with pytest.raises(SimulationError):
-        SimConfig(friction_timeconst=1e-4)
+        SimConfig(servo_bandwidth_hz=0.0)
     with pytest.raises(SimulationError):
         Payload(-1.0)
 

@@ -122,6 +122,8 @@ class GuidingController:
         self._T_cmd = pin.SE3.Identity()
         self._resync = False
         self._started = False
+        self._rest_s = math.inf
+        self._hold_s = cfg.settle_s + cfg.rezero_s
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
@@ -174,6 +176,7 @@ class GuidingController:
         self._T_cmd = self._ik.transform_tool_to_base.copy()
         self._resync = False
         self._started = True
+        self._rest_s = math.inf
         self._safety.reset(t)
 
     def clear_fault(self, t: float = 0.0) -> bool:
@@ -241,8 +244,11 @@ class GuidingController:
             if self._auto is not None:
                 ik.jacobian_in_frame(self.config.frame, self._Jc)
                 self._auto.update(self._Jc, mu, self._friction, self._stop_friction)
-            self._law.step(twist, self._wrench, self._friction, self._stop_friction,
-                           self._twist_des)
+            # settling after a stop: breaking away takes the stopping friction
+            settling = self._rest_s < self._hold_s and not twist.any()
+            self._law.step(twist, self._wrench,
+                           self._stop_friction if settling else self._friction,
+                           self._stop_friction, self._twist_des)
             self._limiter.limit(twist, self._twist_des, scale, new)
             T_new = self._integrate(new)
             speed = math.sqrt(float(new[0]) ** 2 + float(new[1]) ** 2 + float(new[2]) ** 2)
@@ -257,11 +263,13 @@ class GuidingController:
         twist[:] = new
         res = self._ik_result
         if at_rest:
+            self._rest_s += self.config.dt
             # hold: the setpoint stays bit for bit, the target is the pose of the setpoint
             self._qd_cmd[:] = 0.0
             self._T_cmd = T_fk
             res.scale = 1.0
         else:
+            self._rest_s = 0.0
             self._T_cmd = T_new
             ik.solve(self._q_cmd, self._qd_cmd, T_new, res)
             self._q_cmd[:] = res.q
@@ -320,3 +328,4 @@ class GuidingController:
         out.status = Status.FAULT if sup.state == State.FAULT else Status.OK
         out.speed_scale = scale
         out.ik_scale = self._ik_result.scale
+        out.rest_s = self._rest_s

@@ -60,6 +60,11 @@ class GuidingConfig:
         limits: Cartesian speed and acceleration limits (Table IV).
         ik: Differential IK settings.
         safety: Safety thresholds.
+        settle_s: After the commanded motion stops, the drives settle (servo lag, the friction
+            they keep): for ``settle_s + rezero_s`` the rest threshold of eq. 33 is the
+            stopping friction instead of the guiding friction [s].
+        rezero_s: Then the guiding loop re-zeroes the estimator over this window (a
+            zero-velocity update, see ``ExternalForceEstimator.rezero``); 0 disables [s].
     """
 
     dt: float = 0.01
@@ -73,6 +78,8 @@ class GuidingConfig:
     limits: CartesianLimits = field(default_factory=CartesianLimits)
     ik: IKConfig = field(default_factory=IKConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    settle_s: float = 0.3
+    rezero_s: float = 0.0
 
     def __post_init__(self) -> None:
         check_fields("guiding", self, [
@@ -82,6 +89,10 @@ class GuidingConfig:
             ("axes_enabled", len(self.axes_enabled) == 6
              and all(isinstance(a, bool) for a in self.axes_enabled), "6 booleans"),
             ("friction_mode", self.friction_mode in ("fixed", "auto"), "'fixed' or 'auto'"),
+            ("settle_s", math.isfinite(self.settle_s) and 0 <= self.settle_s <= 10,
+             "0 <= settle_s <= 10 s"),
+            ("rezero_s", math.isfinite(self.rezero_s) and 0 <= self.rezero_s <= 10,
+             "0 <= rezero_s <= 10 s"),
         ], ControlError)
         if self.safety.joint_limit_margin <= self.ik.joint_limit_margin:
             raise ControlError("must exceed the IK's margin", field="safety.joint_limit_margin",
@@ -135,6 +146,8 @@ class GuidingOutput:
         speed_scale: Factor applied to the speed limits (singularity slow-down).
         ik_scale: Fraction of the IK step kept by the joint bounds (1: none active).
         ik_residual: ‖log6(T(q_cmd)⁻¹·T_cmd)‖ left by the last IK step [m, rad].
+        rest_s: Time the commanded motion has been at rest since it last moved [s] (0 while
+            moving; infinite before the first motion).
     """
 
     q: Array
@@ -152,3 +165,4 @@ class GuidingOutput:
     speed_scale: float = 1.0
     ik_scale: float = 1.0
     ik_residual: float = 0.0
+    rest_s: float = math.inf

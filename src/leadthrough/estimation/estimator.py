@@ -95,7 +95,14 @@ class EstimatorConfig:
             commanded to the position servo). While guiding, the robot moves because it is
             commanded to, and at the low speeds of a start the measured velocity is mostly
             noise while the drive's friction is at its highest (Stribeck): the command gives
-            friction its true direction and the identified Stribeck curve its level.
+            friction its true direction and the identified Stribeck curve its level. The
+            friction then has memory (eq. 15 as the steady state of a LuGre/Dahl model, see
+            ``kernels.presliding_friction_step``): after a stop, the drives keep the friction
+            they had while moving, and so does the model.
+        presliding_rad: z₀ of the ``"command"`` friction [rad]: the friction turns over a
+            commanded displacement of a few z₀. Gear presliding is of the order of the lost
+            motion (RV and harmonic reducers: ≲ 1 arcmin ≈ 3e-4 rad); a smaller z₀ turns the
+            model's friction slightly ahead of the gear's, which helps a start.
     """
 
     method: str = "direct"
@@ -111,6 +118,7 @@ class EstimatorConfig:
     tare_s: float = 0.0
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
+    presliding_rad: float = 2e-4
 
     def __post_init__(self) -> None:
         check_fields("estimator", self, [
@@ -128,6 +136,7 @@ class EstimatorConfig:
             ("standstill_velocity", self.standstill_velocity > 0, "> 0 rad/s"),
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
+            ("presliding_rad", 0 < self.presliding_rad <= 0.1, "0 < z0 <= 0.1 rad"),
         ])
 
 
@@ -205,6 +214,10 @@ class ExternalForceEstimator:
         self._integral = np.zeros(n)
         self._r = np.zeros(n)
         self._work = np.zeros(n)
+        self._sign = np.zeros(n)
+        self._friction = np.zeros(n)
+        self._presliding = np.zeros(n)
+        self._qd_drive = np.zeros(n)
         self._direct = cfg.method == "direct"
         self._force_only = cfg.axes == "force"
         self._fric_cmd = cfg.friction_velocity == "command"
@@ -221,6 +234,8 @@ class ExternalForceEstimator:
         self._tare_sum = np.zeros(n)
         self._tare_len = round(cfg.tare_s / cfg.dt)
         self._tare_left = self._tare_taken = self._tare_len
+        self._rezero_sum = np.zeros(n)
+        self._rezero_left = self._rezero_taken = 0
         self._fault = False
         self._first = True
 
@@ -239,12 +254,14 @@ class ExternalForceEstimator:
         self._tare[:] = 0.0
         self._tare_sum[:] = 0.0
         self._tare_left = self._tare_taken = self._tare_len
+        self._rezero_left = 0
         self._diff.reset(q)
         self._lpf.reset(np.zeros(self.robot.n))
         self._integral[:] = 0.0
         self._r[:] = 0.0
         self._p0[:] = 0.0
         self._samples = 0
+        self._presliding[:] = 0.0
         self._fault = False
         self._first = True
 
@@ -264,14 +281,24 @@ class ExternalForceEstimator:
         q, qd, qdd = self._diff.position, self._diff.velocity, self._diff.acceleration
         np.multiply(inp.current, self._tpa, out=self._tau_j)
         mdl = self.model
+        fr = self._friction
+        if self._fric_cmd:
+            # driven by the command while it moves, by the measured motion when it is at rest
+            np.copyto(self._qd_drive, qd)
+            np.copyto(self._qd_drive, inp.qd_cmd, where=inp.qd_cmd != 0.0)
+            kernels.presliding_friction_step(self._qd_drive, mdl.friction_rows, mdl.stribeck,
+                                             self.config.dt, self.config.presliding_rad,
+                                             self._presliding, fr)
+        else:
+            kernels.smooth_sign(qd, mdl.friction_rows, self._sign)
+            kernels.friction_torque(qd, self._sign, mdl.friction_rows, mdl.stribeck, fr)
         if self._direct:
             rnea = pin.rnea(mdl.model, mdl.data, q, qd, qdd)
-            qd_friction = inp.qd_cmd if self._fric_cmd else qd
-            kernels.direct_residual(rnea, qd_friction, qdd, self._tau_j, mdl.friction_rows,
-                                    mdl.stribeck, mdl.rotor, mdl.offset, self._lpf.alpha,
-                                    self._lpf.value, self._noise_mean, out.tau_ext)
+            kernels.direct_residual(rnea, fr, qdd, self._tau_j, mdl.rotor, mdl.offset,
+                                    self._lpf.alpha, self._lpf.value, self._noise_mean,
+                                    out.tau_ext)
         else:
-            self._momentum(q, qd, inp.qd_cmd if self._fric_cmd else qd, out.tau_ext)
+            self._momentum(q, qd, out.tau_ext)
         out.tau_ext -= self._tare
         self._wrench(q, out)
         out.qd[:] = qd
@@ -288,8 +315,37 @@ class ExternalForceEstimator:
                 self._tare += self._tare_sum
             out.status = Status.TARING
         else:
+            if self._rezero_left > 0:
+                self._rezero_sum += out.tau_ext
+                self._rezero_left -= 1
+                if self._rezero_left == 0:
+                    self._rezero_sum *= 1.0 / self._rezero_taken
+                    self._tare += self._rezero_sum
             out.status = Status.OK
         return out.status
+
+    def rezero(self, samples: int) -> None:
+        """Zero-velocity update: average τ_ext over the next ``samples`` samples and subtract
+        it from then on, status staying OK (real-time safe: no validation, no allocation).
+
+        For the guiding loop once the commanded motion has stopped and settled (the drives keep
+        part of their friction after a stop, which no rigid-body model predicts). The robot
+        must be untouched meanwhile; :meth:`cancel_rezero` if it moves again.
+
+        Args:
+            samples: Window length [samples], >= 1.
+        """
+        self._rezero_sum[:] = 0.0
+        self._rezero_left = self._rezero_taken = max(1, samples)
+
+    def cancel_rezero(self) -> None:
+        """Abandon a :meth:`rezero` in progress (the tare is kept as it was)."""
+        self._rezero_left = 0
+
+    @property
+    def rezeroing(self) -> bool:
+        """A :meth:`rezero` is in progress."""
+        return self._rezero_left > 0
 
     def tare(self, duration_s: float) -> None:
         """Start taring now: average τ_ext over ``duration_s`` and subtract it from then on.
@@ -311,14 +367,14 @@ class ExternalForceEstimator:
         """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
         return self._tare.copy()
 
-    def _momentum(self, q: Array, qd: Array, qd_friction: Array, tau_ext: Array) -> None:
+    def _momentum(self, q: Array, qd: Array, tau_ext: Array) -> None:
         mdl = self.model
         m, d = mdl.model, mdl.data
         M = pin.crba(m, d, q)  # upper triangle only
         C = pin.computeCoriolisMatrix(m, d, q, qd)
         g = pin.computeGeneralizedGravity(m, d, q)
-        kernels.momentum_step(M, mdl.rotor, C, g, qd, qd_friction, self._tau_j,
-                              mdl.friction_rows, mdl.stribeck, mdl.offset, self.config.dt,
+        kernels.momentum_step(M, mdl.rotor, C, g, qd, self._friction, self._tau_j,
+                              mdl.offset, self.config.dt,
                               self._k_obs, self._samples == 0, self._p0, self._integral, self._r,
                               self._work, self._noise_mean, tau_ext)
 

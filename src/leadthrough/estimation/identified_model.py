@@ -60,10 +60,12 @@ class IdentifiedModel:
             fp[7] = params.cbrt if params.cbrt.size else 0.0
         self.friction_rows = fp
         self.friction = np.zeros(n)
+        self.sign = np.zeros(n)
 
     def friction_torque(self, qd: Array) -> Array:
         """Friction τ_f(q̇) with the smoothed sign [N·m]; returns an internal buffer."""
-        kernels.friction_torque(qd, self.friction_rows, self.stribeck, self.friction)
+        kernels.smooth_sign(qd, self.friction_rows, self.sign)
+        kernels.friction_torque(qd, self.sign, self.friction_rows, self.stribeck, self.friction)
         return self.friction
 
     def torque(self, q: Array, qd: Array, qdd: Array, out: Array) -> None:

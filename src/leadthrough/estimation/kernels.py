@@ -4,8 +4,9 @@ With six joints, each NumPy call costs more in dispatch (~0.5–1 µs) than in a
 estimator sample needs dozens of them. These kernels fuse the element-wise work of one sample
 into a single compiled call each, so an update costs a few Pinocchio calls plus two kernel
 calls. The real-time filter and model classes call them too. The friction here is eq. 15 with
-the smoothed sign; the offline model (:mod:`leadthrough.dynamics.friction`, exact sign) is the
-reference, and ``tests/test_estimation.py`` checks that both agree away from standstill.
+the smoothed sign (or, with memory, :func:`presliding_friction_step`); the offline model
+(:mod:`leadthrough.dynamics.friction`, exact sign) is the reference, and
+``tests/test_estimation.py`` checks that both agree away from standstill.
 
 All kernels write into preallocated arrays and return nothing (or a float); they never
 allocate on the heap except inside the 6×6 LAPACK solve of :func:`wrench_from_torque`.
@@ -28,6 +29,8 @@ __all__ = [
     "friction_torque",
     "low_pass_step",
     "momentum_step",
+    "presliding_friction_step",
+    "smooth_sign",
     "svf_step",
     "wrench_from_torque",
 ]
@@ -63,18 +66,72 @@ def low_pass_step(alpha: float, x: Array, value: Array) -> None:
 
 
 @njit(cache=True, nogil=True)
-def friction_torque(qd: Array, fp: Array, stribeck: bool, out: Array) -> None:
-    """Joint friction with the smoothed sign sat(q̇/v_ε) (eq. 15, or the OLS models) [N·m].
+def smooth_sign(qd: Array, fp: Array, sign: Array) -> None:
+    """The smoothed friction sign sat(q̇/v_ε) (in place on ``sign``).
 
     Args:
         qd: Joint velocities [rad/s], shape (n,).
+        fp: Friction parameter rows, shape (8, n) (row 0 is 1/v_ε).
+        sign: Output in [−1, 1], shape (n,).
+    """
+    for j in range(qd.size):
+        sign[j] = min(1.0, max(-1.0, qd[j] * fp[0, j]))
+
+
+@njit(cache=True, nogil=True)
+def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
+                             presliding: float, state: Array, out: Array) -> None:
+    """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
+
+    The Coulomb + Stribeck part F follows dF/dt = k·(q̇ − |q̇|·F/g(q̇)), with g(q̇) the
+    eq. 15 level f1 + f2·e^{−(R q̇/q̇sm)²} + f3·e^{−(q̇/q̇sg)²} and the presliding stiffness
+    k = g(0)/z₀, solved exactly for q̇ constant over the step. In steady sliding F = g·sgn(q̇),
+    eq. 15 itself. F changes only with motion: it turns over a displacement of a few z₀, and at
+    standstill it keeps its last value (a stopped gear still carries the friction it had when
+    it stopped, not the static peak). The viscous (and cube-root) terms are added as usual.
+
+    Args:
+        qd: Joint velocities driving the friction (the commanded ones) [rad/s], shape (n,).
+        fp: Friction parameter rows, shape (8, n).
+        stribeck: Use the Stribeck rows (eq. 15) instead of the cube-root row.
+        dt: Step [s].
+        presliding: z₀ [rad].
+        state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
+        out: Friction torque [N·m], shape (n,).
+    """
+    for j in range(qd.size):
+        v = qd[j]
+        g = fp[1, j]
+        g0 = g
+        if stribeck:
+            a = v * fp[3, j]
+            b = v * fp[5, j]
+            g += fp[4, j] * np.exp(-a * a) + fp[6, j] * np.exp(-b * b)
+            g0 += fp[4, j] + fp[6, j]
+        if v != 0.0 and g > 0.0:
+            target = g if v > 0.0 else -g
+            state[j] = target + (state[j] - target) * np.exp(-g0 * abs(v) * dt
+                                                            / (presliding * g))
+        f = state[j] + v * fp[2, j]
+        if not stribeck:
+            f += fp[7, j] * np.cbrt(v)
+        out[j] = f
+
+
+@njit(cache=True, nogil=True)
+def friction_torque(qd: Array, sign: Array, fp: Array, stribeck: bool, out: Array) -> None:
+    """Joint friction for a given friction direction (eq. 15, or the OLS models) [N·m].
+
+    Args:
+        qd: Joint velocities [rad/s], shape (n,).
+        sign: Friction direction in [−1, 1] (:func:`smooth_sign`), shape (n,).
         fp: Friction parameter rows, shape (8, n) (module docstring).
         stribeck: Use the Stribeck rows (eq. 15) instead of the cube-root row.
         out: Output [N·m], shape (n,).
     """
     for j in range(qd.size):
         v = qd[j]
-        s = min(1.0, max(-1.0, v * fp[0, j]))
+        s = sign[j]
         f = s * fp[1, j] + v * fp[2, j]
         if stribeck:
             a = v * fp[3, j]
@@ -86,21 +143,19 @@ def friction_torque(qd: Array, fp: Array, stribeck: bool, out: Array) -> None:
 
 
 @njit(cache=True, nogil=True)
-def direct_residual(rnea: Array, qd_friction: Array, qdd: Array, tau_j: Array, fp: Array,
-                    stribeck: bool, rotor: Array, offset: Array, alpha: float,
-                    filtered: Array, noise_mean: Array, tau_ext: Array) -> None:
+def direct_residual(rnea: Array, friction: Array, qdd: Array, tau_j: Array, rotor: Array,
+                    offset: Array, alpha: float, filtered: Array, noise_mean: Array,
+                    tau_ext: Array) -> None:
     """Eq. 27 and 30 for one sample: τ_ext = LPF(τ̂_d − τ̂_j) + τ̄_ω (in place).
 
-    τ̂_d = RNEA + τ_f(q̇) + M_j·q̈ + τ_0 (eq. 21 right side) with the smoothed friction sign.
+    τ̂_d = RNEA + τ_f(q̇) + M_j·q̈ + τ_0 (eq. 21 right side).
 
     Args:
         rnea: Rigid-body torque of the identified links [N·m], shape (n,).
-        qd_friction: Joint velocities of the friction term [rad/s], shape (n,) (the estimated
-            or the commanded velocity).
+        friction: Friction torque τ_f [N·m], shape (n,) (:func:`friction_torque` or
+            :func:`presliding_friction_step`).
         qdd: Joint accelerations [rad/s²], shape (n,).
         tau_j: Torque from current [N·m], shape (n,).
-        fp: Friction rows, shape (8, n).
-        stribeck: Friction model flag (see :func:`friction_torque`).
         rotor: Rotor inertias M_j [kg·m²], shape (n,).
         offset: Torque offsets τ_0 [N·m], shape (n,).
         alpha: Low-pass coefficient.
@@ -108,18 +163,17 @@ def direct_residual(rnea: Array, qd_friction: Array, qdd: Array, tau_j: Array, f
         noise_mean: τ̄_ω added back (zeros to skip) [N·m], shape (n,).
         tau_ext: Output [N·m], shape (n,).
     """
-    friction_torque(qd_friction, fp, stribeck, tau_ext)
     for j in range(qdd.size):
-        raw = rnea[j] + tau_ext[j] + rotor[j] * qdd[j] + offset[j] - tau_j[j]
+        raw = rnea[j] + friction[j] + rotor[j] * qdd[j] + offset[j] - tau_j[j]
         filtered[j] += alpha * (raw - filtered[j])
         tau_ext[j] = filtered[j] + noise_mean[j]
 
 
 @njit(cache=True, nogil=True)
 def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Array,
-                  qd: Array, qd_friction: Array, tau_j: Array, fp: Array, stribeck: bool,
-                  offset: Array, dt: float, gain: float, first: bool, p0: Array, integral: Array,
-                  r: Array, work: Array, noise_mean: Array, tau_ext: Array) -> None:
+                  qd: Array, friction: Array, tau_j: Array, offset: Array, dt: float,
+                  gain: float, first: bool, p0: Array, integral: Array, r: Array, work: Array,
+                  noise_mean: Array, tau_ext: Array) -> None:
     """One step of De Luca's generalized-momentum observer (in place).
 
     r = K_O·(p − p₀ − ∫(τ_j + Cᵀq̇ − g − τ_f − τ_0 + r) dt), p = (M + M_j)·q̇; r → τ_ext with
@@ -132,10 +186,8 @@ def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Arr
         coriolis: C(q, q̇), shape (n, n).
         gravity: g(q) [N·m], shape (n,).
         qd: Joint velocities [rad/s], shape (n,).
-        qd_friction: Joint velocities of the friction term [rad/s], shape (n,).
+        friction: Friction torque τ_f [N·m], shape (n,).
         tau_j: Torque from current [N·m], shape (n,).
-        fp: Friction rows, shape (8, n).
-        stribeck: Friction model flag.
         offset: τ_0 [N·m], shape (n,).
         dt: Sample period [s].
         gain: Observer gain K_O [1/s].
@@ -148,7 +200,6 @@ def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Arr
         tau_ext: Output [N·m], shape (n,).
     """
     n = qd.size
-    friction_torque(qd_friction, fp, stribeck, work)
     for i in range(n):
         p = rotor[i] * qd[i]
         ctq = 0.0
@@ -157,7 +208,7 @@ def momentum_step(mass_upper: Array, rotor: Array, coriolis: Array, gravity: Arr
             ctq += coriolis[k, i] * qd[k]
         if first:
             p0[i] = p
-        beta = tau_j[i] + ctq - gravity[i] - work[i] - offset[i]
+        beta = tau_j[i] + ctq - gravity[i] - friction[i] - offset[i]
         integral[i] += (beta + r[i]) * dt
         work[i] = p
     for i in range(n):

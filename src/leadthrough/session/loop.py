@@ -108,6 +108,8 @@ def run_session(
         raise ControlError("must be > 0", field="duration_s", value=duration_s,
                            expected="> 0 s")
     n, steps = driver.n, round(duration_s / dt)
+    settle_s = controller.config.settle_s
+    rezero_samples = round(controller.config.rezero_s / dt)
     rec = _Buffers(steps, n, applied_wrench is not None)
     fb, cmd = driver.make_feedback(), driver.make_command()
     e_in, e_out = estimator.make_input(), estimator.make_output()
@@ -148,6 +150,9 @@ def run_session(
             held = True if deadman is None else deadman(t_loop)
             c_in.deadman = held and e_out.status == Status.OK
             controller.update(c_in, c_out)
+            if rezero_samples:
+                _zero_velocity_update(estimator, c_out.rest_s, settle_s, controller.config.dt,
+                                      rezero_samples)
             interpolator.set_target(c_out.q, c_out.qd)
         interpolator.update(cmd)
         elapsed = (time.perf_counter() - t0) * 1e6
@@ -165,6 +170,17 @@ def run_session(
     log = rec.to_log(controller.robot.name, events, settings or {})
     return LoopResult(log=log, cycle_us=cycle_us[:k_cycle],
                       servo_us=servo_us[np.arange(steps) % every != 0])
+
+
+def _zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
+                          cycle_s: float, samples: int) -> None:
+    """Re-zero the estimator once the commanded motion has been at rest for ``settle_s``
+    (in the first controller cycle past it); abandon the re-zero if the motion restarts."""
+    if rest_s == 0.0:
+        if estimator.rezeroing:
+            estimator.cancel_rezero()
+    elif settle_s <= rest_s < settle_s + cycle_s:
+        estimator.rezero(samples)
 
 
 def _transition(e: Event) -> SessionEvent:

@@ -3,7 +3,8 @@
 * :func:`check_hold`: commanded pose held under gravity; currents vs the gravity torque through
   the drive model, i = τ_g / (R·Kt).
 * :func:`check_push`: a constant force at the TCP changes the currents by −J^T·F / (R·Kt) (the
-  motors oppose the push, so the estimated external torque τ̂_d − τ̂_j of eq. 27 equals +J^T·F).
+  motors oppose the push, so the estimated external torque τ̂_d − τ̂_j of eq. 27 equals +J^T·F),
+  plus the change of the gears' friction (presliding hysteresis, reported separately).
 
 "Within the noise" means: the error of the averaged current is well below the per-sample current
 noise σ. The averaging windows are seconds long because the sensor noise has a slow component
@@ -71,6 +72,9 @@ class PushCheck:
         expected_delta: −J^T·F / (R·Kt) at the pose [A], shape (n,).
         noise_sigma: Per-sample current noise σ [A], shape (n,).
         max_deflection: Max joint deflection during the push [rad].
+        friction_delta: Change of the drive train's true friction torque, as current
+            Δτ_f / (R·Kt) [A], shape (n,): the presliding hysteresis of the gears keeps part
+            of the deflection's friction after the servo has pulled the joint back.
     """
 
     wrench_base: Array
@@ -78,11 +82,20 @@ class PushCheck:
     expected_delta: Array
     noise_sigma: Array
     max_deflection: float
+    friction_delta: Array
 
     @property
     def error_in_sigma(self) -> Array:
-        """|Δ − expected| / σ per joint."""
-        return np.abs(self.delta_current - self.expected_delta) / self.noise_sigma
+        """|Δ − expected − friction change| / σ per joint."""
+        return (np.abs(self.delta_current - self.expected_delta - self.friction_delta)
+                / self.noise_sigma)
+
+    @property
+    def presliding_share(self) -> float:
+        """max |friction change| / max |expected change|: how much of the push the gears'
+        presliding friction carries."""
+        return float(np.max(np.abs(self.friction_delta))
+                     / max(float(np.max(np.abs(self.expected_delta))), 1e-300))
 
 
 def tcp_jacobian(robot: Robot, q: Array) -> Array:
@@ -145,17 +158,27 @@ def check_push(
     w = np.asarray(wrench_base, dtype=float)
     sim = SimRobot(robot, config, q0=q0,
                    operator=ConstantWrench(tuple(w.tolist()), t_start=before))
-    log = hold(sim, before + settle + window)
     dt = config.timestep
-    pre = log.current[int(0.5 / dt): int(before / dt)].mean(axis=0)
-    post = log.current[int((before + settle) / dt):].mean(axis=0)
+    steps = round((before + settle + window) / dt)
+    current = np.empty((steps, robot.n))
+    friction = np.empty((steps, robot.n))
+    deflection = 0.0
+    for k in range(steps):
+        sim.step()
+        current[k] = sim.read().current
+        friction[k] = sim.true_friction_torque
+        deflection = max(deflection, float(np.max(np.abs(sim.true_state()[0] - q0))))
+    pre = slice(int(0.5 / dt), int(before / dt))
+    post = slice(int((before + settle) / dt), steps)
     expected = -robot.torque_to_current(tcp_jacobian(robot, q0).T @ w)
     return PushCheck(
         wrench_base=w,
-        delta_current=post - pre,
+        delta_current=current[post].mean(axis=0) - current[pre].mean(axis=0),
         expected_delta=expected,
         noise_sigma=sim.truth.current_noise,
-        max_deflection=float(np.max(np.abs(log.truth.q - q0))),
+        max_deflection=deflection,
+        friction_delta=robot.torque_to_current(friction[post].mean(axis=0)
+                                               - friction[pre].mean(axis=0)),
     )
 
 

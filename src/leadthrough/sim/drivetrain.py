@@ -4,20 +4,30 @@ Per joint, all joint-side torques [N·m]:
 
 * motor-side friction: Coulomb + Stribeck (exp(−(R·q̇/q̇sm)²), motor speed) + viscous;
 * gear-side friction: Coulomb + Stribeck (exp(−(q̇/q̇sg)²), joint speed) + viscous;
-* a dynamic, LuGre-type bristle component (presliding hysteresis and frictional lag):
-  ż = q̇ − |q̇|·z/z_ss,  F = σ0·z + σ1·ż with σ0 = g_d / z_ss;
 * a load-dependent Coulomb part μ·|τ_transmitted| (gear tooth friction grows with load);
 * a position-dependent ripple (gear meshing): the static friction is modulated by
   1 + ε·sin(k·R·q + ϕ), k mesh periods per motor revolution;
 * rotor inertia R²·J_motor as MuJoCo armature.
 
-The static (Coulomb + Stribeck + load + ripple) part is applied as MuJoCo ``dof_frictionloss``,
-updated every step, so sticking is solved implicitly by MuJoCo's constraint solver; viscous
-friction is MuJoCo joint damping (implicit in the integrator); the bristle force is applied
-explicitly with an exact exponential update of z, which is unconditionally stable.
+All of the non-viscous friction (Coulomb + Stribeck + load + ripple, level g) acts through the
+LuGre bristle model (Canudas de Wit et al. 1995), which gives presliding: below breakaway a
+gear behaves like a stiff spring with memory, not like a rigid lock::
+
+    ż = q̇ − |q̇|·z / z_ss(q̇),   z_ss = g / σ0,   F = σ0·z + σ1·e^{−(q̇/q̇_d)²}·ż
+
+σ0 = g_static / presliding (the static level is reached after the presliding displacement), and
+σ1 damps the presliding oscillation (a fraction of critical for the joint's inertia; it fades
+out with speed, Olsson's modification, so it adds no viscous friction in sliding). This matters
+in position mode: the servo's integrator holds the commanded position, so in steady state a
+push changes the motor current by the full push even at standstill, and a stopped joint does
+not hunt (a rigid Coulomb lock plus integral action gives a stick-slip limit cycle instead).
+
+z is advanced with the exact exponential solution for constant q̇ over the step, which is
+unconditionally stable; the bristle force is applied explicitly (its stiffness is far below the
+1 kHz step's limit). Viscous friction is MuJoCo joint damping (implicit in the integrator).
 
 Only f1 ≈ Coulomb_total + g_d, f2, q̇sm, f3, q̇sg and f4 ≈ viscous_total are representable by
-eq. 15; the bristle dynamics, load dependence and ripple are deliberate model mismatch.
+eq. 15; the presliding dynamics, load dependence and ripple are deliberate model mismatch.
 """
 
 from __future__ import annotations
@@ -25,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
+import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.errors import SimulationError
@@ -50,9 +61,11 @@ class DriveTrainConfig:
         stribeck_velocity_gear: Gear-side Stribeck velocity [rad/s at the joint].
         viscous: Total viscous friction at the joint's velocity limit [-].
         viscous_motor_share: Share of the viscous friction on the motor side [-].
-        bristle: Steady-state bristle (LuGre) friction g_d [-].
-        bristle_presliding: Presliding displacement z_ss [rad at the joint].
-        bristle_damping_ratio: σ1 as a multiple of σ0·(z_ss per rad/s) [-]; small.
+        bristle: Extra velocity-independent friction g_d [-] (adds to Coulomb).
+        bristle_presliding: Presliding displacement at the static level [rad at the joint].
+        bristle_damping_ratio: σ1 as a fraction of critical damping of the presliding spring
+            with the joint's nominal inertia [-].
+        bristle_damping_velocity: Speed q̇_d above which σ1 fades out [rad/s at the joint].
         load_coefficient: μ, extra Coulomb friction per N·m transmitted [-].
         ripple: Relative amplitude ε of the mesh ripple of the static friction [-].
         ripple_periods_per_motor_rev: Mesh periods per motor revolution k [-].
@@ -70,7 +83,8 @@ class DriveTrainConfig:
     viscous_motor_share: float = 0.5
     bristle: float = 0.003
     bristle_presliding: float = 2e-4
-    bristle_damping_ratio: float = 0.02
+    bristle_damping_ratio: float = 0.7
+    bristle_damping_velocity: float = 0.01
     load_coefficient: float = 0.01
     ripple: float = 0.05
     ripple_periods_per_motor_rev: float = 2.0
@@ -83,7 +97,8 @@ class DriveTrainConfig:
             if not (np.isfinite(v) and v >= 0.0):
                 raise SimulationError("must be finite and >= 0", field=f"drive.{f.name}",
                                       value=v, expected="a finite number >= 0")
-        for name in ("stribeck_velocity_motor", "stribeck_velocity_gear", "bristle_presliding"):
+        for name in ("stribeck_velocity_motor", "stribeck_velocity_gear", "bristle_presliding",
+                     "bristle_damping_velocity"):
             if getattr(self, name) <= 0.0:
                 raise SimulationError("must be > 0", field=f"drive.{name}",
                                       value=getattr(self, name), expected="> 0")
@@ -103,7 +118,8 @@ class DriveTrainTruth:
         stribeck_velocity_motor: [rad/s motor]. stribeck_velocity_gear: [rad/s joint].
         viscous: Total viscous friction [N·m·s/rad].
         bristle: g_d [N·m]. bristle_stiffness: σ0 [N·m/rad]. bristle_damping: σ1 [N·m·s/rad].
-        bristle_presliding: z_ss [rad].
+        bristle_presliding: Presliding displacement at the static level [rad].
+        bristle_damping_velocity: q̇_d [rad/s].
         load_coefficient: μ [-]. ripple: ε [-]. ripple_frequency: k·R [periods/rad joint].
         ripple_phase: ϕ [rad].
     """
@@ -120,6 +136,7 @@ class DriveTrainTruth:
     bristle_stiffness: Array
     bristle_damping: Array
     bristle_presliding: Array
+    bristle_damping_velocity: Array
     load_coefficient: Array
     ripple: Array
     ripple_frequency: Array
@@ -158,21 +175,30 @@ def sample_drive_truth(
 
     bristle = draw(config.bristle) * tmax
     z_ss = draw(config.bristle_presliding)
-    sigma0 = bristle / z_ss
+    armature = robot.reflected_rotor_inertia * (
+        1.0 + config.rotor_inertia_spread * rng.uniform(-1.0, 1.0, n))
+    coulomb_motor = draw(config.coulomb_motor) * tmax
+    coulomb_gear = draw(config.coulomb_gear) * tmax
+    stribeck_motor = draw(config.stribeck_motor) * tmax
+    stribeck_gear = draw(config.stribeck_gear) * tmax
+    static = coulomb_motor + coulomb_gear + stribeck_motor + stribeck_gear + bristle
+    sigma0 = static / z_ss
+    q_mid = 0.5 * (robot.lower_limits + robot.upper_limits)
+    inertia = np.diag(pin.crba(robot.model, robot.model.createData(), q_mid)) + armature
     return DriveTrainTruth(
-        armature=robot.reflected_rotor_inertia
-        * (1.0 + config.rotor_inertia_spread * rng.uniform(-1.0, 1.0, n)),
-        coulomb_motor=draw(config.coulomb_motor) * tmax,
-        coulomb_gear=draw(config.coulomb_gear) * tmax,
-        stribeck_motor=draw(config.stribeck_motor) * tmax,
-        stribeck_gear=draw(config.stribeck_gear) * tmax,
+        armature=armature,
+        coulomb_motor=coulomb_motor,
+        coulomb_gear=coulomb_gear,
+        stribeck_motor=stribeck_motor,
+        stribeck_gear=stribeck_gear,
         stribeck_velocity_motor=draw(config.stribeck_velocity_motor),
         stribeck_velocity_gear=draw(config.stribeck_velocity_gear),
         viscous=draw(config.viscous) * tmax / robot.velocity_limit,
         bristle=bristle,
         bristle_stiffness=sigma0,
-        bristle_damping=config.bristle_damping_ratio * sigma0 * z_ss,
+        bristle_damping=2.0 * config.bristle_damping_ratio * np.sqrt(sigma0 * inertia),
         bristle_presliding=z_ss,
+        bristle_damping_velocity=np.full(n, config.bristle_damping_velocity),
         load_coefficient=draw(config.load_coefficient),
         ripple=draw(config.ripple),
         ripple_frequency=config.ripple_periods_per_motor_rev * robot.gear_ratio,
@@ -193,22 +219,25 @@ class DriveTrain:
         n = gear_ratio.size
         self._a_motor = gear_ratio / truth.stribeck_velocity_motor
         self._a_gear = 1.0 / truth.stribeck_velocity_gear
-        self._coulomb = truth.coulomb_motor + truth.coulomb_gear
-        self._inv_zss = 1.0 / truth.bristle_presliding
+        self._a_damp = 1.0 / truth.bristle_damping_velocity
+        self._coulomb = truth.coulomb_motor + truth.coulomb_gear + truth.bristle
+        # no static friction at all (σ0 = 0): the bristle force is identically zero
+        self._inv_sigma0 = np.divide(1.0, truth.bristle_stiffness,
+                                     out=np.zeros(n), where=truth.bristle_stiffness > 0.0)
         self.z = np.zeros(n)
         self.static = np.zeros(n)
-        self.bristle_force = np.zeros(n)
+        self.friction = np.zeros(n)
         self._t1 = np.zeros(n)
         self._t2 = np.zeros(n)
         self._z_old = np.zeros(n)
 
     def reset(self) -> None:
-        """Zero the bristle state."""
+        """Zero the bristle state (no friction carried at rest)."""
         self.z[:] = 0.0
-        self.bristle_force[:] = 0.0
+        self.friction[:] = 0.0
 
     def update(self, q: Array, qd: Array, transmitted: Array, dt: float) -> None:
-        """Advance one step: fills :attr:`static` (friction-loss level) and :attr:`bristle_force`.
+        """Advance one step: fills :attr:`static` (friction level g) and :attr:`friction`.
 
         Args:
             q: True joint positions [rad], shape (n,).
@@ -242,19 +271,27 @@ class DriveTrain:
         np.abs(transmitted, out=t1)
         t1 *= tr.load_coefficient
         st += t1
-        # Bristle: dz/dt = v - |v| z / z_ss, exact for constant v over the step.
+        # Bristles: dz/dt = v - |v| z / z_ss with z_ss = g / σ0, exact for constant v.
         self._z_old[:] = self.z
+        np.multiply(st, self._inv_sigma0, out=t2)      # z_ss(v) [rad]
+        np.maximum(t2, 1e-15, out=t2)
         np.abs(qd, out=t1)
-        t1 *= self._inv_zss
-        np.multiply(t1, -dt, out=t2)
-        np.exp(t2, out=t2)                   # decay factor
-        np.sign(qd, out=t1)
-        np.divide(t1, self._inv_zss, out=t1)  # steady state z = sgn(v)·z_ss
-        self.z -= t1
-        self.z *= t2
-        self.z += t1
-        # Bristle force σ0·z + σ1·ż.
+        t1 *= -dt
+        t1 /= t2
+        np.exp(t1, out=t1)                             # decay factor
+        np.sign(qd, out=self.friction)
+        t2 *= self.friction                            # steady state sgn(v)·z_ss
+        self.z -= t2
+        self.z *= t1
+        self.z += t2
+        # F = σ0·z + σ1·exp(-(v/v_d)²)·ż.
+        np.multiply(qd, self._a_damp, out=t1)
+        np.square(t1, out=t1)
+        np.negative(t1, out=t1)
+        np.exp(t1, out=t1)
+        t1 *= tr.bristle_damping
         np.subtract(self.z, self._z_old, out=t2)
-        t2 *= tr.bristle_damping / dt
-        np.multiply(self.z, tr.bristle_stiffness, out=self.bristle_force)
-        self.bristle_force += t2
+        t2 *= 1.0 / dt
+        t2 *= t1
+        np.multiply(self.z, tr.bristle_stiffness, out=self.friction)
+        self.friction += t2

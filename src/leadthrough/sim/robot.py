@@ -56,8 +56,6 @@ class SimConfig:
         drive: How the true drive train is drawn.
         sensors: Sensor noise model.
         servo_bandwidth_hz: Velocity-loop bandwidth of the position servo [Hz].
-        friction_timeconst: Time constant of MuJoCo's friction-loss constraint [s] (stiffness of
-            sticking; must be >= 2 timesteps).
     """
 
     seed: int = 0
@@ -67,7 +65,6 @@ class SimConfig:
     drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
     servo_bandwidth_hz: float = 20.0
-    friction_timeconst: float = 0.004
 
     def __post_init__(self) -> None:
         if self.seed < 0 or self.run < 0:
@@ -83,10 +80,6 @@ class SimConfig:
             raise SimulationError("out of range", field="servo_bandwidth_hz",
                                   value=self.servo_bandwidth_hz,
                                   expected=f"0 < bandwidth <= {0.1 / self.timestep:g} Hz")
-        if self.friction_timeconst < 2.0 * self.timestep:
-            raise SimulationError("too stiff for the timestep", field="friction_timeconst",
-                                  value=self.friction_timeconst,
-                                  expected=f">= {2.0 * self.timestep:g} s")
 
 
 @dataclass(frozen=True)
@@ -193,8 +186,6 @@ class SimRobot:
         self.mj_model = build_mujoco_model(
             self.robot, list(self.truth.inertias), armature=self.truth.drive.armature,
             damping=self.truth.drive.viscous, timestep=cfg.timestep, payload=self.payload)
-        self.mj_model.dof_solref[:, 0] = cfg.friction_timeconst
-        self.mj_model.dof_solref[:, 1] = 1.0
         self.mj_data = mujoco.MjData(self.mj_model)
         self._tcp_site = mujoco.mj_name2id(self.mj_model, mujoco.mjtObj.mjOBJ_SITE, TCP_SITE)
         self._tcp_body = int(self.mj_model.site_bodyid[self._tcp_site])
@@ -275,9 +266,8 @@ class SimRobot:
         self._i_meas[:] = self._sensor.read(current, self._speed)
         np.multiply(current, self._tpa, out=self._tau_motor)
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
-        m.dof_frictionloss[:] = self._drive.static
         mujoco.mj_step1(m, d)
-        np.subtract(self._tau_motor, self._drive.bristle_force, out=d.qfrc_applied)
+        np.subtract(self._tau_motor, self._drive.friction, out=d.qfrc_applied)
         if self.operator is not None:
             self._apply_operator()
         elif self._tau_ext.any():
@@ -316,6 +306,11 @@ class SimRobot:
     def true_current(self) -> Array:
         """Actual motor current of the last step, before the sensor [A] (simulator truth)."""
         return self._i_true.copy()
+
+    @property
+    def true_friction_torque(self) -> Array:
+        """Drive-train friction torque (all but viscous) of the last step [N·m] (truth)."""
+        return self._drive.friction.copy()
 
     @property
     def true_external_torque(self) -> Array:
