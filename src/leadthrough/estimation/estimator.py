@@ -214,7 +214,6 @@ class ExternalForceEstimator:
         self._integral = np.zeros(n)
         self._r = np.zeros(n)
         self._work = np.zeros(n)
-        self._sign = np.zeros(n)
         self._friction = np.zeros(n)
         self._presliding = np.zeros(n)
         self._qd_drive = np.zeros(n)
@@ -281,8 +280,8 @@ class ExternalForceEstimator:
         q, qd, qdd = self._diff.position, self._diff.velocity, self._diff.acceleration
         np.multiply(inp.current, self._tpa, out=self._tau_j)
         mdl = self.model
-        fr = self._friction
         if self._fric_cmd:
+            fr = self._friction
             # driven by the command while it moves, by the measured motion when it is at rest
             np.copyto(self._qd_drive, qd)
             np.copyto(self._qd_drive, inp.qd_cmd, where=inp.qd_cmd != 0.0)
@@ -290,15 +289,14 @@ class ExternalForceEstimator:
                                              self.config.dt, self.config.presliding_rad,
                                              self._presliding, fr)
         else:
-            kernels.smooth_sign(qd, mdl.friction_rows, self._sign)
-            kernels.friction_torque(qd, self._sign, mdl.friction_rows, mdl.stribeck, fr)
+            fr = mdl.friction_torque(qd)
         if self._direct:
             rnea = pin.rnea(mdl.model, mdl.data, q, qd, qdd)
             kernels.direct_residual(rnea, fr, qdd, self._tau_j, mdl.rotor, mdl.offset,
                                     self._lpf.alpha, self._lpf.value, self._noise_mean,
                                     out.tau_ext)
         else:
-            self._momentum(q, qd, out.tau_ext)
+            self._momentum(q, qd, fr, out.tau_ext)
         out.tau_ext -= self._tare
         self._wrench(q, out)
         out.qd[:] = qd
@@ -367,13 +365,13 @@ class ExternalForceEstimator:
         """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
         return self._tare.copy()
 
-    def _momentum(self, q: Array, qd: Array, tau_ext: Array) -> None:
+    def _momentum(self, q: Array, qd: Array, friction: Array, tau_ext: Array) -> None:
         mdl = self.model
         m, d = mdl.model, mdl.data
         M = pin.crba(m, d, q)  # upper triangle only
         C = pin.computeCoriolisMatrix(m, d, q, qd)
         g = pin.computeGeneralizedGravity(m, d, q)
-        kernels.momentum_step(M, mdl.rotor, C, g, qd, self._friction, self._tau_j,
+        kernels.momentum_step(M, mdl.rotor, C, g, qd, friction, self._tau_j,
                               mdl.offset, self.config.dt,
                               self._k_obs, self._samples == 0, self._p0, self._integral, self._r,
                               self._work, self._noise_mean, tau_ext)

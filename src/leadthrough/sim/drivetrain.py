@@ -35,11 +35,11 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
+from leadthrough.sim.servo import mid_range_link_inertia
 
 __all__ = ["DriveTrain", "DriveTrainConfig", "DriveTrainTruth", "sample_drive_truth"]
 
@@ -183,8 +183,7 @@ def sample_drive_truth(
     stribeck_gear = draw(config.stribeck_gear) * tmax
     static = coulomb_motor + coulomb_gear + stribeck_motor + stribeck_gear + bristle
     sigma0 = static / z_ss
-    q_mid = 0.5 * (robot.lower_limits + robot.upper_limits)
-    inertia = np.diag(pin.crba(robot.model, robot.model.createData(), q_mid)) + armature
+    inertia = mid_range_link_inertia(robot) + armature
     return DriveTrainTruth(
         armature=armature,
         coulomb_motor=coulomb_motor,

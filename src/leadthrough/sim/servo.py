@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from leadthrough.robot.description import Robot
 
-__all__ = ["CascadedServo", "ServoGains", "design_servo_gains"]
+__all__ = ["CascadedServo", "ServoGains", "design_servo_gains", "mid_range_link_inertia"]
 
 Array = NDArray[np.float64]
 
@@ -45,6 +45,13 @@ class ServoGains:
     ki: Array
 
 
+def mid_range_link_inertia(robot: Robot) -> Array:
+    """Diagonal of the nominal links' mass matrix at the middle of the joint ranges, the
+    inertia each joint sees without its rotor [kg·m²], shape (n,)."""
+    q = 0.5 * (robot.lower_limits + robot.upper_limits)
+    return np.diag(pin.crba(robot.model, robot.model.createData(), q)).copy()
+
+
 def design_servo_gains(robot: Robot, bandwidth_hz: float = 20.0) -> ServoGains:
     """Gains from the nominal joint inertia and a velocity-loop bandwidth.
 
@@ -55,10 +62,7 @@ def design_servo_gains(robot: Robot, bandwidth_hz: float = 20.0) -> ServoGains:
     Returns:
         The gains.
     """
-    q = 0.5 * (robot.lower_limits + robot.upper_limits)
-    data = robot.model.createData()
-    M = pin.crba(robot.model, data, q)
-    inertia = np.diag(M).copy() + robot.reflected_rotor_inertia
+    inertia = mid_range_link_inertia(robot) + robot.reflected_rotor_inertia
     w = 2.0 * np.pi * bandwidth_hz
     kv = inertia * w
     return ServoGains(kp=np.full(robot.n, w / 4.0), kv=kv, ki=kv * w / 4.0)
