@@ -41,6 +41,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from leadthrough.control import kernels
 from leadthrough.control.admittance import AdmittanceLaw
 from leadthrough.control.auto_friction import AutoFriction
 from leadthrough.control.guiding_types import (
@@ -295,12 +296,12 @@ class GuidingController:
     def _integrate(self, twist: Array) -> pin.SE3:
         """Pose after one cycle of ``twist``: tool frame T·exp6(ν·dt); base frame (axes of the
         base at the TCP) p + v·dt and exp3(ω·dt)·R (the TCP point moves with v)."""
-        np.multiply(twist, self.config.dt, out=self._vdt)
         T = self._T_cmd
         if self._tool:
+            np.multiply(twist, self.config.dt, out=self._vdt)
             return T * pin.exp6(self._vdt)
-        np.matmul(pin.exp3(self._vdt[3:]), T.rotation, out=self._R)
-        np.add(T.translation, self._vdt[:3], out=self._p)
+        kernels.integrate_base(T.rotation, T.translation, twist, self.config.dt, self._R,
+                               self._p)
         return pin.SE3(self._R, self._p)
 
     def _write(self, out: GuidingOutput, scale: float) -> None:
@@ -311,15 +312,7 @@ class GuidingController:
         out.qd[:] = self._qd_cmd
         out.transform_tool_to_base[:3, :3] = R
         out.transform_tool_to_base[:3, 3] = T.translation
-        tw = self._twist
-        if self._tool:
-            out.twist_tool[:] = tw
-            np.matmul(R, tw[:3], out=out.twist_base[:3])
-            np.matmul(R, tw[3:], out=out.twist_base[3:])
-        else:
-            out.twist_base[:] = tw
-            np.matmul(tw[:3], R, out=out.twist_tool[:3])
-            np.matmul(tw[3:], R, out=out.twist_tool[3:])
+        kernels.rotate_twist(R, self._twist, self._tool, out.twist_base, out.twist_tool)
         out.wrench[:] = self._wrench
         out.friction[:] = self._friction
         out.stopping_friction[:] = self._stop_friction

@@ -30,6 +30,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from leadthrough.control import kernels
 from leadthrough.errors import ControlError, check_fields, check_period
 from leadthrough.estimation.kernels import damping_of
 from leadthrough.robot.description import Robot
@@ -138,14 +139,7 @@ class DifferentialIK:
         #: λ of the damped least squares at the last q.
         self.damping = 0.0
         self._JJt = np.zeros((6, 6))
-        self._A = np.zeros((6, 6))
-        self._nu = np.zeros(6)
-        self._tmp = np.zeros(n)
-        self._abs = np.zeros(n)
-        self._dist = np.zeros(n)
         self._half_inv_a = 0.5 / self._amax
-        self._neg = np.zeros(n, dtype=bool)
-        self._ok = np.zeros(n, dtype=bool)
 
     def make_result(self) -> IKResult:
         """A preallocated result."""
@@ -157,9 +151,7 @@ class DifferentialIK:
         pin.computeJointJacobians(m, d, q)
         self.transform_tool_to_base = pin.updateFramePlacement(m, d, self._fid)
         self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
-        np.matmul(self.jacobian, self.jacobian.T, out=self._JJt)
-        det = float(np.linalg.det(self._JJt))
-        self.manipulability = math.sqrt(det) if det > 0.0 else 0.0
+        self.manipulability = kernels.gram_manipulability(self.jacobian, self._JJt)
         self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
                                    self.config.max_damping)
 
@@ -189,73 +181,8 @@ class DifferentialIK:
         """
         err = pin.log6(self.transform_tool_to_base.actInv(target)).vector
         out.residual = math.sqrt(float(np.dot(err, err)))
-        np.multiply(err, 1.0 / self.dt, out=self._nu)
-        A = self._JJt
-        if self.damping > 0.0:
-            A = self._A
-            A[:] = self._JJt
-            A.flat[::7] += self.damping * self.damping
-        y = np.linalg.solve(A, self._nu)
-        qd = out.qd
-        np.matmul(self.jacobian.T, y, out=qd)
-        scale = 1.0
-        # joint acceleration: shorten the change of q̇ (one factor for all joints)
-        np.subtract(qd, qd_previous, out=self._tmp)
-        np.abs(self._tmp, out=self._abs)
-        np.divide(self._abs, self._dv, out=self._abs)
-        ratio = float(self._abs.max())
-        if ratio > 1.0:
-            self._tmp *= 1.0 / ratio
-            np.add(qd_previous, self._tmp, out=qd)
-            scale = 1.0 / ratio
-        # joint speed and position: braking distance to the margin, one factor for all joints
-        s = self._bound_scale(q, qd)
-        if s < 1.0:
-            qd *= s
-            scale *= s
+        scale = kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt, q,
+                                 qd_previous, self.lower, self.upper, self._vmax, self._dv,
+                                 self._half_inv_a, out.qd, out.q)
         out.scale = scale
         out.limited = scale < 1.0
-        np.multiply(qd, self.dt, out=out.q)
-        out.q += q
-
-    def _braking_speed(self, dist: float, dv: float) -> float:
-        """Largest speed from which the discrete stop ends within ``dist``.
-
-        Lowering the speed v by dv = a·dt per cycle (position advanced with the new speed of each
-        cycle) travels dt·Σ_i max(v − i·dv, 0). Writing v = dv·(m + f), m integer, f ∈ [0, 1],
-        that is a·dt²·(m + 1)(m/2 + f); solved for the largest v with D = dist/(a·dt²). From
-        there the next cycle's bound is exactly v − dv, so braking never exceeds a.
-        """
-        D = dist / (dv * self.dt)
-        m = math.floor(0.5 * (math.sqrt(1.0 + 8.0 * D) - 1.0))
-        f = min(max(D / (m + 1) - 0.5 * m, 0.0), 1.0)
-        return dv * (m + f)
-
-    def _bound_scale(self, q: Array, qd: Array) -> float:
-        # fast path: every joint within its speed limit and at least v²/(2a) + |v|·dt (an upper
-        # bound of the discrete braking distance) from its bound in the direction it moves
-        ab, d, t = self._abs, self._dist, self._tmp
-        np.abs(qd, out=ab)
-        np.subtract(self.upper, q, out=d)
-        np.subtract(q, self.lower, out=t)
-        np.copyto(d, t, where=np.less(qd, 0.0, out=self._neg))
-        np.multiply(ab, self._half_inv_a, out=t)
-        t += self.dt
-        t *= ab
-        if not (np.less_equal(t, d, out=self._ok).all()
-                and np.less_equal(ab, self._vmax, out=self._ok).all()):
-            return self._bound_scale_exact(q, qd)
-        return 1.0
-
-    def _bound_scale_exact(self, q: Array, qd: Array) -> float:
-        s = 1.0
-        for j in range(self.n):
-            v = float(qd[j])
-            if v == 0.0:
-                continue
-            dist = float(self.upper[j] - q[j]) if v > 0.0 else float(q[j] - self.lower[j])
-            dist = max(dist, 0.0)
-            bound = min(float(self._vmax[j]), self._braking_speed(dist, float(self._dv[j])))
-            if abs(v) > bound:
-                s = min(s, bound / abs(v))
-        return s

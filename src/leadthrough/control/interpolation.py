@@ -27,6 +27,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control import kernels
 from leadthrough.errors import ControlError, check_period
 
 __all__ = [
@@ -127,7 +128,6 @@ class HermiteInterpolator:
         self._p1 = np.zeros(n)
         self._v1 = np.zeros(n)
         self._dp = np.zeros(n)
-        self._tmp = np.zeros(n)
         self._q = np.zeros(n)       # last command
         self._qd = np.zeros(n)
         self._k = substeps
@@ -168,18 +168,9 @@ class HermiteInterpolator:
             self._qd[:] = self._v1
             status = InterpolatorStatus.FINISHED
         else:
-            q, qd, tmp = self._q, self._qd, self._tmp
-            np.multiply(self._dp, self._c01[k], out=q)
-            np.multiply(self._v0, self._c10[k], out=tmp)
-            q += tmp
-            np.multiply(self._v1, self._c11[k], out=tmp)
-            q += tmp
-            q += self._p0
-            np.multiply(self._dp, self._d01[k], out=qd)
-            np.multiply(self._v0, self._d10[k], out=tmp)
-            qd += tmp
-            np.multiply(self._v1, self._d11[k], out=tmp)
-            qd += tmp
+            kernels.hermite_point(self._p0, self._v0, self._dp, self._v1, self._c01[k],
+                                  self._c10[k], self._c11[k], self._d01[k], self._d10[k],
+                                  self._d11[k], self._q, self._qd)
             status = InterpolatorStatus.WORKING
         out.q[:] = self._q
         out.qd[:] = self._qd

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control import kernels
 from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["CartesianLimits", "TwistLimiter"]
@@ -66,11 +67,6 @@ class CartesianLimits:
         return linear_speed * linear_speed / (2.0 * self.max_linear_acceleration)
 
 
-def _norm3(x: Array, i: int) -> float:
-    a, b, c = float(x[i]), float(x[i + 1]), float(x[i + 2])
-    return math.sqrt(a * a + b * b + c * c)
-
-
 class TwistLimiter:
     """Applies :class:`CartesianLimits` to a commanded twist, one controller cycle at a time.
 
@@ -86,9 +82,9 @@ class TwistLimiter:
         check_period("dt", dt, ControlError)
         self.limits = limits
         self.dt = dt
-        self._speed = (limits.max_linear_speed, limits.max_angular_speed)
-        self._step = (limits.max_linear_acceleration * dt, limits.max_angular_acceleration * dt)
-        self._delta = np.zeros(6)
+        self._speed = np.array([limits.max_linear_speed, limits.max_angular_speed])
+        self._step = np.array([limits.max_linear_acceleration * dt,
+                               limits.max_angular_acceleration * dt])
 
     def limit(self, previous: Array, desired: Array, speed_scale: float, out: Array) -> bool:
         """Limit speed and acceleration.
@@ -102,26 +98,8 @@ class TwistLimiter:
         Returns:
             Whether a limit was active.
         """
-        if out is not desired:
-            out[:] = desired
-        active = False
-        for part in (0, 1):
-            i = 3 * part
-            cap = self._speed[part] * speed_scale
-            norm = _norm3(out, i)
-            if norm > cap:
-                out[i:i + 3] *= cap / norm          # norm > cap >= 0
-                active = True
-        np.subtract(out, previous, out=self._delta)
-        for part in (0, 1):
-            i = 3 * part
-            step = self._step[part]
-            norm = _norm3(self._delta, i)
-            if norm > step:
-                self._delta[i:i + 3] *= step / norm
-                active = True
-        np.add(previous, self._delta, out=out)
-        return active
+        return bool(kernels.limit_twist(previous, desired, self._speed, self._step,
+                                        speed_scale, out))
 
     def decelerate(self, previous: Array, out: Array) -> None:
         """One cycle of a stop at the acceleration limit (exactly zero once reached).
@@ -130,12 +108,4 @@ class TwistLimiter:
             previous: Twist of the last cycle, shape (6,).
             out: Result, shape (6,); may be ``previous``.
         """
-        for part in (0, 1):
-            i = 3 * part
-            step = self._step[part]
-            norm = _norm3(previous, i)
-            if norm <= step:
-                out[i:i + 3] = 0.0
-            else:
-                out[i:i + 3] = previous[i:i + 3]
-                out[i:i + 3] *= 1.0 - step / norm
+        kernels.decelerate_twist(previous, self._step, out)

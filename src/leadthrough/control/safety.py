@@ -35,6 +35,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control import kernels
 from leadthrough.control.limits import CartesianLimits
 from leadthrough.errors import ControlError, check_fields
 from leadthrough.robot.description import Robot
@@ -81,6 +82,16 @@ class Fault(IntEnum):
     TRACKING = 10
     #: ``update`` called before the first ``reset`` (no commanded position yet).
     NOT_STARTED = 11
+
+
+#: The fault of each failed check of ``kernels.feedback_fault``.
+_FEEDBACK_FAULTS: dict[int, Fault] = {
+    kernels.FEEDBACK_POSITION: Fault.POSITION_RANGE,
+    kernels.FEEDBACK_CURRENT: Fault.CURRENT_RANGE,
+    kernels.FEEDBACK_FOLLOWING: Fault.FOLLOWING_ERROR,
+    kernels.FEEDBACK_COLLISION_FORCE: Fault.COLLISION,
+    kernels.FEEDBACK_COLLISION_TORQUE: Fault.COLLISION,
+}
 
 
 class Cause(IntEnum):
@@ -204,7 +215,6 @@ class SafetySupervisor:
     def __init__(self, robot: Robot, config: SafetyConfig, limits: CartesianLimits) -> None:
         self.config = cfg = config
         self.limits = limits
-        n = robot.n
         self._mid = 0.5 * (robot.lower_limits + robot.upper_limits)
         self._half_tol = 0.5 * (robot.upper_limits - robot.lower_limits) + cfg.position_tolerance
         self._lo_margin = robot.lower_limits + cfg.joint_limit_margin
@@ -213,9 +223,7 @@ class SafetySupervisor:
         self._box_lo = np.asarray(cfg.workspace_min, dtype=float)
         self._box_hi = np.asarray(cfg.workspace_max, dtype=float)
         self._has_box = bool(np.isfinite(self._box_lo).any() or np.isfinite(self._box_hi).any())
-        self._b = np.zeros(n, dtype=bool)
-        self._b6 = np.zeros(6, dtype=bool)
-        self._x = np.zeros(n)
+        self._info = np.zeros(2)
         self.state = State.IDLE
         self.fault = Fault.NONE
         self.fault_value = math.nan
@@ -300,10 +308,7 @@ class SafetySupervisor:
             wrench: Estimated wrench [N, N·m], shape (6,), force first (any frame: norms only).
             q_commanded: Joint position commanded for now [rad], shape (n,).
         """
-        b = self._b
-        self.inputs_finite = bool(
-            math.isfinite(t) and np.isfinite(q, out=b).all()
-            and np.isfinite(current, out=b).all() and np.isfinite(wrench, out=self._b6).all())
+        self.inputs_finite = math.isfinite(t) and kernels.all_finite(q, current, wrench)
         if self.state == State.FAULT:
             return
         if not self.inputs_finite:
@@ -317,38 +322,13 @@ class SafetySupervisor:
         else:
             self._missed = 0
             self._last_seq = sequence
-        x = self._x
-        # |q − mid| > half range + tolerance: outside the limits by more than the tolerance
-        np.subtract(q, self._mid, out=x)
-        np.abs(x, out=x)
-        x -= self._half_tol
-        if float(x.max()) > 0.0:
-            j = self._worst(x)
-            self.trip(t, Fault.POSITION_RANGE, float(q[j]), j)
-            return
-        np.abs(current, out=x)
-        x -= self._max_current
-        if float(x.max()) > 0.0:
-            j = self._worst(x)
-            self.trip(t, Fault.CURRENT_RANGE, float(current[j]), j)
-            return
-        np.subtract(q, q_commanded, out=x)
-        np.abs(x, out=x)
-        if float(x.max()) > self.config.following_error_limit:
-            j = self._worst(x)
-            self.trip(t, Fault.FOLLOWING_ERROR, float(x[j]), j)
-            return
-        f, m = wrench[:3], wrench[3:]
-        force = math.sqrt(float(np.dot(f, f)))
-        torque = math.sqrt(float(np.dot(m, m)))
-        if force > self.config.max_force:
-            self.trip(t, Fault.COLLISION, force, 0)
-        elif torque > self.config.max_torque:
-            self.trip(t, Fault.COLLISION, torque, 1)
-
-    @staticmethod
-    def _worst(x: Array) -> int:
-        return int(np.argmax(x))
+        cfg, info = self.config, self._info
+        code = kernels.feedback_fault(q, current, wrench, q_commanded, self._mid,
+                                      self._half_tol, self._max_current,
+                                      cfg.following_error_limit, cfg.max_force, cfg.max_torque,
+                                      info)
+        if code != kernels.FEEDBACK_OK:
+            self.trip(t, _FEEDBACK_FAULTS[code], float(info[0]), int(info[1]))
 
     def check_motion(self, t: float, manipulability: float, q_commanded: Array,
                      qd_commanded: Array, residual: float) -> None:
@@ -367,12 +347,11 @@ class SafetySupervisor:
         if manipulability < self.config.stop_manipulability and manipulability < mu_prev:
             self.trip(t, Fault.SINGULARITY, manipulability)
             return
-        for j in range(q_commanded.shape[0]):
-            v = float(qd_commanded[j])
-            qj = float(q_commanded[j])
-            if (v > 0.0 and qj >= self._hi_margin[j]) or (v < 0.0 and qj <= self._lo_margin[j]):
-                self.trip(t, Fault.JOINT_LIMIT, qj, j)
-                return
+        j = kernels.joint_limit_index(q_commanded, qd_commanded, self._lo_margin,
+                                      self._hi_margin)
+        if j >= 0:
+            self.trip(t, Fault.JOINT_LIMIT, float(q_commanded[j]), j)
+            return
         if residual > self.config.tracking_error_limit:
             self.trip(t, Fault.TRACKING, residual)
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control import kernels
 from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["VirtualFriction", "VirtualFrictionConfig"]
@@ -88,13 +89,6 @@ class VirtualFriction:
         self.config = cfg = config if config is not None else VirtualFrictionConfig()
         self.dt = dt
         self._dt_over_m = dt / np.asarray(cfg.mass, dtype=float)
-        self._abs = np.zeros(6)
-        self._neg = np.zeros(6)
-        self._fmag = np.zeros(6)
-        self._f = np.zeros(6)
-        self._tmp = np.zeros(6)
-        self._released = np.zeros(6, dtype=bool)
-        self._rest = np.zeros(6, dtype=bool)
 
     def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
              out: Array) -> None:
@@ -107,24 +101,5 @@ class VirtualFriction:
             stopping_friction: δ_s, shape (6,) [N, N·m], ≥ δ.
             out: Desired twist, shape (6,), written in place; must not alias an input.
         """
-        f = self._f
-        # eq. 32 (moving): f = δ·sgn(v), δ_s instead of δ once the force is removed
-        np.abs(wrench, out=self._abs)
-        np.less(self._abs, friction, out=self._released)
-        self._fmag[:] = friction
-        np.copyto(self._fmag, stopping_friction, where=self._released)
-        np.sign(twist, out=self._tmp)
-        np.multiply(self._fmag, self._tmp, out=f)
-        # eq. 33 (at rest): f = F̂ clipped to ±δ, so that F̂ − f is exactly 0 below δ
-        np.negative(friction, out=self._neg)
-        np.clip(wrench, self._neg, friction, out=self._tmp)
-        np.equal(twist, 0.0, out=self._rest)
-        np.copyto(f, self._tmp, where=self._rest)
-        # eq. 31, one Euler step: v⁺ = v + dt·(F̂ − f)/M
-        np.subtract(wrench, f, out=out)
-        out *= self._dt_over_m
-        out += twist
-        # friction stops a moving axis, it never reverses it
-        np.multiply(out, twist, out=self._tmp)
-        np.less(self._tmp, 0.0, out=self._released)
-        np.copyto(out, 0.0, where=self._released)
+        kernels.virtual_friction_step(twist, wrench, friction, stopping_friction,
+                                      self._dt_over_m, out)

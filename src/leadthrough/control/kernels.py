@@ -1,0 +1,367 @@
+"""Compiled inner loops of the guiding controller (Numba, ``nopython``, cached on disk).
+
+The controller's cycle is small-vector work (6 joints, 6 axes): each NumPy call costs more in
+dispatch than in arithmetic, and the cycle needs dozens. These kernels fuse each step into one
+compiled call, with the same arithmetic as the NumPy reference they replace (the modules that
+call them document the algorithms: :mod:`~leadthrough.control.safety`,
+:mod:`~leadthrough.control.virtual_friction`, :mod:`~leadthrough.control.limits`,
+:mod:`~leadthrough.control.ik`). ``benchmarks/guiding.py`` measures the cycle.
+
+All kernels write into preallocated arrays and return a scalar or nothing; only the 6×6 solve
+and determinant allocate (inside LAPACK).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = [
+    "FEEDBACK_COLLISION_FORCE",
+    "FEEDBACK_COLLISION_TORQUE",
+    "FEEDBACK_CURRENT",
+    "FEEDBACK_FOLLOWING",
+    "FEEDBACK_OK",
+    "FEEDBACK_POSITION",
+    "all_finite",
+    "decelerate_twist",
+    "dls_step",
+    "feedback_fault",
+    "gram_manipulability",
+    "hermite_point",
+    "integrate_base",
+    "joint_limit_index",
+    "limit_twist",
+    "rotate_twist",
+    "virtual_friction_step",
+]
+
+Array = NDArray[np.float64]
+
+FEEDBACK_OK = 0
+FEEDBACK_POSITION = 1
+FEEDBACK_CURRENT = 2
+FEEDBACK_FOLLOWING = 3
+FEEDBACK_COLLISION_FORCE = 4
+FEEDBACK_COLLISION_TORQUE = 5
+
+
+@njit(cache=True, nogil=True)
+def all_finite(q: Array, current: Array, wrench: Array) -> bool:
+    """Whether every entry of the three arrays is finite."""
+    acc = 0.0    # any NaN or inf makes the sum of x·0 NaN
+    for j in range(q.size):
+        acc += q[j] * 0.0 + current[j] * 0.0
+    for j in range(wrench.size):
+        acc += wrench[j] * 0.0
+    return acc == 0.0
+
+
+@njit(cache=True, nogil=True)
+def feedback_fault(q: Array, current: Array, wrench: Array, q_commanded: Array, mid: Array,
+                   half_tolerance: Array, max_current: Array, following_limit: float,
+                   max_force: float, max_torque: float, info: Array) -> int:
+    """The range checks of the feedback, in order: position, current, following error,
+    collision force, collision torque.
+
+    Args:
+        q: Measured joint positions [rad], shape (n,).
+        current: Measured currents [A], shape (n,).
+        wrench: Estimated wrench, force first [N, N·m], shape (6,).
+        q_commanded: Commanded joint positions [rad], shape (n,).
+        mid: Middle of each joint range [rad], shape (n,).
+        half_tolerance: Half range + position tolerance [rad], shape (n,).
+        max_current: Current bound [A], shape (n,).
+        following_limit: Largest |q − q_cmd| [rad].
+        max_force: Collision force [N].
+        max_torque: Collision torque [N·m].
+        info: Output (value, index) of the first failed check, shape (2,).
+
+    Returns:
+        ``FEEDBACK_OK`` or the code of the first failed check (value and index in ``info``:
+        the joint with the largest excess, or the wrench norm and 0/1).
+    """
+    n = q.size
+    for code in range(FEEDBACK_POSITION, FEEDBACK_FOLLOWING + 1):
+        worst, jw = -math.inf, 0
+        for j in range(n):
+            if code == FEEDBACK_POSITION:
+                x = abs(q[j] - mid[j]) - half_tolerance[j]
+            elif code == FEEDBACK_CURRENT:
+                x = abs(current[j]) - max_current[j]
+            else:
+                x = abs(q[j] - q_commanded[j])
+            if x > worst:
+                worst, jw = x, j
+        if code == FEEDBACK_FOLLOWING:
+            if worst > following_limit:
+                info[0], info[1] = worst, jw
+                return code
+        elif worst > 0.0:
+            info[0] = q[jw] if code == FEEDBACK_POSITION else current[jw]
+            info[1] = jw
+            return code
+    force = math.sqrt(wrench[0] ** 2 + wrench[1] ** 2 + wrench[2] ** 2)
+    torque = math.sqrt(wrench[3] ** 2 + wrench[4] ** 2 + wrench[5] ** 2)
+    if force > max_force:
+        info[0], info[1] = force, 0.0
+        return FEEDBACK_COLLISION_FORCE
+    if torque > max_torque:
+        info[0], info[1] = torque, 1.0
+        return FEEDBACK_COLLISION_TORQUE
+    return FEEDBACK_OK
+
+
+@njit(cache=True, nogil=True)
+def virtual_friction_step(twist: Array, wrench: Array, friction: Array,
+                          stopping_friction: Array, dt_over_mass: Array, out: Array) -> None:
+    """Eq. 31–33 with the stopping friction, one Euler step per axis (see
+    :mod:`leadthrough.control.virtual_friction`).
+
+    Args:
+        twist: Twist of the last cycle, shape (6,).
+        wrench: Estimated wrench, shape (6,).
+        friction: δ, shape (6,).
+        stopping_friction: δ_s, shape (6,).
+        dt_over_mass: dt/M per axis, shape (6,).
+        out: Desired twist, shape (6,).
+    """
+    for i in range(6):
+        v, w, d = twist[i], wrench[i], friction[i]
+        if v == 0.0:
+            f = min(max(w, -d), d)            # eq. 33: static friction up to δ
+        else:
+            mag = stopping_friction[i] if abs(w) < d else d
+            f = mag if v > 0.0 else -mag      # eq. 32
+        new = (w - f) * dt_over_mass[i] + v   # eq. 31
+        out[i] = 0.0 if new * v < 0.0 else new
+
+
+@njit(cache=True, nogil=True)
+def limit_twist(previous: Array, desired: Array, max_speed: Array, max_step: Array,
+                speed_scale: float, out: Array) -> bool:
+    """Speed ball then acceleration step, per linear / angular part (see
+    :mod:`leadthrough.control.limits`).
+
+    Args:
+        previous: Twist of the last cycle, shape (6,).
+        desired: Twist asked for, shape (6,) (may be ``out``).
+        max_speed: (v_max, ω_max).
+        max_step: (a_max·dt, α_max·dt).
+        speed_scale: Factor of the speed limits.
+        out: Result, shape (6,); must not be ``previous``.
+
+    Returns:
+        Whether a limit was active.
+    """
+    active = False
+    for part in range(2):
+        i = 3 * part
+        a, b, c = desired[i], desired[i + 1], desired[i + 2]
+        cap = max_speed[part] * speed_scale
+        norm = math.sqrt(a * a + b * b + c * c)
+        k = 1.0
+        if norm > cap:
+            k = cap / norm
+            active = True
+        da = a * k - previous[i]
+        db = b * k - previous[i + 1]
+        dc = c * k - previous[i + 2]
+        step = max_step[part]
+        dnorm = math.sqrt(da * da + db * db + dc * dc)
+        if dnorm > step:
+            s = step / dnorm
+            da, db, dc = da * s, db * s, dc * s
+            active = True
+        out[i] = previous[i] + da
+        out[i + 1] = previous[i + 1] + db
+        out[i + 2] = previous[i + 2] + dc
+    return active
+
+
+@njit(cache=True, nogil=True)
+def decelerate_twist(previous: Array, max_step: Array, out: Array) -> None:
+    """One cycle of a stop at the acceleration limit, exactly zero once reached (may alias)."""
+    for part in range(2):
+        i = 3 * part
+        a, b, c = previous[i], previous[i + 1], previous[i + 2]
+        norm = math.sqrt(a * a + b * b + c * c)
+        step = max_step[part]
+        if norm <= step:
+            out[i] = out[i + 1] = out[i + 2] = 0.0
+        else:
+            k = 1.0 - step / norm
+            out[i], out[i + 1], out[i + 2] = a * k, b * k, c * k
+
+
+@njit(cache=True, nogil=True)
+def gram_manipulability(jacobian: Array, gram: Array) -> float:
+    """J Jᵀ (into ``gram``, shape (6, 6)) and μ = √det(J Jᵀ) (0 if not positive)."""
+    n = jacobian.shape[1]
+    for r in range(6):
+        for c in range(r, 6):
+            s = 0.0
+            for k in range(n):
+                s += jacobian[r, k] * jacobian[c, k]
+            gram[r, c] = s
+            gram[c, r] = s
+    det = np.linalg.det(gram)
+    return math.sqrt(det) if det > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _braking_speed(dist: float, dv: float, dt: float) -> float:
+    """Largest speed from which the discrete stop ends within ``dist``.
+
+    Lowering the speed v by dv = a·dt per cycle (position advanced with the new speed of each
+    cycle) travels dt·Σ_i max(v − i·dv, 0). Writing v = dv·(m + f), m integer, f ∈ [0, 1], that
+    is a·dt²·(m + 1)(m/2 + f); solved for the largest v with D = dist/(a·dt²). From there the
+    next cycle's bound is exactly v − dv, so braking never exceeds a.
+    """
+    d = dist / (dv * dt)
+    m = math.floor(0.5 * (math.sqrt(1.0 + 8.0 * d) - 1.0))
+    f = min(max(d / (m + 1) - 0.5 * m, 0.0), 1.0)
+    return dv * (m + f)
+
+
+@njit(cache=True, nogil=True)
+def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float,
+             q: Array, qd_previous: Array, lower: Array, upper: Array, vmax: Array,
+             dv: Array, half_inv_a: Array, qd: Array, q_next: Array) -> float:
+    """Damped least squares with the joint acceleration, speed and braking bounds (see
+    :mod:`leadthrough.control.ik`).
+
+    Args:
+        jacobian: TCP Jacobian in tool axes, shape (6, n).
+        gram: J Jᵀ, shape (6, 6) (not modified).
+        damping: λ.
+        err: log6 error to the target in tool axes, shape (6,).
+        dt: Controller cycle [s].
+        q: Joint position [rad], shape (n,).
+        qd_previous: Joint velocity of the last cycle [rad/s], shape (n,).
+        lower: Lower bounds [rad], shape (n,).
+        upper: Upper bounds [rad], shape (n,).
+        vmax: Joint speed limits [rad/s], shape (n,).
+        dv: Joint acceleration limit × dt [rad/s], shape (n,).
+        half_inv_a: 1/(2·a) per joint [s²/rad], shape (n,).
+        qd: Output joint velocity [rad/s], shape (n,).
+        q_next: Output q + q̇·dt [rad], shape (n,).
+
+    Returns:
+        The fraction of the DLS step kept by the bounds (1: none active).
+    """
+    n = q.size
+    a = gram.copy()
+    if damping > 0.0:
+        for r in range(6):
+            a[r, r] += damping * damping
+    inv_dt = 1.0 / dt
+    nu = np.empty(6)
+    for r in range(6):
+        nu[r] = err[r] * inv_dt
+    y = np.linalg.solve(a, nu)
+    ratio = 0.0
+    for j in range(n):
+        s = 0.0
+        for r in range(6):
+            s += jacobian[r, j] * y[r]
+        qd[j] = s
+        ratio = max(ratio, abs(s - qd_previous[j]) / dv[j])
+    scale = 1.0
+    if ratio > 1.0:
+        k = 1.0 / ratio
+        for j in range(n):
+            qd[j] = qd_previous[j] + (qd[j] - qd_previous[j]) * k
+        scale = k
+    # speed and braking distance to the bounds: fast path, then exact per joint
+    fast = True
+    for j in range(n):
+        v = abs(qd[j])
+        dist = upper[j] - q[j] if qd[j] >= 0.0 else q[j] - lower[j]
+        if v * (v * half_inv_a[j] + dt) > dist or v > vmax[j]:
+            fast = False
+            break
+    if not fast:
+        s_bound = 1.0
+        for j in range(n):
+            v = qd[j]
+            if v == 0.0:
+                continue
+            dist = max(upper[j] - q[j] if v > 0.0 else q[j] - lower[j], 0.0)
+            bound = min(vmax[j], _braking_speed(dist, dv[j], dt))
+            if abs(v) > bound:
+                s_bound = min(s_bound, bound / abs(v))
+        if s_bound < 1.0:
+            for j in range(n):
+                qd[j] *= s_bound
+            scale *= s_bound
+    for j in range(n):
+        q_next[j] = qd[j] * dt + q[j]
+    return scale
+
+
+@njit(cache=True, nogil=True)
+def integrate_base(rotation: Array, position: Array, twist: Array, dt: float,
+                   rotation_out: Array, position_out: Array) -> None:
+    """Pose after one cycle of a base-axes twist: p + v·dt, exp3(ω·dt)·R (Rodrigues)."""
+    wx, wy, wz = twist[3] * dt, twist[4] * dt, twist[5] * dt
+    th2 = wx * wx + wy * wy + wz * wz
+    th = math.sqrt(th2)
+    if th < 1e-8:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    e = np.empty((3, 3))
+    e[0, 0] = 1.0 - b * (wy * wy + wz * wz)
+    e[1, 1] = 1.0 - b * (wx * wx + wz * wz)
+    e[2, 2] = 1.0 - b * (wx * wx + wy * wy)
+    e[0, 1] = b * wx * wy - a * wz
+    e[1, 0] = b * wx * wy + a * wz
+    e[0, 2] = b * wx * wz + a * wy
+    e[2, 0] = b * wx * wz - a * wy
+    e[1, 2] = b * wy * wz - a * wx
+    e[2, 1] = b * wy * wz + a * wx
+    for r in range(3):
+        for c in range(3):
+            rotation_out[r, c] = (e[r, 0] * rotation[0, c] + e[r, 1] * rotation[1, c]
+                                  + e[r, 2] * rotation[2, c])
+        position_out[r] = position[r] + twist[r] * dt
+
+
+@njit(cache=True, nogil=True)
+def rotate_twist(rotation: Array, twist: Array, tool: bool, twist_base: Array,
+                 twist_tool: Array) -> None:
+    """The twist in base and tool axes from the one in the controller's frame."""
+    for part in range(2):
+        i = 3 * part
+        for r in range(3):
+            if tool:
+                twist_tool[i + r] = twist[i + r]
+                twist_base[i + r] = (rotation[r, 0] * twist[i] + rotation[r, 1] * twist[i + 1]
+                                     + rotation[r, 2] * twist[i + 2])
+            else:
+                twist_base[i + r] = twist[i + r]
+                twist_tool[i + r] = (rotation[0, r] * twist[i] + rotation[1, r] * twist[i + 1]
+                                     + rotation[2, r] * twist[i + 2])
+
+
+@njit(cache=True, nogil=True)
+def hermite_point(p0: Array, v0: Array, dp: Array, v1: Array, c01: float, c10: float,
+                  c11: float, d01: float, d10: float, d11: float, q: Array, qd: Array) -> None:
+    """One point of a cubic Hermite segment (see :mod:`leadthrough.control.interpolation`):
+    q = p0 + c01·Δp + c10·v0 + c11·v1, q̇ = d01·Δp + d10·v0 + d11·v1."""
+    for j in range(q.size):
+        q[j] = dp[j] * c01 + v0[j] * c10 + v1[j] * c11 + p0[j]
+        qd[j] = dp[j] * d01 + v0[j] * d10 + v1[j] * d11
+
+
+@njit(cache=True, nogil=True)
+def joint_limit_index(q: Array, qd: Array, lower: Array, upper: Array) -> int:
+    """First joint at or beyond a bound and moving toward it (−1: none)."""
+    for j in range(q.size):
+        if (qd[j] > 0.0 and q[j] >= upper[j]) or (qd[j] < 0.0 and q[j] <= lower[j]):
+            return j
+    return -1
