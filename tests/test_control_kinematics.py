@@ -15,6 +15,7 @@ from leadthrough.control import (
 )
 from leadthrough.control.ik import dls_damping
 from leadthrough.errors import ControlError
+from leadthrough.estimation.kernels import gram_manipulability
 from leadthrough.robot import Robot
 
 DT = 0.01
@@ -207,7 +208,7 @@ def test_compiled_manipulability_matches_numpy(er20: Robot) -> None:
     for q in [*_random_poses(er20, 10, seed=8), Q_WRIST_SINGULAR]:
         ik.compute_kinematics(q)
         J = ik.jacobian
-        mu = kernels.gram_manipulability(J, gram)
+        mu = gram_manipulability(J, gram)
         np.testing.assert_allclose(gram, J @ J.T, rtol=1e-12, atol=1e-14)
         assert mu == pytest.approx(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)), rel=1e-9,
                                    abs=1e-12)

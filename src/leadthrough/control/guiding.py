@@ -287,8 +287,7 @@ class GuidingController:
             w[:] = math.nan                                 # unknown (and the law is not run)
             return
         if self._tool:
-            np.matmul(wrench_base[:3], R, out=w[:3])      # Rᵀ·f
-            np.matmul(wrench_base[3:], R, out=w[3:])      # Rᵀ·m
+            kernels.rotate_to_tool(R, wrench_base, w)
         else:
             w[:] = wrench_base
         w *= self._mask
@@ -312,7 +311,13 @@ class GuidingController:
         out.qd[:] = self._qd_cmd
         out.transform_tool_to_base[:3, :3] = R
         out.transform_tool_to_base[:3, 3] = T.translation
-        kernels.rotate_twist(R, self._twist, self._tool, out.twist_base, out.twist_tool)
+        tw = self._twist
+        if self._tool:
+            out.twist_tool[:] = tw
+            kernels.rotate_to_base(R, tw, out.twist_base)
+        else:
+            out.twist_base[:] = tw
+            kernels.rotate_to_tool(R, tw, out.twist_tool)
         out.wrench[:] = self._wrench
         out.friction[:] = self._friction
         out.stopping_friction[:] = self._stop_friction

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from leadthrough.control import kernels
 from leadthrough.errors import ControlError, check_fields, check_period
-from leadthrough.estimation.kernels import damping_of
+from leadthrough.estimation.kernels import damping_of, gram_manipulability
 from leadthrough.robot.description import Robot
 
 __all__ = ["DifferentialIK", "IKConfig", "IKResult", "dls_damping"]
@@ -151,7 +151,7 @@ class DifferentialIK:
         pin.computeJointJacobians(m, d, q)
         self.transform_tool_to_base = pin.updateFramePlacement(m, d, self._fid)
         self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
-        self.manipulability = kernels.gram_manipulability(self.jacobian, self._JJt)
+        self.manipulability = gram_manipulability(self.jacobian, self._JJt)
         self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
                                    self.config.max_damping)
 

@@ -8,7 +8,8 @@ call them document the algorithms: :mod:`~leadthrough.control.safety`,
 :mod:`~leadthrough.control.ik`). ``benchmarks/guiding.py`` measures the cycle.
 
 All kernels write into preallocated arrays and return a scalar or nothing; only the 6×6 solve
-and determinant allocate (inside LAPACK).
+allocates (inside LAPACK). J Jᵀ and μ come from the estimator's kernels
+(:func:`leadthrough.estimation.kernels.gram_manipulability`), one formula for both.
 """
 
 from __future__ import annotations
@@ -30,12 +31,12 @@ __all__ = [
     "decelerate_twist",
     "dls_step",
     "feedback_fault",
-    "gram_manipulability",
     "hermite_point",
     "integrate_base",
     "joint_limit_index",
     "limit_twist",
-    "rotate_twist",
+    "rotate_to_base",
+    "rotate_to_tool",
     "virtual_friction_step",
 ]
 
@@ -51,7 +52,7 @@ FEEDBACK_COLLISION_TORQUE = 5
 
 @njit(cache=True, nogil=True)
 def all_finite(q: Array, current: Array, wrench: Array) -> bool:
-    """Whether every entry of the three arrays is finite."""
+    """Whether every entry of the three arrays is finite (``q`` and ``current`` of one size)."""
     acc = 0.0    # any NaN or inf makes the sum of x·0 NaN
     for j in range(q.size):
         acc += q[j] * 0.0 + current[j] * 0.0
@@ -198,21 +199,6 @@ def decelerate_twist(previous: Array, max_step: Array, out: Array) -> None:
 
 
 @njit(cache=True, nogil=True)
-def gram_manipulability(jacobian: Array, gram: Array) -> float:
-    """J Jᵀ (into ``gram``, shape (6, 6)) and μ = √det(J Jᵀ) (0 if not positive)."""
-    n = jacobian.shape[1]
-    for r in range(6):
-        for c in range(r, 6):
-            s = 0.0
-            for k in range(n):
-                s += jacobian[r, k] * jacobian[c, k]
-            gram[r, c] = s
-            gram[c, r] = s
-    det = np.linalg.det(gram)
-    return math.sqrt(det) if det > 0.0 else 0.0
-
-
-@njit(cache=True, nogil=True)
 def _braking_speed(dist: float, dv: float, dt: float) -> float:
     """Largest speed from which the discrete stop ends within ``dist``.
 
@@ -332,20 +318,27 @@ def integrate_base(rotation: Array, position: Array, twist: Array, dt: float,
 
 
 @njit(cache=True, nogil=True)
-def rotate_twist(rotation: Array, twist: Array, tool: bool, twist_base: Array,
-                 twist_tool: Array) -> None:
-    """The twist in base and tool axes from the one in the controller's frame."""
-    for part in range(2):
-        i = 3 * part
+def rotate_to_tool(rotation: Array, base: Array, tool: Array) -> None:
+    """A twist or wrench from base axes to tool axes: Rᵀ applied to each half (may not alias).
+
+    Args:
+        rotation: R, tool axes in the base frame, shape (3, 3).
+        base: 6-vector in base axes.
+        tool: Output 6-vector in tool axes.
+    """
+    for i in (0, 3):
         for r in range(3):
-            if tool:
-                twist_tool[i + r] = twist[i + r]
-                twist_base[i + r] = (rotation[r, 0] * twist[i] + rotation[r, 1] * twist[i + 1]
-                                     + rotation[r, 2] * twist[i + 2])
-            else:
-                twist_base[i + r] = twist[i + r]
-                twist_tool[i + r] = (rotation[0, r] * twist[i] + rotation[1, r] * twist[i + 1]
-                                     + rotation[2, r] * twist[i + 2])
+            tool[i + r] = (rotation[0, r] * base[i] + rotation[1, r] * base[i + 1]
+                           + rotation[2, r] * base[i + 2])
+
+
+@njit(cache=True, nogil=True)
+def rotate_to_base(rotation: Array, tool: Array, base: Array) -> None:
+    """A twist or wrench from tool axes to base axes: R applied to each half (may not alias)."""
+    for i in (0, 3):
+        for r in range(3):
+            base[i + r] = (rotation[r, 0] * tool[i] + rotation[r, 1] * tool[i + 1]
+                           + rotation[r, 2] * tool[i + 2])
 
 
 @njit(cache=True, nogil=True)

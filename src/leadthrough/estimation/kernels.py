@@ -27,6 +27,7 @@ __all__ = [
     "damping_of",
     "direct_residual",
     "friction_torque",
+    "gram_manipulability",
     "low_pass_step",
     "momentum_step",
     "presliding_friction_step",
@@ -225,6 +226,22 @@ def damping_of(mu: float, mu0: float, max_damping: float) -> float:
 
 
 @njit(cache=True, nogil=True)
+def gram_manipulability(jacobian: Array, gram: Array) -> float:
+    """J Jᵀ (into ``gram``, shape (6, 6)) and the manipulability μ = √det(J Jᵀ) (0 if not
+    positive), for the estimator's Jᵀ inverse and the controller's IK alike."""
+    n = jacobian.shape[1]
+    for r in range(6):
+        for c in range(r, 6):
+            s = 0.0
+            for k in range(n):
+                s += jacobian[r, k] * jacobian[c, k]
+            gram[r, c] = s
+            gram[c, r] = s
+    det = np.linalg.det(gram)
+    return np.sqrt(det) if det > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
 def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: bool,
                        mu0: float, max_damping: float, wrench: Array) -> float:
     """Joint torque → TCP wrench through a damped pseudo-inverse of Jᵀ (eq. 28–30, in place).
@@ -247,8 +264,8 @@ def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: b
         The manipulability μ (the damping used is :func:`damping_of` of it).
     """
     n = tau.size
-    jjt = jacobian @ jacobian.T
-    mu = np.sqrt(max(np.linalg.det(jjt), 0.0))
+    jjt = np.empty((6, 6))
+    mu = gram_manipulability(jacobian, jjt)
     lam2 = damping_of(mu, mu0, max_damping) ** 2
     if force_only:
         a = np.zeros((3, 3))
