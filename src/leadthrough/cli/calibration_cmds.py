@@ -15,8 +15,15 @@ from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
+from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
 from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
-from leadthrough.identification.api import METHODS, IdentifyConfig, evaluate, identify
+from leadthrough.identification.api import (
+    METHODS,
+    IdentifyConfig,
+    evaluate,
+    identify,
+    identify_with_sweep,
+)
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent import ConsistentConfig
 from leadthrough.identification.metrics import ResidualStats
@@ -25,6 +32,7 @@ from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.robot.urdf_export import write_urdf_with_inertias
+from leadthrough.session.sim_session import guide_start_pose
 from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import run_trajectory
@@ -40,7 +48,9 @@ def register(sub: Any) -> None:
                        description="Optimise a Fourier excitation trajectory (rest to rest) for "
                                    "identification: minimal condition number within joint, "
                                    "speed, acceleration, torque and floor limits.",
-                       epilog="example: leadthrough excite --robot er20 --duration 60 -o traj.csv")
+                       epilog="examples:\n  leadthrough excite --robot er20 --duration 60 -o "
+                              "traj.csv\n  leadthrough excite --robot er20 --sweep -o sweep.csv "
+                              " # friction sweep for identify --friction-sweep")
     p.add_argument("--robot", default="er20", help="built-in name or robot TOML")
     p.add_argument("--duration", type=float, default=60.0, help="length [s], whole periods")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start")
@@ -48,6 +58,11 @@ def register(sub: Any) -> None:
     p.add_argument("--base-frequency", type=float, default=0.1, help="f0 [Hz]")
     p.add_argument("--starts", type=int, default=4, help="random starts")
     p.add_argument("--floor", type=float, default=0.3, help="min TCP height [m]")
+    p.add_argument("--sweep", action="store_true",
+                   help="instead, a friction sweep: constant-velocity passes out and back at "
+                        "10 speeds, all joints at once (about 45 s)")
+    p.add_argument("--start", type=float, nargs="+", default=None, metavar="Q",
+                   help="sweep start configuration [rad] (default: the guiding start pose)")
     p.add_argument("-o", "--output", type=Path, required=True, help="trajectory CSV")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run_excite)
@@ -84,6 +99,9 @@ def register(sub: Any) -> None:
                    help="bounds around the URDF values for proposed/consistent, as a fraction "
                         "(default 0.3 = ±30 %%, the paper's) or 'none' (consistent only)")
     _preprocess_args(p)
+    p.add_argument("--friction-sweep", type=Path, default=None, metavar="REC",
+                   help="recording of a friction sweep (excite --sweep, then record): the "
+                        "friction curve is measured from it (consistent method only)")
     p.add_argument("-o", "--output", type=Path, required=True, help="params TOML")
     p.add_argument("--urdf-out", type=Path, default=None,
                    help="also write the URDF with the identified link inertias")
@@ -168,9 +186,31 @@ def _load(args: argparse.Namespace, robot: Robot) -> Recording:
     return rec
 
 
+def _excite_sweep(args: argparse.Namespace, robot: Robot) -> int:
+    q0 = guide_start_pose(robot) if args.start is None else np.array(args.start, dtype=float)
+    if q0.shape != (robot.n,):
+        raise DataError("wrong number of joint positions", field="--start", value=args.start,
+                        expected=f"{robot.n} values [rad]")
+    sweep = design_friction_sweep(robot, q0)
+    save_trajectory(args.output, sweep.samples, robot.name,
+                    {"kind": "friction sweep", "speeds": " ".join(f"{v:g}" for v in
+                                                                  FrictionSweepConfig().speeds)})
+    out = {"robot": robot.name, "kind": "friction sweep", "duration_s": sweep.duration_s,
+           "speeds_rad_s": sweep.speeds.tolist(), "q_start": q0.tolist(),
+           "output": str(args.output)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"friction sweep: {sweep.speeds.shape[0]} speeds out and back, "
+              f"{sweep.duration_s:.1f} s; written to {args.output}")
+    return 0
+
+
 def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
     robot = load_robot(args.robot)
+    if args.sweep:
+        return _excite_sweep(args, robot)
     cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
                            starts=args.starts, seed=args.seed, floor_height=args.floor)
     period = 1.0 / cfg.base_frequency
@@ -242,10 +282,18 @@ def run_record(args: argparse.Namespace) -> int:
 
 def run_identify(args: argparse.Namespace) -> int:
     """Execute ``leadthrough identify``."""
+    if args.friction_sweep is not None and args.method != "consistent":
+        raise DataError("a friction sweep is used by the consistent method only",
+                        field="--method", value=args.method,
+                        expected="'consistent' with --friction-sweep")
     robot = load_robot(args.robot)
     rec = _load(args, robot)
     bar = Progress(f"identifying ({args.method})", 1)
-    result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
+    if args.friction_sweep is not None:
+        sweep = load_recording(args.friction_sweep, args.columns)
+        result = identify_with_sweep(rec, sweep, robot, _identify_config(args)).result
+    else:
+        result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
     bar.close(f"J = {result.J:.3f}")
     save_params(args.output, robot, args.method, result.params, result.stats)
     if args.urdf_out is not None:

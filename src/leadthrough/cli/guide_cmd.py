@@ -13,7 +13,7 @@ from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
 from leadthrough.session.record import save_session
-from leadthrough.session.sim_session import SimSessionConfig, run_sim_session
+from leadthrough.session.sim_session import SimSessionConfig, light_guiding, run_sim_session
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES
 
 __all__ = ["register"]
@@ -41,6 +41,9 @@ def register(sub: Any) -> None:
                    help="force-following law (default: virtual-friction, the paper's)")
     p.add_argument("--friction", choices=("fixed", "auto"), default="fixed",
                    help="virtual friction: Table IV values or eq. 36 from the identified noise")
+    p.add_argument("--mass", type=float, default=None, metavar="KG",
+                   help="translational virtual mass [kg] (default: Table IV's 1000; the "
+                        "push demonstrations use 100 so that 40 N reaches the 0.2 m/s cap)")
     p.add_argument("--duration", type=float, default=None,
                    help="session length [s] (default: the operator script's)")
     p.add_argument("--seed", type=int, default=1, help="simulated robot instance (default: 1)")
@@ -54,9 +57,10 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
     pf = load_params(args.params, robot)
+    guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     cfg = SimSessionConfig(operator=args.operator, controller=args.controller,
                            duration_s=args.duration, seed=args.seed, paced=args.realtime,
-                           guiding=replace(GuidingConfig(), friction_mode=args.friction))
+                           guiding=replace(guiding, friction_mode=args.friction))
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
     save_session(session.result.log, args.output)

@@ -62,7 +62,10 @@ class GuidingConfig:
         safety: Safety thresholds.
         settle_s: After the commanded motion stops, the drives settle (servo lag, the friction
             they keep): for ``settle_s + rezero_s`` the rest threshold of eq. 33 is the
-            stopping friction instead of the guiding friction [s].
+            stopping friction instead of the guiding friction [s]. After a stop the gears'
+            friction relaxes from its sliding level over about a second as the servo's integral
+            unwinds, and no model of the currents can tell that from a push; on the simulated
+            er20 a restart below the stopping friction within 1 s of a stop can be a phantom.
         rezero_s: Then the guiding loop re-zeroes the estimator over this window (a
             zero-velocity update, see ``ExternalForceEstimator.rezero``); 0 disables [s].
     """
@@ -78,7 +81,7 @@ class GuidingConfig:
     limits: CartesianLimits = field(default_factory=CartesianLimits)
     ik: IKConfig = field(default_factory=IKConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
-    settle_s: float = 0.3
+    settle_s: float = 1.5
     rezero_s: float = 0.0
 
     def __post_init__(self) -> None:

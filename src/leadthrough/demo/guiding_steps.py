@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control.guiding import GuidingConfig
 from leadthrough.data.preprocess import preprocess
 from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.estimation.payload import estimate_payload
@@ -17,7 +18,12 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
 from leadthrough.session.record import SessionLog, save_session
-from leadthrough.session.sim_session import SimSession, SimSessionConfig, run_sim_session
+from leadthrough.session.sim_session import (
+    SimSession,
+    SimSessionConfig,
+    light_guiding,
+    run_sim_session,
+)
 from leadthrough.sim.calibration_set import CalibrationSet, record_excitation
 from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.robot import SimConfig
@@ -96,7 +102,8 @@ class GuidingDemo:
 
 def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
                      say: Callable[[str], None]) -> GuidingDemo:
-    """Rest and push +x with both controllers, diagonal and seam with virtual friction.
+    """Rest and push +x with both controllers, diagonal and seam with virtual friction (push +x
+    with the translational virtual mass :data:`PUSH_MASS_KG`, the rest with Table IV's).
 
     Writes each session to ``out/session_<operator>_<controller>.parquet`` and Fig. 4 / Fig. 5.
     """
@@ -104,8 +111,9 @@ def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
     plan = [(op, ctl) for op in ("rest", "push-x") for ctl in ("virtual-friction", "velocity")]
     plan += [("diagonal", "virtual-friction"), ("seam", "virtual-friction")]
     for op, ctl in plan:
+        guiding = light_guiding() if op == "push-x" else GuidingConfig()
         s = run_sim_session(robot, params, SimSessionConfig(operator=op, controller=ctl,
-                                                            seed=seed))
+                                                            seed=seed, guiding=guiding))
         sessions[f"{op}/{ctl}"] = s
         save_session(s.result.log, out / f"session_{op}_{ctl}.parquet")
         sm = s.summary

@@ -11,6 +11,7 @@ from leadthrough.demo.run import GUIDING_METHOD, DemoResult
 from leadthrough.fileio import atomic_write_text
 from leadthrough.identification.comparison import table2_markdown
 from leadthrough.report import Figure, Report, Section, Table, write_html, write_markdown
+from leadthrough.session.sim_session import PUSH_MASS_KG
 
 __all__ = ["summary_dict", "write_demo_report"]
 
@@ -91,8 +92,10 @@ def write_demo_report(res: DemoResult, out: Path) -> dict[str, Path]:
         sections.append(Section(
             "Guiding (Fig. 4, Fig. 5)",
             paragraphs=[f"Scripted operators push the simulated robot; the force is estimated "
-                        f"from currents with the {GUIDING_METHOD} parameters; virtual mass "
-                        "1000 kg, friction 15 N, stopping friction 50 N (Table IV)."],
+                        f"from currents with the {GUIDING_METHOD} parameters identified with "
+                        "the friction sweep; virtual mass 1000 kg (push +x: "
+                        f"{PUSH_MASS_KG:g} kg, so that 40 N reaches the 0.2 m/s cap), friction "
+                        "15 N, stopping friction 50 N (Table IV)."],
             tables=[Table("Sessions", ["operator/controller", "max v [m/s]", "max a [m/s²]",
                                        "rest drift [mm]", "faults", "cycle median [µs]",
                                        "cycle p99 [µs]"], rows)],

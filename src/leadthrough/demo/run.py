@@ -28,13 +28,19 @@ from leadthrough.data.preprocess import preprocess
 from leadthrough.demo.guiding_steps import GuidingDemo, PayloadRow, payload_table, run_guiding_demo
 from leadthrough.errors import LeadthroughError
 from leadthrough.excitation.design import ExcitationConfig
-from leadthrough.identification.api import METHODS, IdentifyConfig
+from leadthrough.excitation.friction_sweep import FrictionSweepConfig
+from leadthrough.identification.api import METHODS, IdentifyConfig, identify_with_sweep
 from leadthrough.identification.comparison import Table2, ratio_summary, table2, table2_markdown
 from leadthrough.identification.params_file import ParamsFile, save_params
 from leadthrough.identification.plots import plot_torque_fit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot.description import Robot
-from leadthrough.sim.calibration_set import compare_on_calibration_set, record_calibration_set
+from leadthrough.session.sim_session import guide_start_pose
+from leadthrough.sim.calibration_set import (
+    compare_on_calibration_set,
+    record_calibration_set,
+    record_friction_sweep,
+)
 from leadthrough.sim.checks import check_hold, check_push, check_regressor
 from leadthrough.sim.robot import SimConfig
 from leadthrough.teach import tcp_path, teach_session, write_program_csv, write_program_json
@@ -66,6 +72,7 @@ class DemoResult:
         program: The taught seam, or None if the teach-in failed (``teach_error`` says why).
         teach_error: Why there is no program.
         seam_target_errors_mm: |P1 − target P1|, |P2 − target P2| [mm].
+        sweep_rms: RMS of the eq. 15 fit to the friction sweep per joint [N·m].
         files: Output files by role.
         total_s: Wall time [s].
     """
@@ -83,6 +90,7 @@ class DemoResult:
     program: TaughtProgram | None = None
     teach_error: str = ""
     seam_target_errors_mm: tuple[float, float] | None = None
+    sweep_rms: list[float] = field(default_factory=list)
     files: dict[str, Path] = field(default_factory=dict)
     total_s: float = 0.0
 
@@ -122,6 +130,11 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
                                                            out / "identification.parquet")
     res.files["held-out recording"] = save_recording(cal.held_out.measured,
                                                      out / "held_out.parquet")
+    sweep = record_friction_sweep(robot, seed=seed, run=2, q_start=guide_start_pose(robot))
+    res.files["friction-sweep recording"] = save_recording(sweep.measured,
+                                                           out / "friction_sweep.parquet")
+    say(f"      friction sweep recorded: {sweep.measured.duration:.0f} s, "
+        f"{len(FrictionSweepConfig().speeds)} speeds out and back")
 
     say("[3/6] calibration: " + ", ".join(METHODS) + " ...")
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
@@ -140,6 +153,14 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
         path = save_params(out / f"params_{m}.toml", robot, m, r.params, r.stats)
         res.files[f"params ({m})"] = path
         params[m] = ParamsFile.from_result(r, path)
+    guided = identify_with_sweep(cal.identification.measured, sweep.measured, robot, cfg)
+    path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
+                       guided.result.params, guided.result.stats)
+    res.files["params (guiding: consistent + friction sweep)"] = path
+    guiding_params = ParamsFile.from_result(guided.result, path)
+    res.sweep_rms = guided.sweep.rms.tolist()
+    say("      guiding parameters: consistent with the friction sweep (fit RMS "
+        + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m)")
     held = preprocess(cal.held_out.measured, robot, cfg.preprocess)
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},
@@ -153,8 +174,8 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
                           for m, rows in res.payload.items())
         say(f"      {row.true_n:7.2f} N: {cells}")
 
-    say(f"[5/6] guiding sessions ({GUIDING_METHOD} parameters) ...")
-    res.guiding = run_guiding_demo(robot, params[GUIDING_METHOD], seed, out, say)
+    say(f"[5/6] guiding sessions ({GUIDING_METHOD} parameters with the friction sweep) ...")
+    res.guiding = run_guiding_demo(robot, guiding_params, seed, out, say)
     res.files["fig4"] = res.guiding.fig4
     res.files["fig5"] = res.guiding.fig5
 

@@ -101,8 +101,10 @@ class EstimatorConfig:
             they had while moving, and so does the model.
         presliding_rad: z₀ of the ``"command"`` friction [rad]: the friction turns over a
             commanded displacement of a few z₀. Gear presliding is of the order of the lost
-            motion (RV and harmonic reducers: ≲ 1 arcmin ≈ 3e-4 rad); a smaller z₀ turns the
-            model's friction slightly ahead of the gear's, which helps a start.
+            motion (RV and harmonic reducers: ≲ 1 arcmin ≈ 3e-4 rad). A smaller z₀ turns the
+            model's friction ahead of the gear's, a larger one behind it: on the simulated er20
+            (gear presliding 1.5–2.5e-4 rad plus the servo's lag) 1e-3 stalls a 40 N start and
+            2e-4 over-reads starts and reversals by up to 2×; 4e-4 follows both.
     """
 
     method: str = "direct"
@@ -118,7 +120,7 @@ class EstimatorConfig:
     tare_s: float = 0.0
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
-    presliding_rad: float = 2e-4
+    presliding_rad: float = 4e-4
 
     def __post_init__(self) -> None:
         check_fields("estimator", self, [

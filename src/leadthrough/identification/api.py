@@ -26,6 +26,7 @@ from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES, LINK_PARAMETER_
 from leadthrough.errors import DataError
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent import ConsistentConfig, identify_consistent
+from leadthrough.identification.friction_sweep import SweepFit, fit_sweep_friction, sweep_points
 from leadthrough.identification.metrics import ResidualStats, residual_stats
 from leadthrough.identification.observations import build_observations
 from leadthrough.identification.ols import identify_ols_cbrt, identify_ols_cv
@@ -37,8 +38,10 @@ __all__ = [
     "IdentificationResult",
     "IdentifyConfig",
     "NamedParameter",
+    "SweepCalibration",
     "evaluate",
     "identify",
+    "identify_with_sweep",
     "named_parameters",
 ]
 
@@ -147,6 +150,7 @@ def identify(
     method: str,
     config: IdentifyConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
+    sweep: SweepFit | None = None,
 ) -> IdentificationResult:
     """Calibrate the robot's model from a recording with no external force.
 
@@ -156,6 +160,10 @@ def identify(
         method: ``ols-cv``, ``ols-cbrt``, ``proposed`` or ``consistent``.
         config: Settings.
         progress: Progress callback for long methods, ``progress(done, total)``.
+        sweep: Steady friction measured by a constant-velocity sweep
+            (:func:`leadthrough.identification.friction_sweep.fit_sweep_friction`): the
+            identified friction curve then passes within ``consistent.sweep_tolerance`` of it;
+            ``consistent`` only.
 
     Returns:
         The identified model and its figures on the identification data.
@@ -167,6 +175,9 @@ def identify(
     if method not in METHODS:
         raise DataError("unknown method", field="method", value=method,
                         expected=f"one of {', '.join(METHODS)}")
+    if sweep is not None and method != "consistent":
+        raise DataError("a measured friction curve is used by the consistent method only",
+                        field="method", value=method, expected="'consistent' with a sweep")
     cfg = config if config is not None else IdentifyConfig()
     t0 = time.perf_counter()
     processed = _processed(data, robot, cfg)
@@ -180,7 +191,7 @@ def identify(
         ccfg = cfg.consistent
         if ccfg.k_omega != cfg.k_omega:
             ccfg = replace(ccfg, k_omega=cfg.k_omega)
-        cons = identify_consistent(obs, ccfg)
+        cons = identify_consistent(obs, ccfg, sweep)
         params = cons.params
         iterations = cons.iterations
     else:
@@ -225,3 +236,44 @@ def evaluate(
         raise DataError("some joint never moves in the validation data", source=processed.source,
                         field="q", expected="a recording that moves every joint")
     return _stats(robot, params, processed, cfg.k_omega)
+
+
+@dataclass(frozen=True)
+class SweepCalibration:
+    """The consistent method with a friction sweep.
+
+    Attributes:
+        result: Identified on the excitation recording, friction held near the sweep's curve.
+        sweep: The sweep's measured points and eq. 15 fit.
+    """
+
+    result: IdentificationResult
+    sweep: SweepFit
+
+
+def identify_with_sweep(
+    excitation: Recording | ProcessedData,
+    sweep: Recording,
+    robot: Robot,
+    config: IdentifyConfig | None = None,
+) -> SweepCalibration:
+    """Calibrate for hand guiding: friction from a constant-velocity sweep, the rest from an
+    excitation recording (``consistent`` method).
+
+    Args:
+        excitation: The excitation recording (or processed data).
+        sweep: A friction-sweep recording
+            (:func:`leadthrough.excitation.friction_sweep.design_friction_sweep`).
+        robot: The robot.
+        config: Settings.
+
+    Returns:
+        The identification and the sweep's fit.
+
+    Raises:
+        DataError: As :func:`identify`, or a sweep with too few usable passes.
+    """
+    sweep.check_robot(robot)
+    fit = fit_sweep_friction(sweep_points(sweep, robot), robot, source=sweep.source)
+    return SweepCalibration(result=identify(excitation, robot, "consistent", config, sweep=fit),
+                            sweep=fit)

@@ -36,11 +36,13 @@ from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent_convex import (
     ConsistentConfig,
+    FrictionBand,
     Layout,
     SolverError,
     closest_to_nominal,
     inner_problem,
 )
+from leadthrough.identification.friction_sweep import SweepFit
 from leadthrough.identification.observations import Observations
 
 __all__ = ["ConsistentConfig", "ConsistentOutcome", "SolverError", "identify_consistent"]
@@ -170,9 +172,20 @@ def _least_squares(joints: list[_Joint], cols: list[Array], layout: Layout, z_no
     return np.asarray(z_nom + scale * np.linalg.solve(G, g))
 
 
-def identify_consistent(obs: Observations, config: ConsistentConfig | None = None
-                        ) -> ConsistentOutcome:
+def identify_consistent(obs: Observations, config: ConsistentConfig | None = None,
+                        sweep: SweepFit | None = None) -> ConsistentOutcome:
     """Calibrate with variable projection and a physically consistent convex inner problem.
+
+    Args:
+        obs: Observations of the excitation recording.
+        config: Settings.
+        sweep: Steady friction measured by a constant-velocity sweep (see
+            :mod:`leadthrough.identification.friction_sweep`), or None. When given, the Stribeck
+            velocities are the sweep's (no grid) and the friction curve must stay within
+            ``config.sweep_tolerance`` of the sweep's fitted curve at every measured speed;
+            within that band the excitation data decide. The excitation hardly visits low
+            speeds, and where it does (reversals) the friction is not on its steady curve: the
+            sweep is what hand guiding needs.
 
     Raises:
         SolverError: The inner problem is infeasible (naming the link whose bounds cannot be met)
@@ -195,6 +208,8 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
     grids_g = [np.geomspace(1e-3 * vmax[j], vmax[j], cfg.grid) for j in range(n)]
     vel = [(float(np.sqrt(gm[0] * gm[-1])), float(np.sqrt(gg[0] * gg[-1])))
            for gm, gg in zip(grids_m, grids_g, strict=True)]
+    if sweep is not None:
+        return _with_measured_friction(obs, joints, layout, z_nom, scale, cfg, sweep, t0)
     # Warm start: alternate the per-joint grids with unconstrained least squares (cheap).
     z = z_nom
     for _ in range(cfg.alternations):
@@ -218,12 +233,43 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
         cols = [jt.columns(*vel[j]) for j, jt in enumerate(joints)]
         z = inner_problem(obs, [jt.b for jt in joints], cols, layout, z_nom, scale, cfg)
         solves += 1
-    phi, M = closest_to_nominal(obs, z, z_nom, scale, cfg)
     f = z[11 * n:15 * n].reshape(4, n)
+    stribeck = StribeckParameters(f1=f[0], f2=f[1], qd_sm=np.array([v[0] for v in vel]),
+                                  f3=f[2], qd_sg=np.array([v[1] for v in vel]), f4=f[3])
+    return _outcome(obs, z, z_nom, scale, cfg, stribeck, cfg.alternations + solves, t0)
+
+
+def _outcome(obs: Observations, z: Array, z_nom: Array, scale: Array, cfg: ConsistentConfig,
+             stribeck: StribeckParameters, iterations: int, t0: float) -> ConsistentOutcome:
+    """Standard parameters closest to nominal, packed with the friction and offsets."""
+    n = obs.robot.n
+    phi, M = closest_to_nominal(obs, z, z_nom, scale, cfg)
     params = DriveModelParameters(
-        phi=phi, friction_model=FrictionModel.STRIBECK, rotor_inertia=M,
-        stribeck=StribeckParameters(f1=f[0], f2=f[1], qd_sm=np.array([v[0] for v in vel]),
-                                    f3=f[2], qd_sg=np.array([v[1] for v in vel]), f4=f[3]),
+        phi=phi, friction_model=FrictionModel.STRIBECK, rotor_inertia=M, stribeck=stribeck,
         offset=z[15 * n:].copy())
     return ConsistentOutcome(params=params, min_pseudo_inertia_eig=min_pseudo_inertia_eigenvalues(
-        phi), iterations=cfg.alternations + 2, runtime_s=time.perf_counter() - t0)
+        phi), iterations=iterations, runtime_s=time.perf_counter() - t0)
+
+
+def _with_measured_friction(obs: Observations, joints: list[_Joint], layout: Layout,
+                            z_nom: Array, scale: Array, cfg: ConsistentConfig, sweep: SweepFit,
+                            t0: float) -> ConsistentOutcome:
+    """One inner problem with the Stribeck velocities of the sweep and the friction curve held
+    within ``cfg.sweep_tolerance`` of the sweep's fitted curve at every measured speed."""
+    n = obs.robot.n
+    st = sweep.params
+    R = obs.robot.gear_ratio
+    bands = []
+    for j in range(n):
+        v = sweep.points.speed[j]
+        G = np.column_stack([np.ones_like(v), np.exp(-np.square(R[j] * v / st.qd_sm[j])),
+                             np.exp(-np.square(v / st.qd_sg[j])), v])
+        f = G @ np.array([st.f1[j], st.f2[j], st.f3[j], st.f4[j]])
+        bands.append(FrictionBand(G, f, cfg.sweep_tolerance * np.abs(f)))
+    cols = [jt.columns(float(st.qd_sm[j]), float(st.qd_sg[j])) for j, jt in enumerate(joints)]
+    z = inner_problem(obs, [jt.b for jt in joints], cols, layout, z_nom, scale, cfg,
+                      friction_bands=bands)
+    f = z[11 * n:15 * n].reshape(4, n)
+    stribeck = StribeckParameters(f1=f[0], f2=f[1], qd_sm=st.qd_sm.copy(), f3=f[2],
+                                  qd_sg=st.qd_sg.copy(), f4=f[3])
+    return _outcome(obs, z, z_nom, scale, cfg, stribeck, 1, t0)

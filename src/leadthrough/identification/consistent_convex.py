@@ -24,7 +24,8 @@ from leadthrough.errors import LeadthroughError, check_fields
 from leadthrough.identification.consistency import link_bounds, min_pseudo_inertia_eigenvalues
 from leadthrough.identification.observations import Observations
 
-__all__ = ["ConsistentConfig", "Layout", "SolverError", "closest_to_nominal", "inner_problem"]
+__all__ = ["ConsistentConfig", "FrictionBand", "Layout", "SolverError", "closest_to_nominal",
+           "inner_problem"]
 
 Array = NDArray[np.float64]
 
@@ -48,6 +49,8 @@ class ConsistentConfig:
         grid: Grid points per Stribeck velocity.
         alternations: Grid / unconstrained least-squares alternations (warm start).
         constrained_alternations: Grid / constrained inner-problem alternations (at most).
+        sweep_tolerance: With a friction sweep, the identified curve stays within this
+            fraction of every measured point [-].
     """
 
     bound: float | None = 0.3
@@ -57,6 +60,7 @@ class ConsistentConfig:
     grid: int = 16
     alternations: int = 3
     constrained_alternations: int = 4
+    sweep_tolerance: float = 0.03
 
     def __post_init__(self) -> None:
         checks = [
@@ -67,8 +71,24 @@ class ConsistentConfig:
             ("grid", self.grid >= 2, ">= 2"),
             ("alternations", self.alternations >= 1, ">= 1"),
             ("constrained_alternations", self.constrained_alternations >= 1, ">= 1"),
+            ("sweep_tolerance", 0 <= self.sweep_tolerance < 1, "0 <= tolerance < 1"),
         ]
         check_fields("consistent", self, checks)
+
+
+@dataclass(frozen=True)
+class FrictionBand:
+    """Measured steady friction of one joint that the identified curve must pass near.
+
+    Attributes:
+        G: Eq. 15 columns [1, e_m, e_g, q̇] at the measured speeds, shape (K, 4).
+        friction: Measured friction [N·m], shape (K,).
+        tolerance: Allowed |curve − measured| [N·m], shape (K,).
+    """
+
+    G: Array
+    friction: Array
+    tolerance: Array
 
 
 class Layout:
@@ -185,8 +205,12 @@ def _diagnose(obs: Observations, cfg: ConsistentConfig, status: str, what: str) 
 
 
 def inner_problem(obs: Observations, targets: list[Array], cols: list[Array], layout: Layout,
-                  z_nom: Array, scale: Array, cfg: ConsistentConfig) -> Array:
-    """The convex problem for fixed Stribeck velocities, on QR-compressed data."""
+                  z_nom: Array, scale: Array, cfg: ConsistentConfig,
+                  friction_bands: list[FrictionBand] | None = None) -> Array:
+    """The convex problem for fixed Stribeck velocities, on QR-compressed data.
+
+    ``friction_bands`` (one per joint) keep each joint's friction curve near measured points.
+    """
     n = obs.robot.n
     u = cp.Variable(layout.size)
     z = z_nom + cp.multiply(scale, u)
@@ -207,6 +231,10 @@ def inner_problem(obs: Observations, targets: list[Array], cols: list[Array], la
             terms.append(cp.sum_squares(Rf @ cp.hstack([-u[idx], np.ones(1)])) / b.size)
     cons = [*_link_constraints(obs, z[: 10 * n], cfg, margin_factor=2.0),
             z[10 * n:15 * n] >= 0]
+    for j, band in enumerate(friction_bands or []):
+        f = z[11 * n + j + n * np.arange(4)]
+        cons += [band.G @ f <= band.friction + band.tolerance,
+                 band.G @ f >= band.friction - band.tolerance]
     prob = cp.Problem(cp.Minimize(cp.sum(cp.hstack(terms))), cons)
     _solve(prob, "inner problem")
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or u.value is None:

@@ -25,7 +25,12 @@ from leadthrough.session.metrics import SessionSummary, summarize
 from leadthrough.sim.operator_scripts import make_operator
 from leadthrough.sim.robot import SimConfig, SimRobot
 
-__all__ = ["SimSession", "SimSessionConfig", "guide_start_pose", "run_sim_session"]
+__all__ = ["PUSH_MASS_KG", "SimSession", "SimSessionConfig", "guide_start_pose", "light_guiding",
+           "run_sim_session"]
+
+#: Virtual mass [kg] of the push demonstrations: 40 N for 3 s then reaches the 0.2 m/s cap
+#: ((40 − 15) N / 100 kg = 0.25 m/s²). With Table IV's 1000 kg it reaches 0.075 m/s.
+PUSH_MASS_KG = 100.0
 
 Array = NDArray[np.float64]
 
@@ -42,7 +47,8 @@ class SimSessionConfig:
         seed: Simulated robot instance and the operator's random pushes.
         run: Recording number on that robot (independent sensor noise).
         q0: Start pose [rad], shape (n,); None: :func:`guide_start_pose`.
-        estimator: Estimator settings (``frame`` must be ``"base"``).
+        estimator: Estimator settings (``frame`` must be ``"base"``); the friction follows the
+            commanded velocity (see ``EstimatorConfig.friction_velocity``).
         guiding: Controller settings.
         paced: Run in real time instead of as fast as possible.
         faults: Feedback faults injected by the simulated driver (safety tests).
@@ -55,7 +61,8 @@ class SimSessionConfig:
     run: int = 500
     q0: tuple[float, ...] | None = None
     estimator: EstimatorConfig = field(
-        default_factory=lambda: EstimatorConfig(axes="force", tare_s=0.5))
+        default_factory=lambda: EstimatorConfig(axes="force", tare_s=0.5,
+                                                friction_velocity="command"))
     guiding: GuidingConfig = field(default_factory=GuidingConfig)
     paced: bool = False
     faults: tuple[Fault, ...] = ()
@@ -85,14 +92,32 @@ class SimSession:
     p2_base: Array | None = None
 
 
+def light_guiding(mass_kg: float = PUSH_MASS_KG, base: GuidingConfig | None = None
+                  ) -> GuidingConfig:
+    """Guiding settings with a lighter translational virtual mass (rotations keep Table IV's).
+
+    Args:
+        mass_kg: M of x, y and z [kg].
+        base: Settings to modify (default: all defaults).
+
+    Raises:
+        ControlError: A mass that is not finite and positive.
+    """
+    cfg = base if base is not None else GuidingConfig()
+    vf = cfg.virtual_friction
+    return replace(cfg, virtual_friction=replace(vf, mass=(mass_kg,) * 3 + tuple(vf.mass[3:])))
+
+
 def guide_start_pose(robot: Robot) -> Array:
-    """A comfortable, non-singular start pose for a 6R arm: shoulder and elbow bent by 0.3 rad,
-    wrist by 0.8 rad from the neutral pose (clipped into the limits) [rad], shape (n,)."""
+    """A comfortable, non-singular start pose for a 6R arm [rad], shape (n,): the elbow bent by
+    0.9 rad and the wrist by −1.2 rad from the neutral pose (clipped into the limits). For the
+    er20 the TCP is then 0.87 m out and 0.81 m up with the tool pointing forward, about half way
+    to the edge of the workspace, so a push of half a metre in any direction stays clear of the
+    stretched-arm singularity."""
     q = robot.neutral()
     if robot.n >= 5:
-        q[1] -= 0.3
-        q[2] += 0.3
-        q[4] -= 0.8
+        q[2] += 0.9
+        q[4] -= 1.2
     return np.clip(q, robot.lower_limits + 0.05, robot.upper_limits - 0.05)
 
 

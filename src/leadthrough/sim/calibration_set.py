@@ -8,9 +8,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
 from leadthrough.excitation.design import ExcitationConfig, ExcitationResult, design_excitation
+from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
 from leadthrough.identification.api import IdentifyConfig
 from leadthrough.identification.comparison import MethodComparison, compare_methods, noise_floor
 from leadthrough.identification.metrics import ResidualStats
@@ -19,6 +21,8 @@ from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import SimLog, run_trajectory
 
+Array = NDArray[np.float64]
+
 __all__ = [
     "CalibrationComparison",
     "CalibrationSet",
@@ -26,6 +30,7 @@ __all__ = [
     "compare_on_calibration_set",
     "record_calibration_set",
     "record_excitation",
+    "record_friction_sweep",
 ]
 
 
@@ -89,6 +94,39 @@ def record_excitation(
                          robot=robot.name, source=f"sim seed {config.seed} run {config.run}")
     true = Recording(time=log.time, q=log.q, current=log.truth.current, robot=robot.name,
                      source=f"sim seed {config.seed} run {config.run} (true current)")
+    return SimRecording(measured=measured, true=true, log=log)
+
+
+def record_friction_sweep(
+    robot: Robot,
+    seed: int = 1,
+    run: int = 2,
+    q_start: Array | None = None,
+    sweep_config: FrictionSweepConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> SimRecording:
+    """Run a friction sweep (:func:`design_friction_sweep`) on simulated robot ``seed``.
+
+    Args:
+        robot: The robot.
+        seed: Simulated robot instance.
+        run: Recording number (independent sensor noise).
+        q_start: Start configuration [rad], shape (n,); default: the neutral pose.
+        sweep_config: Sweep layout.
+        progress: Progress callback.
+
+    Returns:
+        Measured and true recordings.
+    """
+    sweep = design_friction_sweep(robot, q_start, sweep_config)
+    s = sweep.samples
+    sim = SimRobot(robot, SimConfig(seed=seed, run=run), q0=s.q[0])
+    log = run_trajectory(sim, s.q, s.qd, progress=progress)
+    src = f"sim seed {seed} run {run} friction sweep"
+    measured = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
+                         robot=robot.name, source=src)
+    true = Recording(time=log.time, q=log.q, current=log.truth.current, robot=robot.name,
+                     source=f"{src} (true current)")
     return SimRecording(measured=measured, true=true, log=log)
 
 
