@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import StribeckParameters
+from leadthrough.dynamics.friction import StribeckParameters, stribeck_shapes
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent_convex import (
@@ -204,12 +204,12 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
                                                 1e-3)) for k in range(n)])
     scale = np.concatenate([phi_scale, np.maximum(robot.reflected_rotor_inertia, 1e-3 * tmax / 10),
                             np.tile(0.01 * tmax, 3), 0.01 * tmax / vmax, 0.01 * tmax])
+    if sweep is not None:
+        return _with_measured_friction(obs, joints, layout, z_nom, scale, cfg, sweep, t0)
     grids_m = [np.geomspace(0.5, R[j] * vmax[j], cfg.grid) for j in range(n)]
     grids_g = [np.geomspace(1e-3 * vmax[j], vmax[j], cfg.grid) for j in range(n)]
     vel = [(float(np.sqrt(gm[0] * gm[-1])), float(np.sqrt(gg[0] * gg[-1])))
            for gm, gg in zip(grids_m, grids_g, strict=True)]
-    if sweep is not None:
-        return _with_measured_friction(obs, joints, layout, z_nom, scale, cfg, sweep, t0)
     # Warm start: alternate the per-joint grids with unconstrained least squares (cheap).
     z = z_nom
     for _ in range(cfg.alternations):
@@ -261,9 +261,9 @@ def _with_measured_friction(obs: Observations, joints: list[_Joint], layout: Lay
     R = obs.robot.gear_ratio
     bands = []
     for j in range(n):
-        v = sweep.points.speed[j]
-        G = np.column_stack([np.ones_like(v), np.exp(-np.square(R[j] * v / st.qd_sm[j])),
-                             np.exp(-np.square(v / st.qd_sg[j])), v])
+        v = sweep.points.speed[j][:, None]                   # > 0: every sign is +1
+        sgn, motor, gear = stribeck_shapes(v, R[j:j + 1], st.qd_sm[j:j + 1], st.qd_sg[j:j + 1])
+        G = np.column_stack([sgn, motor, gear, v])
         f = G @ np.array([st.f1[j], st.f2[j], st.f3[j], st.f4[j]])
         bands.append(FrictionBand(G, f, cfg.sweep_tolerance * np.abs(f)))
     cols = [jt.columns(float(st.qd_sm[j]), float(st.qd_sg[j])) for j, jt in enumerate(joints)]

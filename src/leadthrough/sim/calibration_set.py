@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
 from leadthrough.excitation.design import ExcitationConfig, ExcitationResult, design_excitation
+from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
 from leadthrough.identification.api import IdentifyConfig
 from leadthrough.identification.comparison import MethodComparison, compare_methods, noise_floor
@@ -88,12 +89,19 @@ def record_excitation(
         Measured and true recordings.
     """
     samples = excitation.trajectory.at_rate(duration, 1.0 / config.timestep)
+    return _run(robot, samples, config, payload, progress, "")
+
+
+def _run(robot: Robot, samples: TrajectorySamples, config: SimConfig, payload: Payload | None,
+         progress: Callable[[int, int], None] | None, what: str) -> SimRecording:
+    """Play samples at the simulator's rate; the measured and the true-current recordings."""
     sim = SimRobot(robot, config, payload=payload, q0=samples.q[0])
     log = run_trajectory(sim, samples.q, samples.qd, progress=progress)
+    src = f"sim seed {config.seed} run {config.run}{what}"
     measured = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
-                         robot=robot.name, source=f"sim seed {config.seed} run {config.run}")
+                         robot=robot.name, source=src)
     true = Recording(time=log.time, q=log.q, current=log.truth.current, robot=robot.name,
-                     source=f"sim seed {config.seed} run {config.run} (true current)")
+                     source=f"{src} (true current)")
     return SimRecording(measured=measured, true=true, log=log)
 
 
@@ -118,16 +126,10 @@ def record_friction_sweep(
     Returns:
         Measured and true recordings.
     """
-    sweep = design_friction_sweep(robot, q_start, sweep_config)
-    s = sweep.samples
-    sim = SimRobot(robot, SimConfig(seed=seed, run=run), q0=s.q[0])
-    log = run_trajectory(sim, s.q, s.qd, progress=progress)
-    src = f"sim seed {seed} run {run} friction sweep"
-    measured = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
-                         robot=robot.name, source=src)
-    true = Recording(time=log.time, q=log.q, current=log.truth.current, robot=robot.name,
-                     source=f"{src} (true current)")
-    return SimRecording(measured=measured, true=true, log=log)
+    config = SimConfig(seed=seed, run=run)
+    layout = sweep_config if sweep_config is not None else FrictionSweepConfig()
+    sweep = design_friction_sweep(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
+    return _run(robot, sweep.samples, config, None, progress, " friction sweep")
 
 
 def record_calibration_set(
