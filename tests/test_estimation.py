@@ -302,3 +302,30 @@ def test_rezero_zeroes_a_constant_error_and_cancel_keeps_the_tare(er20: Robot) -
     assert not est.rezeroing
     run(1)  # the sample that completes the window still reports the old tare
     np.testing.assert_allclose(out.tau_ext, 0.0, atol=1e-6)
+
+
+def test_friction_weights_count_a_turning_joint_less_and_recover() -> None:
+    """kernels.friction_weights: 1/σ in steady sliding; half way through a turnover (F = 0) the
+    gap g lowers the weight to 1/√(σ² + (κg)²); the envelope then decays by ``decay`` per step."""
+    from leadthrough.estimation import kernels
+
+    sigma = np.array([10.0, 1.0])
+    level = np.array([50.0, 5.0])
+    envelope, weight = np.zeros(2), np.zeros(2)
+    kernels.friction_weights(level, level.copy(), 0.9, 2.0, sigma, envelope, weight)
+    np.testing.assert_allclose(weight, 1.0 / sigma)
+    state = np.array([50.0, 0.0])  # joint 2 turning over after a reversal
+    kernels.friction_weights(level, state, 0.9, 2.0, sigma, envelope, weight)
+    np.testing.assert_allclose(weight, [0.1, 1.0 / np.sqrt(1.0 + (2.0 * 5.0) ** 2)])
+    for _ in range(10):  # turned over: the envelope holds the peak, decaying
+        kernels.friction_weights(level, -level, 0.9, 2.0, sigma, envelope, weight)
+    np.testing.assert_allclose(envelope, [0.0, 5.0 * 0.9**10])
+    np.testing.assert_allclose(weight[1], 1.0 / np.sqrt(1.0 + (2.0 * 5.0 * 0.9**10) ** 2))
+
+
+def test_friction_weighting_needs_the_force_fit_and_commanded_friction() -> None:
+    with pytest.raises(DataError, match="friction_weighting"):
+        EstimatorConfig(friction_weighting=1.0)  # wrench axes, measured friction
+    with pytest.raises(DataError, match="friction_weighting"):
+        EstimatorConfig(axes="force", friction_velocity="command", friction_weighting=-1.0)
+    EstimatorConfig(axes="force", friction_velocity="command", friction_weighting=1.0)

@@ -94,6 +94,8 @@ def test_bad_pushes_raise() -> None:
 def test_bad_seam_settings_raise() -> None:
     with pytest.raises(SimulationError, match=r"seam\.stiffness"):
         SeamOperator(START, stiffness=-1.0)
+    with pytest.raises(SimulationError, match="lean_gain"):
+        SeamOperator(START, lean_gain=-1.0)
     with pytest.raises(SimulationError, match=r"seam\.mark_after_s"):
         SeamOperator(START, dwell_s=1.0, mark_after_s=1.0)
 
@@ -181,9 +183,10 @@ def test_random_pushes_within_ranges(seed: int) -> None:
 
 # --------------------------------------------------------------------------------------- seam
 def _seam() -> SeamOperator:
-    op = make_operator("seam", seed=0, tcp_start_base=START)
-    assert isinstance(op, SeamOperator)
-    return op
+    """The registry's seam with the lean switched off and a 1500 N/m, 150 N·s/m hand, 2 s
+    dwells (the pure spring-damper the tests below check in closed form)."""
+    return SeamOperator(START, stiffness=1500.0, damping=150.0, lean_gain=0.0, dwell_s=2.0,
+                        mark_after_s=1.5)
 
 
 def test_seam_geometry_target_and_marks() -> None:
@@ -252,6 +255,37 @@ def test_seam_damper_uses_tcp_velocity() -> None:
     # time going back (a restarted session) forgets the velocity: no damper force at rest
     w0 = op.wrench(op.timing.t_at_p1, op.p1_base)
     assert np.all(np.isfinite(w0)) and not w0.any()
+
+
+def test_seam_lean_grows_while_the_tool_is_short_and_relaxes_on_the_move() -> None:
+    """At a point, a tool held short of it gets an ever firmer push (k_i·error per second, up to
+    the saturation); once the target moves on, the lean fades with the time constant accel_s."""
+    op = SeamOperator(START, stiffness=3000.0, damping=0.0, lean_gain=1000.0)
+    tm = op.timing
+    d = np.array([0.004, -0.003, 0.0])  # the tool stops 5 mm short of P1
+    t0 = tm.t_at_p1
+    steps = round(1.0 / DT)
+    w = np.array([op.wrench(t0 + k * DT, op.p1_base - d) for k in range(steps + 1)])
+    np.testing.assert_allclose(w[0, :3], 3000.0 * d, atol=1e-9)
+    np.testing.assert_allclose(w[-1, :3], 3000.0 * d + 1000.0 * 1.0 * d, rtol=1e-3)
+    assert np.all(np.diff(np.linalg.norm(w[:, :3], axis=1)) > 0)
+    # held far enough short for long enough: saturated at max_force, no wind-up beyond it
+    k = steps
+    for k in range(steps, 40 * steps):
+        w_k = op.wrench(t0 + k * DT, op.p1_base - 3.0 * d)
+        if t0 + k * DT >= tm.t_leave_p1 - DT:
+            break
+    assert np.linalg.norm(w_k[:3]) == pytest.approx(60.0, rel=1e-9)
+    # the target moves on: with the tool on the target, the force left is the lean, fading
+    lean = []
+    for j in range(round(op.accel_s / DT) + 1):
+        t = tm.t_leave_p1 + DT * (j + 1)
+        lean.append(np.linalg.norm(op.wrench(t, op.target(t).position_base)[:3]))
+    assert lean[-1] == pytest.approx(lean[0] * np.exp(-1.0), rel=0.01)
+    # pure spring-damper without it
+    flat = SeamOperator(START, stiffness=3000.0, damping=0.0, lean_gain=0.0)
+    w = [flat.wrench(t0 + k * DT, flat.p1_base - d) for k in range(steps)]
+    np.testing.assert_allclose(w[-1][:3], 3000.0 * d, atol=1e-9)
 
 
 def test_seam_leads_an_admittance_along_the_line() -> None:

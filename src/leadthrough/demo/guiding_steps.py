@@ -103,7 +103,9 @@ class GuidingDemo:
 def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
                      say: Callable[[str], None]) -> GuidingDemo:
     """Rest and push +x with both controllers, diagonal and seam with virtual friction (push +x
-    with the translational virtual mass :data:`PUSH_MASS_KG`, the rest with Table IV's).
+    and the seam with the translational virtual mass :data:`PUSH_MASS_KG`, the rest with Table
+    IV's: a 1000 kg tool swings about a hand-held point for seconds, too slow to place a seam's
+    end points).
 
     Writes each session to ``out/session_<operator>_<controller>.parquet`` and Fig. 4 / Fig. 5.
     """
@@ -111,7 +113,7 @@ def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
     plan = [(op, ctl) for op in ("rest", "push-x") for ctl in ("virtual-friction", "velocity")]
     plan += [("diagonal", "virtual-friction"), ("seam", "virtual-friction")]
     for op, ctl in plan:
-        guiding = light_guiding() if op == "push-x" else GuidingConfig()
+        guiding = light_guiding() if op in ("push-x", "seam") else GuidingConfig()
         s = run_sim_session(robot, params, SimSessionConfig(operator=op, controller=ctl,
                                                             seed=seed, guiding=guiding))
         sessions[f"{op}/{ctl}"] = s

@@ -105,6 +105,12 @@ class EstimatorConfig:
             model's friction ahead of the gear's, a larger one behind it: on the simulated er20
             (gear presliding 1.5–2.5e-4 rad plus the servo's lag) 1e-3 stalls a 40 N start and
             2e-4 over-reads starts and reversals by up to 2×; 4e-4 follows both.
+        friction_weighting: κ of the ``axes="force"`` fit with ``"command"`` friction: each
+            joint's weight 1/σ_j becomes 1/√(σ_j² + (κ·u_j)²), u_j the friction's uncertainty
+            (see ``kernels.friction_weights``), held over two time constants of the output
+            filter. A joint whose friction is turning over (a wrist reversing while the TCP moves
+            straight) then counts less than the others, which a pure force at the TCP leaves
+            free to (six torques, three unknowns). 0 keeps the fixed weights 1/σ_j.
     """
 
     method: str = "direct"
@@ -121,6 +127,7 @@ class EstimatorConfig:
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
     presliding_rad: float = 4e-4
+    friction_weighting: float = 0.0
 
     def __post_init__(self) -> None:
         check_fields("estimator", self, [
@@ -139,6 +146,11 @@ class EstimatorConfig:
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
             ("presliding_rad", 0 < self.presliding_rad <= 0.1, "0 < z0 <= 0.1 rad"),
+            ("friction_weighting",
+             0 <= self.friction_weighting < np.inf
+             and (self.friction_weighting == 0
+                  or (self.axes == "force" and self.friction_velocity == "command")),
+             "a finite value >= 0; > 0 only with axes='force' and friction_velocity='command'"),
         ])
 
 
@@ -228,7 +240,12 @@ class ExternalForceEstimator:
         if std.shape != (n,) or not np.all(std > 0):
             raise DataError("wrong size or not positive", field="noise_std", value=std.tolist(),
                             expected=f"{n} positive values")
+        self._std = std
         self._w = 1.0 / std
+        self._level = np.zeros(n)
+        self._envelope = np.zeros(n)
+        self._weigh = cfg.friction_weighting > 0
+        self._env_decay = float(np.exp(-cfg.dt * np.pi * cfg.output_cutoff_hz))
         self._samples = 0
         self._warm = round(cfg.warm_up_s / cfg.dt)
         self._tare = np.zeros(n)
@@ -263,6 +280,8 @@ class ExternalForceEstimator:
         self._p0[:] = 0.0
         self._samples = 0
         self._presliding[:] = 0.0
+        self._envelope[:] = 0.0
+        np.divide(1.0, self._std, out=self._w)
         self._fault = False
         self._first = True
 
@@ -289,7 +308,11 @@ class ExternalForceEstimator:
             np.copyto(self._qd_drive, inp.qd_cmd, where=inp.qd_cmd != 0.0)
             kernels.presliding_friction_step(self._qd_drive, mdl.friction_rows, mdl.stribeck,
                                              self.config.dt, self.config.presliding_rad,
-                                             self._presliding, fr)
+                                             self._presliding, fr, self._level)
+            if self._weigh:
+                kernels.friction_weights(self._level, self._presliding, self._env_decay,
+                                         self.config.friction_weighting, self._std,
+                                         self._envelope, self._w)
         else:
             fr = mdl.friction_torque(qd)
         if self._direct:

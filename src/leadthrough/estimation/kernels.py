@@ -27,6 +27,7 @@ __all__ = [
     "damping_of",
     "direct_residual",
     "friction_torque",
+    "friction_weights",
     "gram_manipulability",
     "low_pass_step",
     "momentum_step",
@@ -81,7 +82,8 @@ def smooth_sign(qd: Array, fp: Array, sign: Array) -> None:
 
 @njit(cache=True, nogil=True)
 def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
-                             presliding: float, state: Array, out: Array) -> None:
+                             presliding: float, state: Array, out: Array,
+                             level: Array) -> None:
     """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
 
     The Coulomb + Stribeck part F follows dF/dt = k·(q̇ − |q̇|·F/g(q̇)), with g(q̇) the
@@ -99,6 +101,7 @@ def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
         presliding: z₀ [rad].
         state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
         out: Friction torque [N·m], shape (n,).
+        level: The eq. 15 level g(q̇) [N·m] (written), shape (n,).
     """
     for j in range(qd.size):
         v = qd[j]
@@ -109,6 +112,7 @@ def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
             b = v * fp[5, j]
             g += fp[4, j] * np.exp(-a * a) + fp[6, j] * np.exp(-b * b)
             g0 += fp[4, j] + fp[6, j]
+        level[j] = g
         if v != 0.0 and g > 0.0:
             target = g if v > 0.0 else -g
             state[j] = target + (state[j] - target) * np.exp(-g0 * abs(v) * dt
@@ -117,6 +121,37 @@ def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
         if not stribeck:
             f += fp[7, j] * np.cbrt(v)
         out[j] = f
+
+
+@njit(cache=True, nogil=True)
+def friction_weights(level: Array, state: Array, decay: float, kappa: float, std: Array,
+                     envelope: Array, weight: Array) -> None:
+    """Per-joint weights of the force fit from the friction's uncertainty, one step.
+
+    u_j = |g_j(q̇) − |F_j||, the gap between the friction state of
+    :func:`presliding_friction_step` and the eq. 15 level at the current speed: zero in steady
+    sliding, up to g while the friction turns over after a reversal (|F| passes through zero,
+    and where the gear is then depends on its presliding, of which the model's z₀ is only a
+    guess), and at standstill the gap to the static level (a stopped gear's friction can be
+    anything up to it). Its envelope (peak hold decaying by ``decay``
+    per step, so that it covers the low-passed τ_ext) enters the weight
+    w_j = 1/√(σ_j² + (κ·u_j)²).
+
+    Args:
+        level: g(q̇) [N·m], shape (n,).
+        state: F [N·m], shape (n,).
+        decay: Envelope factor per step, in [0, 1).
+        kappa: κ [-], ≥ 0.
+        std: σ_j of the calibration residual [N·m], shape (n,), > 0.
+        envelope: Envelope of u [N·m] (in place), shape (n,).
+        weight: Weights [1/(N·m)], shape (n,) (written).
+    """
+    for j in range(level.size):
+        u = abs(level[j] - abs(state[j]))
+        held = envelope[j] * decay
+        envelope[j] = u if u > held else held
+        s = kappa * envelope[j]
+        weight[j] = 1.0 / np.sqrt(std[j] * std[j] + s * s)
 
 
 @njit(cache=True, nogil=True)

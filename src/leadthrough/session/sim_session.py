@@ -48,7 +48,8 @@ class SimSessionConfig:
         run: Recording number on that robot (independent sensor noise).
         q0: Start pose [rad], shape (n,); None: :func:`guide_start_pose`.
         estimator: Estimator settings (``frame`` must be ``"base"``); the friction follows the
-            commanded velocity (see ``EstimatorConfig.friction_velocity``).
+            commanded velocity (see ``EstimatorConfig.friction_velocity``) and the force fit
+            weighs the joints by their friction's uncertainty (``friction_weighting``).
         guiding: Controller settings.
         paced: Run in real time instead of as fast as possible.
         faults: Feedback faults injected by the simulated driver (safety tests).
@@ -62,7 +63,8 @@ class SimSessionConfig:
     q0: tuple[float, ...] | None = None
     estimator: EstimatorConfig = field(
         default_factory=lambda: EstimatorConfig(axes="force", tare_s=0.5,
-                                                friction_velocity="command"))
+                                                friction_velocity="command",
+                                                friction_weighting=1.0))
     guiding: GuidingConfig = field(default_factory=GuidingConfig)
     paced: bool = False
     faults: tuple[Fault, ...] = ()

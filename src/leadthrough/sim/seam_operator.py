@@ -71,11 +71,17 @@ def _smooth_move(t: float, origin: Array, unit: Array, length: float, speed: flo
 class SeamOperator:
     """The ``seam`` script: the hand leads the TCP along a straight welding seam P1 → P2.
 
-    The hand is a spring-damper to a moving target, ``F = k·(p_t − p) + c·(v_t − v)``, its
-    magnitude saturated at ``max_force``. The TCP velocity ``v`` is the finite difference of
-    successive TCP positions over their times, low-passed with ``velocity_filter_s``; a call at the
-    same ``t`` as the previous one leaves that estimate unchanged, and a call at an earlier ``t``
-    (a restarted simulation) resets it to zero. Forces only, no torque.
+    The hand is a spring-damper to a moving target, ``F = k·(p_t − p) + c·(v_t − v) + L``, its
+    magnitude saturated at ``max_force``. ``L`` is the operator's lean: while the target rests
+    (at the start, P1 and P2) the operator sees the tool short of the point and pushes harder,
+    ``L̇ = k_i·(p_t − p)`` (integrated only while |F| is below the saturation); while the target
+    moves the lean relaxes with the time constant ``accel_s``. Without it the tool stops where the
+    spring force falls below the robot's virtual friction, δ/k short of each point.
+
+    The TCP velocity ``v`` is the finite difference of successive TCP positions over their
+    times, low-passed with ``velocity_filter_s``; a call at the same ``t`` as the previous one
+    leaves that estimate (and the lean) unchanged, and a call at an earlier ``t`` (a restarted
+    simulation) resets both to zero. Forces only, no torque.
 
     The target rests at the start position until ``t_first``, moves to P1, dwells ``dwell_s``, moves
     along the seam to P2, dwells, and the hand lets go. Moves cruise at ``speed`` with
@@ -88,8 +94,9 @@ class SeamOperator:
         p1_offset_base: P1 relative to the start position, base frame [m], shape (3,).
         seam_base: P2 − P1, base frame [m], shape (3,) (default a 0.3 m horizontal line along
             (0.6, 0.8, 0)).
-        stiffness: Hand stiffness k [N/m].
-        damping: Hand damping c [N·s/m] (with k, ζ ≈ 0.6 against a 10 kg admittance mass).
+        stiffness: Hand stiffness k [N/m] (a firm grip for fine positioning).
+        damping: Hand damping c [N·s/m] (with k, ζ ≈ 0.3 against a 100 kg virtual mass).
+        lean_gain: k_i of the lean [N/(m·s)] (0: a pure spring-damper).
         max_force: Saturation of |F| [N].
         speed: Cruise speed of the target [m/s].
         accel_s: Acceleration and deceleration time of each move [s].
@@ -108,15 +115,17 @@ class SeamOperator:
     def __init__(self, tcp_start_base: ArrayLike, *,
                  p1_offset_base: ArrayLike = (-0.05, -0.10, -0.05),
                  seam_base: ArrayLike = (0.18, 0.24, 0.0),
-                 stiffness: float = 1500.0, damping: float = 150.0, max_force: float = 60.0,
-                 speed: float = 0.05, accel_s: float = 0.5, t_first: float = 1.0,
-                 dwell_s: float = 2.0, mark_after_s: float = 1.5, after_s: float = 1.0,
+                 stiffness: float = 3000.0, damping: float = 300.0, lean_gain: float = 1000.0,
+                 max_force: float = 60.0, speed: float = 0.05, accel_s: float = 0.5,
+                 t_first: float = 1.0, dwell_s: float = 3.0, mark_after_s: float = 2.5,
+                 after_s: float = 1.0,
                  velocity_filter_s: float = 0.01) -> None:
         self.start_base = vector3(tcp_start_base, "tcp_start_base")
         self.p1_base = self.start_base + vector3(p1_offset_base, "p1_offset_base")
         self.p2_base = self.p1_base + vector3(seam_base, "seam_base")
         self.stiffness, self.damping, self.max_force = float(stiffness), float(damping), \
             float(max_force)
+        self.lean_gain = float(lean_gain)
         self.speed, self.accel_s, self.t_first = float(speed), float(accel_s), float(t_first)
         self.dwell_s, self.mark_after_s = float(dwell_s), float(mark_after_s)
         self.after_s, self.velocity_filter_s = float(after_s), float(velocity_filter_s)
@@ -124,6 +133,7 @@ class SeamOperator:
         check_fields("seam", self, [
             ("stiffness", 0.0 < self.stiffness < math.inf, pos),
             ("damping", 0.0 <= self.damping < math.inf, nonneg),
+            ("lean_gain", 0.0 <= self.lean_gain < math.inf, nonneg),
             ("max_force", 0.0 < self.max_force < math.inf, pos),
             ("speed", 0.0 < self.speed < math.inf, pos),
             ("accel_s", 0.0 < self.accel_s < math.inf, pos),
@@ -150,15 +160,17 @@ class SeamOperator:
         self._t_prev = math.nan
         self._p_prev = np.zeros(3)
         self._v_est = np.zeros(3)
+        self._lean = np.zeros(3)
 
     def _move_time(self, leg: int) -> float:
         length = self._lengths[leg]
         return length / self._speeds[leg] + self.accel_s if length > 0.0 else 0.0
 
     def reset(self) -> None:
-        """Forget the TCP history (velocity estimate back to zero)."""
+        """Forget the TCP history (velocity estimate and lean back to zero)."""
         self._t_prev = math.nan
         self._v_est[:] = 0.0
+        self._lean[:] = 0.0
 
     def target(self, t: float) -> HandTarget:
         """Where the hand wants the TCP at time ``t`` [s] (rests at P2 after the release)."""
@@ -170,17 +182,21 @@ class SeamOperator:
         return _smooth_move(t - t0, origin, self._units[leg], self._lengths[leg],
                             self._speeds[leg], self.accel_s)
 
-    def _update_velocity(self, t: float, p: Array) -> None:
+    def _advance(self, t: float, p: Array) -> float:
+        """Update the velocity estimate; returns the time step [s] (0 if none)."""
+        dt = 0.0
         if not t >= self._t_prev:  # first call (nan) or time went back: restart
             self._v_est[:] = 0.0
+            self._lean[:] = 0.0
         elif t > self._t_prev:
             dt = t - self._t_prev
             alpha = dt / (self.velocity_filter_s + dt)
             self._v_est += alpha * ((p - self._p_prev) / dt - self._v_est)
         else:  # same t again: keep the estimate
-            return
+            return 0.0
         self._t_prev = t
         self._p_prev[:] = p
+        return dt
 
     def wrench(self, t: float, tcp_position_base: Array) -> Array:
         """Wrench of the hand at the TCP, base frame [N, N·m], shape (6,) (a new array).
@@ -190,13 +206,19 @@ class SeamOperator:
             tcp_position_base: TCP position, base frame [m], shape (3,).
         """
         p = np.asarray(tcp_position_base, dtype=float)
-        self._update_velocity(t, p)
+        dt = self._advance(t, p)
         w = np.zeros(6)
         if t >= self.timing.t_release:
             return w
         target = self.target(t)
-        f = self.stiffness * (target.position_base - p) \
-            + self.damping * (target.velocity_base - self._v_est)
+        error = target.position_base - p
+        f = self.stiffness * error + self.damping * (target.velocity_base - self._v_est)
+        if dt > 0.0:
+            if target.velocity_base.any():
+                self._lean *= math.exp(-dt / self.accel_s)
+            elif math.sqrt(float((f + self._lean) @ (f + self._lean))) < self.max_force:
+                self._lean += (self.lean_gain * dt) * error
+        f += self._lean
         norm = math.sqrt(float(f @ f))
         if norm > self.max_force:
             f *= self.max_force / norm
