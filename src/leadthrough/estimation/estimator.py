@@ -331,21 +331,25 @@ class ExternalForceEstimator:
         if self._samples <= self._warm:
             out.status = Status.WARMING_UP
         elif self._tare_left > 0:
-            self._tare_sum += out.tau_ext
-            self._tare_left -= 1
-            if self._tare_left == 0:
-                self._tare_sum *= 1.0 / self._tare_taken
-                self._tare += self._tare_sum
+            self._tare_left = self._average_into_tare(self._tare_sum, self._tare_left,
+                                                      self._tare_taken, out.tau_ext)
             out.status = Status.TARING
         else:
             if self._rezero_left > 0:
-                self._rezero_sum += out.tau_ext
-                self._rezero_left -= 1
-                if self._rezero_left == 0:
-                    self._rezero_sum *= 1.0 / self._rezero_taken
-                    self._tare += self._rezero_sum
+                self._rezero_left = self._average_into_tare(self._rezero_sum, self._rezero_left,
+                                                            self._rezero_taken, out.tau_ext)
             out.status = Status.OK
         return out.status
+
+    def _average_into_tare(self, total: Array, left: int, taken: int, tau_ext: Array) -> int:
+        """One sample of an averaging window (tare or re-zero): add ``tau_ext`` to ``total``;
+        on the window's last sample add the mean to the tare. Returns the samples left."""
+        total += tau_ext
+        left -= 1
+        if left == 0:
+            total *= 1.0 / taken
+            self._tare += total
+        return left
 
     def rezero(self, samples: int) -> None:
         """Zero-velocity update: average τ_ext over the next ``samples`` samples and subtract

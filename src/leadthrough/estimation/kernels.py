@@ -133,9 +133,8 @@ def friction_weights(level: Array, state: Array, decay: float, kappa: float, std
     sliding, up to g while the friction turns over after a reversal (|F| passes through zero,
     and where the gear is then depends on its presliding, of which the model's z₀ is only a
     guess), and at standstill the gap to the static level (a stopped gear's friction can be
-    anything up to it). Its envelope (peak hold decaying by ``decay``
-    per step, so that it covers the low-passed τ_ext) enters the weight
-    w_j = 1/√(σ_j² + (κ·u_j)²).
+    anything up to it). Its envelope (peak hold decaying by ``decay`` per step, so that it
+    covers the low-passed τ_ext) enters the weight w_j = 1/√(σ_j² + (κ·u_j)²).
 
     Args:
         level: g(q̇) [N·m], shape (n,).

@@ -216,8 +216,10 @@ class SeamOperator:
         if dt > 0.0:
             if target.velocity_base.any():
                 self._lean *= math.exp(-dt / self.accel_s)
-            elif math.sqrt(float((f + self._lean) @ (f + self._lean))) < self.max_force:
-                self._lean += (self.lean_gain * dt) * error
+            else:
+                leaning = f + self._lean
+                if math.sqrt(float(leaning @ leaning)) < self.max_force:
+                    self._lean += (self.lean_gain * dt) * error
         f += self._lean
         norm = math.sqrt(float(f @ f))
         if norm > self.max_force:
