@@ -142,20 +142,48 @@ def test_ik_stops_on_the_joint_limit_margin_braking_at_the_joint_limit(er20: Rob
 
 def test_ik_scaling_keeps_the_direction(er20: Robot) -> None:
     """With a joint speed bound active, q̇ is the DLS solution scaled by one factor."""
-    slow = DifferentialIK(er20, IKConfig(velocity_scale=0.05), dt=DT)
     free = DifferentialIK(er20, dt=DT)
-    a, b = slow.make_result(), free.make_result()
+    b = free.make_result()
     target = _fk(er20, Q_WORK) * pin.exp6(np.array([0.2, 0.1, 0.0, 0.0, 0.0, 0.1]) * DT)
     free.compute_kinematics(Q_WORK)
     free.solve(Q_WORK, np.zeros(er20.n), target, b)        # from rest: acceleration-bounded
     assert b.limited
-    qd_dls = b.qd / b.scale
+    qd_dls = b.qd_dls.copy()
     free.solve(Q_WORK, qd_dls, target, b)                   # already moving: unbounded
+    assert not b.limited
+    np.testing.assert_allclose(b.qd, qd_dls, rtol=1e-12)
+    # speed limits 3 % under the fastest joint's speed: bound by speed, not by acceleration
+    fraction = 0.97 * float(np.max(np.abs(qd_dls) / er20.velocity_limit))
+    slow = DifferentialIK(er20, IKConfig(velocity_scale=fraction), dt=DT)
+    a = slow.make_result()
     slow.compute_kinematics(Q_WORK)
     slow.solve(Q_WORK, qd_dls, target, a)
-    assert a.limited and not b.limited
+    assert a.limited and a.scale == pytest.approx(0.97, rel=1e-9)
     np.testing.assert_allclose(a.qd, a.scale * b.qd, rtol=1e-12, atol=1e-15)
-    assert np.all(np.abs(a.qd) <= 0.05 * er20.velocity_limit * (1 + 1e-12))
+    assert np.all(np.abs(a.qd) <= fraction * er20.velocity_limit * (1 + 1e-12))
+
+
+def test_ik_braking_at_a_position_limit_slows_no_other_joint_beyond_its_acceleration() -> None:
+    """Joint 0 brakes before its position limit; the common factor would slow the fast joint 1
+    by more than a·dt, so joint 1 slows at its acceleration limit instead (DLS on J = 1)."""
+    n, a = 6, 6.0
+    dv, dt = np.full(n, a * DT), DT
+    lower, upper = np.full(n, -3.0), np.full(n, 3.0)
+    q = np.zeros(n)
+    q[0] = upper[0] - 0.05
+    bound = kernels._braking_speed(0.05, dv[0], dt)
+    qd_prev = np.zeros(n)
+    qd_prev[0], qd_prev[1] = bound + 0.5 * dv[0], 2.0           # both keep their speed
+    qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
+    scale = kernels.dls_step(np.eye(n), np.eye(n), 0.0, qd_prev * dt, dt, q, qd_prev, lower,
+                             upper, np.full(n, 10.0), dv, np.full(n, 0.5 / a), qd_dls, qd,
+                             q_next)
+    np.testing.assert_allclose(qd_dls, qd_prev, rtol=1e-12)
+    assert scale == pytest.approx(bound / qd_prev[0], rel=1e-12)
+    assert qd[0] == pytest.approx(bound, rel=1e-12)              # the bound holds
+    assert 2.0 * (1 - scale) > dv[1]                             # the common factor would not
+    assert qd[1] == pytest.approx(2.0 - dv[1], rel=1e-12)        # slows at its limit
+    np.testing.assert_allclose(q_next, q + qd * dt, rtol=0, atol=1e-15)
 
 
 def test_ik_is_finite_at_a_singularity(er20: Robot) -> None:
@@ -168,9 +196,22 @@ def test_ik_is_finite_at_a_singularity(er20: Robot) -> None:
     assert np.all(np.abs(res.qd) <= er20.velocity_limit * (1 + 1e-12))
 
 
+def test_ik_stop_cycles_leave_part_of_the_joint_acceleration(er20: Robot) -> None:
+    """A planned stop gives each joint |q̇_j|/(f·a_j·dt) cycles; the slowest joint sets it."""
+    qd = np.zeros(er20.n)
+    assert DifferentialIK(er20, dt=DT).stop_cycles(qd) == 0.0
+    qd[0], qd[3] = -1.2, 0.9
+    expected = max(1.2 / er20.acceleration_limit[0], 0.9 / er20.acceleration_limit[3]) / DT
+    assert DifferentialIK(er20, IKConfig(stop_acceleration_fraction=1.0), dt=DT).stop_cycles(
+        qd) == pytest.approx(expected, rel=1e-12)
+    assert DifferentialIK(er20, dt=DT).stop_cycles(qd) == pytest.approx(2 * expected, rel=1e-12)
+
+
 def test_ik_config_errors(er20: Robot) -> None:
     with pytest.raises(ControlError, match=r"ik.velocity_scale"):
         IKConfig(velocity_scale=0.0)
+    with pytest.raises(ControlError, match=r"ik.stop_acceleration_fraction"):
+        IKConfig(stop_acceleration_fraction=1.5)
     with pytest.raises(ControlError, match="dt"):
         DifferentialIK(er20, dt=-1.0)
 

@@ -163,5 +163,26 @@ def test_decelerate_reaches_exact_zero_at_the_limit() -> None:
         assert np.linalg.norm(v[3:] - before[3:]) <= 0.4 * DT * (1 + 1e-12)
         if np.linalg.norm(v[:3]) > 0:             # straight line in velocity space
             np.testing.assert_allclose(v[:3] / np.linalg.norm(v[:3]), direction, rtol=1e-12)
+        # proportional: the angular part (0.05 rad/s) ends with the linear one
+        assert np.count_nonzero(v) in (0, 3)
     assert not v.any() and cycles == 50          # 0.2 m/s at 0.4 m/s²: 50 cycles
     assert CartesianLimits().braking_distance(0.2) == pytest.approx(0.05)
+
+
+def test_decelerate_takes_the_joints_stop_when_longer() -> None:
+    lim = TwistLimiter(CartesianLimits(), DT)
+    v = np.array([0.1, 0.0, 0.0, 0.0, 0.0, 0.0])  # 25 cycles at the Cartesian limit
+    path, cycles = 0.0, 0
+    while v.any() and cycles < 100:
+        cycles += 1
+        before = v[0]
+        # the joints, whose speeds scale with the twist, need 40 cycles from the start
+        lim.decelerate(v, v, 40.0 * before / 0.1)
+        assert before - v[0] == pytest.approx(0.1 / 40.0, rel=1e-9)
+        path += v[0] * DT
+    assert cycles == 40
+    # the braking distance given that stop time bounds the discrete stop's path
+    bound = CartesianLimits().braking_distance(0.1, 40 * DT)
+    assert bound == pytest.approx(0.1 * 0.4 / 2)
+    assert path <= bound and path == pytest.approx(bound, rel=0.03)
+    assert CartesianLimits().braking_distance(0.1, 0.01) == pytest.approx(0.1 ** 2 / 0.8)

@@ -22,12 +22,17 @@ One cycle:
    [14] (:mod:`~leadthrough.control.velocity_baseline`), with fixed friction or eq. 36
    (:mod:`~leadthrough.control.auto_friction`); then the speed and acceleration limits
    (:mod:`~leadthrough.control.limits`, speed scaled down near singularities). STOPPING and
-   FAULT: decelerate to zero at the acceleration limit; IDLE: at rest;
+   FAULT: decelerate to zero at the acceleration limit, or slower if the joints need longer to
+   stop (near a singularity; :meth:`~leadthrough.control.ik.DifferentialIK.stop_cycles`), so
+   that the joints can follow the stop; IDLE: at rest;
 3. the twist is integrated into the commanded TCP pose (tool frame: T·exp6(ν·dt); base frame:
    p + v·dt, exp3(ω·dt)·R); if the TCP could not stop inside the workspace box (less a 1 mm
-   margin for the IK's residual) from there, WORKSPACE fault and a stop instead;
+   margin for the IK's residual) from there, over the longer of the Cartesian and the joints'
+   stop, WORKSPACE fault and a stop instead;
 4. differential IK (:mod:`~leadthrough.control.ik`) to the joint setpoint. A twist of exactly
-   zero skips the IK: the joint setpoint is held bit for bit and q̇ = 0.0 exactly.
+   zero, once every joint is slow enough to halt within its acceleration limit, skips the IK:
+   the joint setpoint is held bit for bit and q̇ = 0.0 exactly (until then the IK tracks the
+   held pose and brakes the joints).
 
 ``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio and
 ``numpy.linalg`` allocate their results; a state transition appends one event to the log).
@@ -124,6 +129,7 @@ class GuidingController:
         self._resync = False
         self._started = False
         self._rest_s = math.inf
+        self._stop_plan = 0.0   # cycles of the stop the last workspace check planned
         self._hold_s = cfg.settle_s + cfg.rezero_s
 
     # ----------------------------------------------------------------- set-up
@@ -173,6 +179,8 @@ class GuidingController:
                                         f"{sc.workspace_margin} m inside")
         self._q_cmd[:] = q
         self._qd_cmd[:] = 0.0
+        self._ik_result.qd_dls[:] = 0.0
+        self._stop_plan = 0.0
         self._twist[:] = 0.0
         self._T_cmd = self._ik.transform_tool_to_base.copy()
         self._resync = False
@@ -186,9 +194,10 @@ class GuidingController:
         The joint setpoint is kept; use :meth:`reset` to restart from another position.
 
         Returns:
-            Whether the fault was cleared (False while still decelerating, or if not in FAULT).
+            Whether the fault was cleared (False while the twist or the joints are still
+            decelerating, or if not in FAULT).
         """
-        ok = self._safety.clear_fault(t, not self._twist.any())
+        ok = self._safety.clear_fault(t, not self._twist.any() and not self._qd_cmd.any())
         if ok:
             self._resync = True
         return ok
@@ -236,11 +245,18 @@ class GuidingController:
         err = pin.log6(T_fk.actInv(self._T_cmd)).vector
         residual = math.sqrt(float(np.dot(err, err)))
         mu = ik.manipulability
+        twist, new = self._twist, self._twist_new
+        # cycles a stop gives the joints (IKConfig.stop_acceleration_fraction) from the setpoint
+        joint_stop = ik.stop_cycles(self._qd_cmd)
+        # a stop starting next cycle lasts at most this long: the Cartesian one, or the joints'
+        # from the faster of their velocity and the one the twist asks for (ahead while their
+        # acceleration holds them back), plus that cycle's step
+        stop = max(self._limiter.stop_cycles(twist), joint_stop,
+                   ik.stop_cycles(self._ik_result.qd_dls)) + 1.0
         sup.check_motion(t, mu, self._q_cmd, self._qd_cmd, residual)
         sup.deadman(t, inp.deadman)
         scale = sup.speed_scale(mu)
         self._control_wrench(inp.wrench_base, T_fk.rotation)
-        twist, new = self._twist, self._twist_new
         if sup.state == State.GUIDING:
             if self._auto is not None:
                 ik.jacobian_in_frame(self.config.frame, self._Jc)
@@ -253,13 +269,22 @@ class GuidingController:
             self._limiter.limit(twist, self._twist_des, scale, new)
             T_new = self._integrate(new)
             speed = math.sqrt(float(new[0]) ** 2 + float(new[1]) ** 2 + float(new[2]) ** 2)
-            clearance = sup.workspace_clearance(T_new.translation, speed)
+            clearance = sup.workspace_clearance(T_new.translation, speed,
+                                                stop * self.config.dt)
             if clearance < 0.0:
+                # stop from the last cycle's twist, as planned (and checked) there
                 sup.trip(t, Fault.WORKSPACE, clearance)
+            else:
+                self._stop_plan = stop
         if sup.state != State.GUIDING:
-            self._limiter.decelerate(twist, new)
+            # at the joints' pace, but never longer than the stop the last check planned
+            self._limiter.decelerate(twist, new, min(joint_stop, self._stop_plan))
+            self._stop_plan = max(self._stop_plan - 1.0, 0.0)
             T_new = self._integrate(new)
-        at_rest = not new.any()
+        # at rest: no twist, and joints slow enough to halt within one cycle's acceleration
+        # (else the IK keeps tracking the held pose and brakes them at their limits)
+        at_rest = (not new.any()
+                   and joint_stop * ik.config.stop_acceleration_fraction <= 1.0)
         sup.stopped(t, at_rest)
         twist[:] = new
         res = self._ik_result
@@ -267,6 +292,7 @@ class GuidingController:
             self._rest_s += self.config.dt
             # hold: the setpoint stays bit for bit, the target is the pose of the setpoint
             self._qd_cmd[:] = 0.0
+            res.qd_dls[:] = 0.0
             self._T_cmd = T_fk
             res.scale = 1.0
         else:

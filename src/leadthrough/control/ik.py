@@ -14,7 +14,8 @@ One call per controller cycle (dt = 10 ms) turns the Cartesian TCP target into a
   discrete stop (speed lowered by a·dt per cycle, a the joint's acceleration limit) ends within
   d (≈ √(2·a·d)), so a joint brakes at its acceleration limit and stops on the margin, never
   beyond; the whole q̇ is scaled by one factor so that the TCP keeps its direction and only
-  slows down.
+  slows down, except that no joint is slowed by more than its own a·dt in a cycle (a fast joint
+  then slows at its limit, and the TCP leaves its line while the bound brakes).
 
 When a bound shortens the step (``IKResult.limited``) the Cartesian target is not reached; the
 guiding controller then re-synchronises its target with the reached pose so that the IK never
@@ -56,6 +57,10 @@ class IKConfig:
         velocity_scale: Fraction of the robot's joint speed limits used, in (0, 1].
         acceleration_scale: Fraction of the robot's joint acceleration limits used (braking at
             the position limits, and the per-cycle change of q̇), in (0, 1].
+        stop_acceleration_fraction: Fraction of those joint accelerations a planned stop may
+            take for slowing the joints down, in (0, 1] (:meth:`DifferentialIK.stop_cycles`).
+            The rest is left for the joint accelerations that the straight TCP path needs by
+            itself (J̇·q̇, large near a singularity), so that the joints can follow the stop.
     """
 
     manipulability_threshold: float = 0.02
@@ -63,6 +68,7 @@ class IKConfig:
     joint_limit_margin: float = 0.01
     velocity_scale: float = 1.0
     acceleration_scale: float = 1.0
+    stop_acceleration_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         check_fields("ik", self, [
@@ -72,6 +78,8 @@ class IKConfig:
             ("joint_limit_margin", 0 <= self.joint_limit_margin < 0.5, "0 <= margin < 0.5 rad"),
             ("velocity_scale", 0 < self.velocity_scale <= 1, "0 < scale <= 1"),
             ("acceleration_scale", 0 < self.acceleration_scale <= 1, "0 < scale <= 1"),
+            ("stop_acceleration_fraction", 0 < self.stop_acceleration_fraction <= 1,
+             "0 < fraction <= 1"),
         ], ControlError)
 
 
@@ -81,6 +89,8 @@ class IKResult:
 
     Attributes:
         qd: Joint velocity over the cycle [rad/s], shape (n,).
+        qd_dls: Joint velocity the DLS step asked for before the joint bounds [rad/s], shape
+            (n,): ahead of ``qd`` while the joints' accelerations hold them back.
         q: Joint position at the end of the cycle, q + q̇·dt [rad], shape (n,).
         scale: Fraction of the DLS step kept by the joint bounds (1 = none active).
         limited: Whether a joint bound shortened the step.
@@ -88,6 +98,7 @@ class IKResult:
     """
 
     qd: Array
+    qd_dls: Array
     q: Array
     scale: float = 1.0
     limited: bool = False
@@ -140,10 +151,23 @@ class DifferentialIK:
         self.damping = 0.0
         self._JJt = np.zeros((6, 6))
         self._half_inv_a = 0.5 / self._amax
+        self._dv_stop = self._dv * cfg.stop_acceleration_fraction
+
+    def stop_cycles(self, qd: Array) -> float:
+        """Cycles a planned stop gives the joints to stop from ``qd``.
+
+        Args:
+            qd: Joint velocity [rad/s], shape (n,).
+
+        Returns:
+            max_j |q̇_j|/(f·a_j·dt) (not rounded), f the ``stop_acceleration_fraction`` and
+            a_j the IK's joint acceleration limits.
+        """
+        return float(kernels.joint_stop_cycles(qd, self._dv_stop))
 
     def make_result(self) -> IKResult:
         """A preallocated result."""
-        return IKResult(qd=np.zeros(self.n), q=np.zeros(self.n))
+        return IKResult(qd=np.zeros(self.n), qd_dls=np.zeros(self.n), q=np.zeros(self.n))
 
     def compute_kinematics(self, q: Array) -> None:
         """Jacobian, TCP pose, manipulability and damping at ``q`` (shape (n,) [rad])."""
@@ -183,6 +207,6 @@ class DifferentialIK:
         out.residual = math.sqrt(float(np.dot(err, err)))
         scale = kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt, q,
                                  qd_previous, self.lower, self.upper, self._vmax, self._dv,
-                                 self._half_inv_a, out.qd, out.q)
+                                 self._half_inv_a, out.qd_dls, out.qd, out.q)
         out.scale = scale
         out.limited = scale < 1.0

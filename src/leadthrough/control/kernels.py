@@ -34,6 +34,7 @@ __all__ = [
     "hermite_point",
     "integrate_base",
     "joint_limit_index",
+    "joint_stop_cycles",
     "limit_twist",
     "rotate_to_base",
     "rotate_to_tool",
@@ -184,18 +185,45 @@ def limit_twist(previous: Array, desired: Array, max_speed: Array, max_step: Arr
 
 
 @njit(cache=True, nogil=True)
-def decelerate_twist(previous: Array, max_step: Array, out: Array) -> None:
-    """One cycle of a stop at the acceleration limit, exactly zero once reached (may alias)."""
+def decelerate_twist(previous: Array, max_step: Array, min_cycles: float, out: Array) -> None:
+    """One cycle of a proportional stop, exactly zero once reached (may alias).
+
+    The stop takes n = max(‖v‖/(a_max·dt), ‖ω‖/(α_max·dt), ``min_cycles``) cycles and scales
+    the whole twist by 1 − 1/n: a straight line in velocity space (the linear and angular
+    parts end together), the dominant part at its acceleration limit.
+
+    Args:
+        previous: Twist of the last cycle, shape (6,).
+        max_step: (a_max·dt, α_max·dt).
+        min_cycles: Lower bound on n, e.g. the joints' own stop (:func:`joint_stop_cycles`).
+        out: Result, shape (6,).
+    """
+    n = min_cycles
     for part in range(2):
         i = 3 * part
         a, b, c = previous[i], previous[i + 1], previous[i + 2]
-        norm = math.sqrt(a * a + b * b + c * c)
-        step = max_step[part]
-        if norm <= step:
-            out[i] = out[i + 1] = out[i + 2] = 0.0
-        else:
-            k = 1.0 - step / norm
-            out[i], out[i + 1], out[i + 2] = a * k, b * k, c * k
+        n = max(n, math.sqrt(a * a + b * b + c * c) / max_step[part])
+    if n <= 1.0:
+        for i in range(6):
+            out[i] = 0.0
+    else:
+        k = 1.0 - 1.0 / n
+        for i in range(6):
+            out[i] = previous[i] * k
+
+
+@njit(cache=True, nogil=True)
+def joint_stop_cycles(qd: Array, dv: Array) -> float:
+    """Cycles the joints need to stop at their acceleration limits: max_j |q̇_j|/(a_j·dt).
+
+    Args:
+        qd: Joint velocity [rad/s], shape (n,).
+        dv: Joint acceleration limit × dt [rad/s], shape (n,).
+    """
+    n = 0.0
+    for j in range(qd.size):
+        n = max(n, abs(qd[j]) / dv[j])
+    return n
 
 
 @njit(cache=True, nogil=True)
@@ -216,7 +244,7 @@ def _braking_speed(dist: float, dv: float, dt: float) -> float:
 @njit(cache=True, nogil=True)
 def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float,
              q: Array, qd_previous: Array, lower: Array, upper: Array, vmax: Array,
-             dv: Array, half_inv_a: Array, qd: Array, q_next: Array) -> float:
+             dv: Array, half_inv_a: Array, qd_dls: Array, qd: Array, q_next: Array) -> float:
     """Damped least squares with the joint acceleration, speed and braking bounds (see
     :mod:`leadthrough.control.ik`).
 
@@ -233,6 +261,7 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
         vmax: Joint speed limits [rad/s], shape (n,).
         dv: Joint acceleration limit × dt [rad/s], shape (n,).
         half_inv_a: 1/(2·a) per joint [s²/rad], shape (n,).
+        qd_dls: Output joint velocity of the DLS step before the bounds [rad/s], shape (n,).
         qd: Output joint velocity [rad/s], shape (n,).
         q_next: Output q + q̇·dt [rad], shape (n,).
 
@@ -255,6 +284,7 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
         for r in range(6):
             s += jacobian[r, j] * y[r]
         qd[j] = s
+        qd_dls[j] = s
         ratio = max(ratio, abs(s - qd_previous[j]) / dv[j])
     scale = 1.0
     if ratio > 1.0:
@@ -284,6 +314,14 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
             for j in range(n):
                 qd[j] *= s_bound
             scale *= s_bound
+            # the common factor may slow a fast joint by more than its own a·dt: such a joint
+            # slows at its limit instead (the TCP leaves its line while a joint bound brakes);
+            # the braking joint's own bound admits its previous speed less a·dt, so both hold
+            for j in range(n):
+                v = min(max(qd[j], qd_previous[j] - dv[j]), qd_previous[j] + dv[j])
+                dist = max(upper[j] - q[j] if v > 0.0 else q[j] - lower[j], 0.0)
+                bound = min(vmax[j], _braking_speed(dist, dv[j], dt))
+                qd[j] = min(max(v, -bound), bound)
     for j in range(n):
         q_next[j] = qd[j] * dt + q[j]
     return scale

@@ -10,9 +10,9 @@ separately (a per-axis clamp would allow √3 × the speed along a diagonal):
 The limiter first clips the desired twist to the speed ball, then moves from the previous twist
 toward it by at most the acceleration step. Both balls are convex, so the result is inside the
 speed ball whenever the previous twist was (a lowered speed scale is reached by decelerating at
-a_max, never by a jump). :meth:`TwistLimiter.decelerate` is the same step toward zero: a stop
-along a straight line in velocity space at the acceleration limit, which is how every stop
-(fault, deadman release) is made.
+a_max, never by a jump). :meth:`TwistLimiter.decelerate` is the step toward zero: a stop along a
+straight line in velocity space at the acceleration limit, or slower when the joints need longer
+to stop, which is how every stop (fault, deadman release) is made.
 """
 
 from __future__ import annotations
@@ -55,16 +55,20 @@ class CartesianLimits:
                          "max_angular_acceleration")
         ], ControlError)
 
-    def braking_distance(self, linear_speed: float) -> float:
-        """Distance the TCP travels while stopping from ``linear_speed`` at a_max [m].
+    def braking_distance(self, linear_speed: float, stop_time: float = 0.0) -> float:
+        """Distance the TCP travels while stopping from ``linear_speed`` [m].
 
-        The discrete stop of :meth:`TwistLimiter.decelerate` (speed lowered by a_max·dt each
-        cycle, position advanced with the new speed) travels at most v²/(2·a_max).
+        The discrete stop of :meth:`TwistLimiter.decelerate` lowers the speed linearly to zero
+        over T = max(‖v‖/a_max, ``stop_time``) (position advanced with the new speed of each
+        cycle) and so travels at most ‖v‖·T/2, which is v²/(2·a_max) when the Cartesian limit
+        sets the pace.
 
         Args:
             linear_speed: ‖v‖ [m/s].
+            stop_time: Lower bound on T [s], e.g. the time the joints need to stop at their
+                acceleration limits.
         """
-        return linear_speed * linear_speed / (2.0 * self.max_linear_acceleration)
+        return 0.5 * linear_speed * max(linear_speed / self.max_linear_acceleration, stop_time)
 
 
 class TwistLimiter:
@@ -101,11 +105,29 @@ class TwistLimiter:
         return bool(kernels.limit_twist(previous, desired, self._speed, self._step,
                                         speed_scale, out))
 
-    def decelerate(self, previous: Array, out: Array) -> None:
+    def stop_cycles(self, twist: Array) -> float:
+        """Cycles a stop at the acceleration limits takes: max(‖v‖/(a_max·dt), ‖ω‖/(α_max·dt)).
+
+        Args:
+            twist: Twist, shape (6,) [m/s, rad/s].
+        """
+        return max(math.sqrt(float(twist[0]) ** 2 + float(twist[1]) ** 2
+                             + float(twist[2]) ** 2) / float(self._step[0]),
+                   math.sqrt(float(twist[3]) ** 2 + float(twist[4]) ** 2
+                             + float(twist[5]) ** 2) / float(self._step[1]))
+
+    def decelerate(self, previous: Array, out: Array, min_cycles: float = 0.0) -> None:
         """One cycle of a stop at the acceleration limit (exactly zero once reached).
+
+        The whole twist is scaled down by the same factor each cycle (a straight line in
+        velocity space, linear and angular parts ending together), so that the stop takes
+        max(‖v‖/(a_max·dt), ‖ω‖/(α_max·dt), ``min_cycles``) cycles.
 
         Args:
             previous: Twist of the last cycle, shape (6,).
             out: Result, shape (6,); may be ``previous``.
+            min_cycles: Fewest cycles the stop may take, e.g. those the joints need to stop
+                at their own acceleration limits (slower than the Cartesian limit near a
+                singularity), so that the joints can follow the decelerating twist.
         """
-        kernels.decelerate_twist(previous, self._step, out)
+        kernels.decelerate_twist(previous, self._step, min_cycles, out)

@@ -362,16 +362,19 @@ class SafetySupervisor:
                                                           - cfg.stop_manipulability)
         return min(1.0, max(cfg.min_speed_scale, s))
 
-    def workspace_clearance(self, position: Array, linear_speed: float) -> float:
+    def workspace_clearance(self, position: Array, linear_speed: float,
+                            stop_time: float = 0.0) -> float:
         """Distance left between the TCP's braking ball and the workspace box [m].
 
         Args:
             position: TCP position in the base frame [m], shape (3,).
             linear_speed: ‖v‖ of the TCP [m/s].
+            stop_time: Lower bound on the time a stop takes [s] (the joints' own, see
+                :meth:`CartesianLimits.braking_distance`).
 
         Returns:
-            min over the faces of (distance to the face) − margin − v²/(2·a_max); negative: the
-            TCP could not stop inside the box (less the margin). +inf without a box.
+            min over the faces of (distance to the face) − margin − braking distance; negative:
+            the TCP could not stop inside the box (less the margin). +inf without a box.
         """
         if not self._has_box:
             return math.inf
@@ -379,4 +382,5 @@ class SafetySupervisor:
         for i in range(3):
             p = float(position[i])
             c = min(c, p - float(self._box_lo[i]), float(self._box_hi[i]) - p)
-        return c - self.config.workspace_margin - self.limits.braking_distance(linear_speed)
+        return (c - self.config.workspace_margin
+                - self.limits.braking_distance(linear_speed, stop_time))
