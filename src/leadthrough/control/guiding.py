@@ -129,7 +129,8 @@ class GuidingController:
         self._resync = False
         self._started = False
         self._rest_s = math.inf
-        self._stop_plan = 0.0   # cycles of the stop the last workspace check planned
+        # cycles of the stop the last workspace check planned (inf: no box, no plan)
+        self._stop_plan = math.inf
         self._hold_s = cfg.settle_s + cfg.rezero_s
 
     # ----------------------------------------------------------------- set-up
@@ -180,7 +181,7 @@ class GuidingController:
         self._q_cmd[:] = q
         self._qd_cmd[:] = 0.0
         self._ik_result.qd_dls[:] = 0.0
-        self._stop_plan = 0.0
+        self._stop_plan = math.inf if not self._safety.has_box else 0.0
         self._twist[:] = 0.0
         self._T_cmd = self._ik.transform_tool_to_base.copy()
         self._resync = False
@@ -246,13 +247,9 @@ class GuidingController:
         residual = math.sqrt(float(np.dot(err, err)))
         mu = ik.manipulability
         twist, new = self._twist, self._twist_new
-        # cycles a stop gives the joints (IKConfig.stop_acceleration_fraction) from the setpoint
-        joint_stop = ik.stop_cycles(self._qd_cmd)
-        # a stop starting next cycle lasts at most this long: the Cartesian one, or the joints'
-        # from the faster of their velocity and the one the twist asks for (ahead while their
-        # acceleration holds them back), plus that cycle's step
-        stop = max(self._limiter.stop_cycles(twist), joint_stop,
-                   ik.stop_cycles(self._ik_result.qd_dls)) + 1.0
+        # cycles a stop gives the joints (IKConfig.stop_acceleration_fraction) from the setpoint;
+        # computed where needed (-1: not yet)
+        joint_stop = -1.0
         sup.check_motion(t, mu, self._q_cmd, self._qd_cmd, residual)
         sup.deadman(t, inp.deadman)
         scale = sup.speed_scale(mu)
@@ -268,23 +265,36 @@ class GuidingController:
                            self._stop_friction, self._twist_des)
             self._limiter.limit(twist, self._twist_des, scale, new)
             T_new = self._integrate(new)
-            speed = math.sqrt(float(new[0]) ** 2 + float(new[1]) ** 2 + float(new[2]) ** 2)
-            clearance = sup.workspace_clearance(T_new.translation, speed,
-                                                stop * self.config.dt)
-            if clearance < 0.0:
-                # stop from the last cycle's twist, as planned (and checked) there
-                sup.trip(t, Fault.WORKSPACE, clearance)
-            else:
-                self._stop_plan = stop
+            if sup.has_box:
+                joint_stop = ik.stop_cycles(self._qd_cmd)
+                # a stop starting next cycle lasts at most this long: the Cartesian one, or the
+                # joints' from the faster of their velocity and the one the twist asks for
+                # (ahead while their acceleration holds them back), plus this cycle's step
+                stop = max(self._limiter.stop_cycles(twist), joint_stop,
+                           ik.stop_cycles(self._ik_result.qd_dls)) + 1.0
+                speed = math.sqrt(float(new[0]) ** 2 + float(new[1]) ** 2
+                                  + float(new[2]) ** 2)
+                clearance = sup.workspace_clearance(T_new.translation, speed,
+                                                    stop * self.config.dt)
+                if clearance < 0.0:
+                    # stop from the last cycle's twist, as planned (and checked) there
+                    sup.trip(t, Fault.WORKSPACE, clearance)
+                else:
+                    self._stop_plan = stop
         if sup.state != State.GUIDING:
+            if joint_stop < 0.0:
+                joint_stop = ik.stop_cycles(self._qd_cmd)
             # at the joints' pace, but never longer than the stop the last check planned
             self._limiter.decelerate(twist, new, min(joint_stop, self._stop_plan))
             self._stop_plan = max(self._stop_plan - 1.0, 0.0)
             T_new = self._integrate(new)
         # at rest: no twist, and joints slow enough to halt within one cycle's acceleration
         # (else the IK keeps tracking the held pose and brakes them at their limits)
-        at_rest = (not new.any()
-                   and joint_stop * ik.config.stop_acceleration_fraction <= 1.0)
+        at_rest = not new.any()
+        if at_rest and self._qd_cmd.any():
+            if joint_stop < 0.0:
+                joint_stop = ik.stop_cycles(self._qd_cmd)
+            at_rest = joint_stop * ik.config.stop_acceleration_fraction <= 1.0
         sup.stopped(t, at_rest)
         twist[:] = new
         res = self._ik_result

@@ -362,6 +362,11 @@ class SafetySupervisor:
                                                           - cfg.stop_manipulability)
         return min(1.0, max(cfg.min_speed_scale, s))
 
+    @property
+    def has_box(self) -> bool:
+        """Whether a workspace box is configured (a finite face)."""
+        return self._has_box
+
     def workspace_clearance(self, position: Array, linear_speed: float,
                             stop_time: float = 0.0) -> float:
         """Distance left between the TCP's braking ball and the workspace box [m].
