@@ -391,3 +391,30 @@ def test_after_a_stop_breaking_away_takes_the_stopping_friction(er20: Robot) -> 
     assert np.all(vx[stop:stop + hold] == 0.0)          # held while settling
     assert vx[stop + hold + 1] < 0.0                      # then the pull moves it
     assert np.all(tr.fault == Fault.NONE)
+
+
+def test_after_a_release_at_rest_breaking_away_takes_the_stopping_friction(er20: Robot) -> None:
+    """A hold below δ at rest, then let go: the estimate swinging the other way (the gears
+    unloading) moves nothing for settle_s + rezero_s; a hold that never drops does not start a
+    settle window, so the same pull then moves the tool at once."""
+    cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6),
+                        settle_s=0.3, rezero_s=0.2)
+    hold = round((cfg.settle_s + cfg.rezero_s) / DT)
+    w = np.zeros((200, 6))
+    w[:100, 0] = 12.0                 # a hand resting on the tool, below δ = 15 N: no motion
+    # let go: the estimate (3 Hz low-pass) swings to -30 N (< δ_s = 50 N)
+    tau = 1.0 / (2 * np.pi * 3.0)
+    w[100:, 0] = -30.0 + 42.0 * np.exp(-np.arange(100) * DT / tau)
+    tr = run(GuidingController(er20, cfg), Q_WORK, w, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    moves = int(np.argmax(vx < 0.0))
+    # held while the drives settle (from the release, seen within 0.1 s), then it moves
+    assert np.all(vx[:moves] == 0.0) and 100 + hold < moves <= 100 + hold + 10
+    assert np.all(tr.fault == Fault.NONE)
+    # no hold before: the same pull moves the tool as soon as it passes δ
+    w[:100, 0] = 0.0
+    w[100:, 0] = -30.0 + 30.0 * np.exp(-np.arange(100) * DT / tau)
+    tr = run(GuidingController(er20, cfg), Q_WORK, w, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    first = 100 + int(np.argmax(w[100:, 0] <= -15.0))
+    assert np.all(vx[:first] == 0.0) and vx[first] < 0.0

@@ -13,7 +13,9 @@ from leadthrough.control import (
     VelocityBaselineConfig,
     VirtualFriction,
     VirtualFrictionConfig,
+    kernels,
 )
+from leadthrough.control.guiding import RELEASE_DROP, RELEASE_SMOOTHING_S
 from leadthrough.control.limits import TwistLimiter
 from leadthrough.errors import ControlError
 
@@ -186,3 +188,26 @@ def test_decelerate_takes_the_joints_stop_when_longer() -> None:
     assert bound == pytest.approx(0.1 * 0.4 / 2)
     assert path <= bound and path == pytest.approx(bound, rel=0.03)
     assert CartesianLimits().braking_distance(0.1, 0.01) == pytest.approx(0.1 ** 2 / 0.8)
+
+
+def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
+    """A release: the smoothed force falls back from its peak by half of δ (toward zero or past
+    it); estimator noise below δ (±10 N per cycle, white) and a steady or rising push are not."""
+    alpha = DT / (RELEASE_SMOOTHING_S + DT)
+    friction = np.full(6, 15.0)
+    smooth, peak = np.zeros(6), np.zeros(6)
+    rng = np.random.default_rng(3)
+    noise = rng.uniform(-10.0, 10.0, size=(2000, 6))
+    assert not any(kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak)
+                   for w in noise)
+    smooth[:], peak[:] = 0.0, 0.0
+    w = np.zeros(6)
+    for k in range(100):                   # rising, then steady at 12 N (below δ)
+        w[1] = min(12.0, 0.5 * k)
+        assert not kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak)
+    assert peak[1] == pytest.approx(12.0, rel=1e-6)
+    w[1] = -5.0                            # let go (the estimate overshoots past zero)
+    seen = [kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak)
+            for _ in range(10)]
+    first = seen.index(True)
+    assert first <= 3 and not any(seen[first + 1:])   # once, within 40 ms

@@ -20,7 +20,11 @@ One cycle:
    the TCP; ``"tool"``: tool axes) and masked by ``axes_enabled``, drives the law, virtual
    friction (eq. 31–33, :mod:`~leadthrough.control.virtual_friction`) or the velocity baseline
    [14] (:mod:`~leadthrough.control.velocity_baseline`), with fixed friction or eq. 36
-   (:mod:`~leadthrough.control.auto_friction`); then the speed and acceleration limits
+   (:mod:`~leadthrough.control.auto_friction`). At rest, for ``settle_s + rezero_s`` after a
+   stop or after a release (the force on an axis falling back from its peak by
+   :data:`RELEASE_DROP` × δ or more), breaking away takes the stopping friction: the paper's
+   "larger friction once the force is removed", applied while the drives settle or unload.
+   Then the speed and acceleration limits
    (:mod:`~leadthrough.control.limits`, speed scaled down near singularities). STOPPING and
    FAULT: decelerate to zero at the acceleration limit, or slower if the joints need longer to
    stop (near a singularity; :meth:`~leadthrough.control.ik.DifferentialIK.stop_cycles`), so
@@ -74,6 +78,13 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+#: A release at rest: the (smoothed) force on an axis falls back from its peak by this fraction
+#: of that axis's friction δ or more.
+RELEASE_DROP = 0.5
+#: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
+#: below δ must not look like a release).
+RELEASE_SMOOTHING_S = 0.05
 
 class GuidingController:
     """Hand-guiding controller: law + limits + safety + differential IK, one call per cycle.
@@ -129,6 +140,10 @@ class GuidingController:
         self._resync = False
         self._started = False
         self._rest_s = math.inf
+        self._release_s = math.inf  # time since the force was removed at rest [s]
+        self._peak = np.zeros(6)    # signed peak force per axis at rest since then
+        self._smooth = np.zeros(6)  # the wrench smoothed for the release
+        self._release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
         # cycles of the stop the last workspace check planned (inf: no box, no plan)
         self._stop_plan = math.inf
         self._hold_s = cfg.settle_s + cfg.rezero_s
@@ -186,6 +201,9 @@ class GuidingController:
         self._T_cmd = self._ik.transform_tool_to_base.copy()
         self._resync = False
         self._started = True
+        self._release_s = math.inf
+        self._peak[:] = 0.0
+        self._smooth[:] = 0.0
         self._rest_s = math.inf
         self._safety.reset(t)
 
@@ -258,8 +276,19 @@ class GuidingController:
             if self._auto is not None:
                 ik.jacobian_in_frame(self.config.frame, self._Jc)
                 self._auto.update(self._Jc, mu, self._friction, self._stop_friction)
-            # settling after a stop: breaking away takes the stopping friction
-            settling = self._rest_s < self._hold_s and not twist.any()
+            # settling after a stop, or after a release at rest (the force on some axis falls
+            # back from its peak: the gears unload, and the estimate swings the other way):
+            # breaking away takes the stopping friction
+            at_rest_now = not twist.any()
+            if kernels.release_step(self._wrench, self._friction, RELEASE_DROP,
+                                    self._release_alpha, self._smooth, self._peak) \
+                    and at_rest_now:
+                self._release_s = 0.0
+            if not at_rest_now:
+                self._peak[:] = self._smooth
+            settling = at_rest_now and (self._rest_s < self._hold_s
+                                        or self._release_s < self._hold_s)
+            self._release_s += self.config.dt
             self._law.step(twist, self._wrench,
                            self._stop_friction if settling else self._friction,
                            self._stop_friction, self._twist_des)

@@ -66,6 +66,8 @@ class GuidingConfig:
             friction relaxes from its sliding level over about a second as the servo's integral
             unwinds, and no model of the currents can tell that from a push; on the simulated
             er20 a restart below the stopping friction within 1 s of a stop can be a phantom.
+            The same window follows a release at rest (a hand letting go of the tool: the gears
+            unload and the estimate swings the other way, by up to twice the released force).
         rezero_s: Then the guiding loop re-zeroes the estimator over this window (a
             zero-velocity update, see ``ExternalForceEstimator.rezero``); 0 disables [s].
     """

@@ -36,6 +36,7 @@ __all__ = [
     "joint_limit_index",
     "joint_stop_cycles",
     "limit_twist",
+    "release_step",
     "rotate_to_base",
     "rotate_to_tool",
     "virtual_friction_step",
@@ -182,6 +183,36 @@ def limit_twist(previous: Array, desired: Array, max_speed: Array, max_step: Arr
         out[i + 1] = previous[i + 1] + db
         out[i + 2] = previous[i + 2] + dc
     return active
+
+
+@njit(cache=True, nogil=True)
+def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smooth: Array,
+                 peak: Array) -> bool:
+    """A release at rest: on some axis the smoothed w_i held a peak of at least ``drop``·δ_i
+    and fell back from it, toward zero or beyond, by ``drop``·δ_i or more (a smaller hold
+    needs no settling: the estimate's swing after letting go stays below δ).
+
+    Args:
+        wrench: Estimated wrench in the controller's frame, shape (6,).
+        friction: δ per axis, shape (6,).
+        drop: Fraction of δ that counts as a release.
+        alpha: Weight of the new sample in the first-order smoothing, in (0, 1].
+        smooth: Smoothed wrench, shape (6,); updated in place.
+        peak: Signed smoothed w_i of largest magnitude since the tool came to rest or since
+            the last release, shape (6,); updated in place.
+    """
+    released = False
+    for i in range(wrench.size):
+        smooth[i] += alpha * (wrench[i] - smooth[i])
+        w, p = smooth[i], peak[i]
+        back = p - w if p >= 0.0 else w - p      # how far w fell back from the peak
+        level = drop * friction[i]
+        if back >= level and abs(p) >= level:
+            released = True
+            peak[i] = w
+        elif abs(w) > abs(p):
+            peak[i] = w
+    return released
 
 
 @njit(cache=True, nogil=True)
