@@ -86,6 +86,7 @@ RELEASE_DROP = 0.5
 #: below δ must not look like a release).
 RELEASE_SMOOTHING_S = 0.05
 
+
 class GuidingController:
     """Hand-guiding controller: law + limits + safety + differential IK, one call per cycle.
 
