@@ -39,6 +39,7 @@ __all__ = [
     "release_step",
     "rotate_to_base",
     "rotate_to_tool",
+    "twist_stop_cycles",
     "virtual_friction_step",
 ]
 
@@ -216,6 +217,22 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smoo
 
 
 @njit(cache=True, nogil=True)
+def twist_stop_cycles(twist: Array, max_step: Array) -> float:
+    """Cycles a stop at the acceleration limits takes: max(‖v‖/(a_max·dt), ‖ω‖/(α_max·dt)).
+
+    Args:
+        twist: Twist, shape (6,) [m/s, rad/s].
+        max_step: (a_max·dt, α_max·dt).
+    """
+    n = 0.0
+    for part in range(2):
+        i = 3 * part
+        a, b, c = twist[i], twist[i + 1], twist[i + 2]
+        n = max(n, math.sqrt(a * a + b * b + c * c) / max_step[part])
+    return n
+
+
+@njit(cache=True, nogil=True)
 def decelerate_twist(previous: Array, max_step: Array, min_cycles: float, out: Array) -> None:
     """One cycle of a proportional stop, exactly zero once reached (may alias).
 
@@ -229,11 +246,7 @@ def decelerate_twist(previous: Array, max_step: Array, min_cycles: float, out: A
         min_cycles: Lower bound on n, e.g. the joints' own stop (:func:`joint_stop_cycles`).
         out: Result, shape (6,).
     """
-    n = min_cycles
-    for part in range(2):
-        i = 3 * part
-        a, b, c = previous[i], previous[i + 1], previous[i + 2]
-        n = max(n, math.sqrt(a * a + b * b + c * c) / max_step[part])
+    n = max(min_cycles, twist_stop_cycles(previous, max_step))
     if n <= 1.0:
         for i in range(6):
             out[i] = 0.0
@@ -270,6 +283,15 @@ def _braking_speed(dist: float, dv: float, dt: float) -> float:
     m = math.floor(0.5 * (math.sqrt(1.0 + 8.0 * d) - 1.0))
     f = min(max(d / (m + 1) - 0.5 * m, 0.0), 1.0)
     return dv * (m + f)
+
+
+@njit(cache=True, nogil=True)
+def _speed_bound(v: float, q: float, lower: float, upper: float, vmax: float, dv: float,
+                 dt: float) -> float:
+    """Largest |q̇| of a joint moving at sign(``v``): its speed limit, and the speed from which
+    it can still stop before the bound it moves toward."""
+    dist = max(upper - q if v > 0.0 else q - lower, 0.0)
+    return min(vmax, _braking_speed(dist, dv, dt))
 
 
 @njit(cache=True, nogil=True)
@@ -337,8 +359,7 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
             v = qd[j]
             if v == 0.0:
                 continue
-            dist = max(upper[j] - q[j] if v > 0.0 else q[j] - lower[j], 0.0)
-            bound = min(vmax[j], _braking_speed(dist, dv[j], dt))
+            bound = _speed_bound(v, q[j], lower[j], upper[j], vmax[j], dv[j], dt)
             if abs(v) > bound:
                 s_bound = min(s_bound, bound / abs(v))
         if s_bound < 1.0:
@@ -350,8 +371,7 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
             # the braking joint's own bound admits its previous speed less a·dt, so both hold
             for j in range(n):
                 v = min(max(qd[j], qd_previous[j] - dv[j]), qd_previous[j] + dv[j])
-                dist = max(upper[j] - q[j] if v > 0.0 else q[j] - lower[j], 0.0)
-                bound = min(vmax[j], _braking_speed(dist, dv[j], dt))
+                bound = _speed_bound(v, q[j], lower[j], upper[j], vmax[j], dv[j], dt)
                 qd[j] = min(max(v, -bound), bound)
     for j in range(n):
         q_next[j] = qd[j] * dt + q[j]

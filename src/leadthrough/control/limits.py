@@ -111,10 +111,7 @@ class TwistLimiter:
         Args:
             twist: Twist, shape (6,) [m/s, rad/s].
         """
-        return max(math.sqrt(float(twist[0]) ** 2 + float(twist[1]) ** 2
-                             + float(twist[2]) ** 2) / float(self._step[0]),
-                   math.sqrt(float(twist[3]) ** 2 + float(twist[4]) ** 2
-                             + float(twist[5]) ** 2) / float(self._step[1]))
+        return float(kernels.twist_stop_cycles(twist, self._step))
 
     def decelerate(self, previous: Array, out: Array, min_cycles: float = 0.0) -> None:
         """One cycle of a stop at the acceleration limit (exactly zero once reached).
