@@ -13,7 +13,7 @@ from leadthrough.cli import main
 from leadthrough.control.safety import State
 from leadthrough.drivers.sim_driver import Fault, FaultKind
 from leadthrough.dynamics import nominal_drive_parameters
-from leadthrough.errors import DataError
+from leadthrough.errors import ControlError, DataError
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot
@@ -85,6 +85,24 @@ def test_session_file_round_trip(er20: Robot, nominal_params: ParamsFile,
     assert back.settings["operator"] == "diagonal"
 
 
+def test_operator_seed_varies_the_pushes_not_the_robot(er20: Robot,
+                                                        nominal_params: ParamsFile) -> None:
+    """``operator_seed`` draws other random pushes on the same simulated robot: until the first
+    push (1 s) the two recordings are bit-identical, then the applied wrenches differ."""
+    a, b = (run_sim_session(er20, nominal_params,
+                            SimSessionConfig(operator="random", duration_s=2.0, operator_seed=s))
+            for s in (0, 5))
+    la, lb = a.result.log, b.result.log
+    before = la.time < 1.0
+    np.testing.assert_array_equal(la.current[before], lb.current[before])
+    assert la.wrench_applied_base is not None and lb.wrench_applied_base is not None
+    assert not np.allclose(la.wrench_applied_base, lb.wrench_applied_base)
+    assert la.settings["seed"] == lb.settings["seed"] == 1
+    assert (la.settings["operator_seed"], lb.settings["operator_seed"]) == (0, 5)
+    with pytest.raises(ControlError, match="operator_seed"):
+        SimSessionConfig(operator_seed=-1)
+
+
 def test_corrupt_or_foreign_session_files_are_clear_errors(tmp_path: Path) -> None:
     bad = tmp_path / "bad.parquet"
     bad.write_bytes(b"not parquet at all")
@@ -105,7 +123,7 @@ def test_guide_cli(er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
     assert load_params(params, er20).method == "nominal"
     out = tmp_path / "s.parquet"
     code = main(["guide", "--params", str(params), "--operator", "rest", "--duration", "2",
-                 "-o", str(out), "--json"])
+                 "--operator-seed", "3", "-o", str(out), "--json"])
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert {"max_linear_speed", "max_angular_speed", "max_linear_acc", "rest_drift_m",
@@ -113,6 +131,7 @@ def test_guide_cli(er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
     assert summary["rest_drift_m"] == 0.0 and summary["max_linear_speed"] == 0.0
     assert set(summary["cycle_time_us"]) == {"median", "p99"}
     assert out.is_file()
+    assert load_session(out).settings["operator_seed"] == 3
     # bad input: one line, exit 2, nothing written
     missing = tmp_path / "nowhere" / "s.parquet"
     assert main(["guide", "--params", str(params), "-o", str(missing)]) == 2

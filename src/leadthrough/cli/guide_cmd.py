@@ -46,7 +46,12 @@ def register(sub: Any) -> None:
                         "push demonstrations use 100 so that 40 N reaches the 0.2 m/s cap)")
     p.add_argument("--duration", type=float, default=None,
                    help="session length [s] (default: the operator script's)")
-    p.add_argument("--seed", type=int, default=1, help="simulated robot instance (default: 1)")
+    p.add_argument("--seed", type=int, default=1,
+                   help="simulated robot instance (default: 1); use the one the params were "
+                        "identified on (leadthrough record --seed)")
+    p.add_argument("--operator-seed", type=int, default=None, metavar="N",
+                   help="seed of the random operator's pushes (default: --seed); vary this "
+                        "for other push sequences on the same robot")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -59,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     pf = load_params(args.params, robot)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     cfg = SimSessionConfig(operator=args.operator, controller=args.controller,
-                           duration_s=args.duration, seed=args.seed, paced=args.realtime,
+                           duration_s=args.duration, seed=args.seed,
+                           operator_seed=args.operator_seed, paced=args.realtime,
                            guiding=replace(guiding, friction_mode=args.friction))
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)

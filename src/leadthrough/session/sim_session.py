@@ -44,8 +44,11 @@ class SimSessionConfig:
             ``seam``).
         controller: ``"virtual-friction"`` (the paper) or ``"velocity"`` ([14]).
         duration_s: Session length [s]; None: the script's own length.
-        seed: Simulated robot instance and the operator's random pushes.
+        seed: Simulated robot instance (its true parameters): the one the params were
+            identified on, or the force estimate is made with another robot's model.
         run: Recording number on that robot (independent sensor noise).
+        operator_seed: Seed of the operator's random pushes (``random``); None: ``seed``.
+            Vary this, not ``seed``, for other push sequences on the same robot.
         q0: Start pose [rad], shape (n,); None: :func:`guide_start_pose`.
         estimator: Estimator settings (``frame`` must be ``"base"``); the friction follows the
             commanded velocity (see ``EstimatorConfig.friction_velocity``) and the force fit
@@ -60,6 +63,7 @@ class SimSessionConfig:
     duration_s: float | None = None
     seed: int = 1
     run: int = 500
+    operator_seed: int | None = None
     q0: tuple[float, ...] | None = None
     estimator: EstimatorConfig = field(
         default_factory=lambda: EstimatorConfig(axes="force", tare_s=0.5,
@@ -74,6 +78,9 @@ class SimSessionConfig:
             ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600,
              "0 < duration <= 3600 s"),
             ("seed", isinstance(self.seed, int) and self.seed >= 0, "an integer >= 0"),
+            ("operator_seed", self.operator_seed is None
+             or (isinstance(self.operator_seed, int) and self.operator_seed >= 0),
+             "None or an integer >= 0"),
         ], ControlError)
 
 
@@ -141,7 +148,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) 
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q0)
     tcp0 = data.oMf[robot.tcp_frame_id].translation.copy()
-    operator = make_operator(config.operator, seed=config.seed, tcp_start_base=tcp0)
+    op_seed = config.seed if config.operator_seed is None else config.operator_seed
+    operator = make_operator(config.operator, seed=op_seed, tcp_start_base=tcp0)
     duration = operator.duration_s if config.duration_s is None else config.duration_s
     sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run), q0=q0, operator=operator)
     driver = SimDriver(sim)
@@ -155,7 +163,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) 
     interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / driver.dt))
     settings: dict[str, object] = {
         "operator": config.operator, "controller": config.controller, "seed": config.seed,
-        "run": config.run, "duration_s": duration, "params_method": params.method,
+        "run": config.run, "operator_seed": op_seed, "duration_s": duration,
+        "params_method": params.method,
         "estimator": {"method": est_cfg.method, "axes": est_cfg.axes,
                       "output_cutoff_hz": est_cfg.output_cutoff_hz, "tare_s": est_cfg.tare_s},
         "friction_mode": guiding.friction_mode,
