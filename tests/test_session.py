@@ -4,6 +4,7 @@ the ``guide`` CLI."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,8 @@ from leadthrough.errors import ControlError, DataError
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot
-from leadthrough.session.record import load_session, save_session
+from leadthrough.session.metrics import release_overruns
+from leadthrough.session.record import SessionLog, load_session, save_session
 from leadthrough.session.sim_session import SimSessionConfig, run_sim_session
 
 LIMIT_ACC = 0.4  # m/s², Table IV
@@ -101,6 +103,41 @@ def test_operator_seed_varies_the_pushes_not_the_robot(er20: Robot,
     assert (la.settings["operator_seed"], lb.settings["operator_seed"]) == (0, 5)
     with pytest.raises(ControlError, match="operator_seed"):
         SimSessionConfig(operator_seed=-1)
+
+
+def test_release_overruns_measure_travel_beyond_the_shortest_stop() -> None:
+    """A push to 0.2 m/s, released at t = 1 s: a stop at 0.4 m/s² covers 50 mm. A log that
+    coasts 0.5 s at 0.2 m/s before that stop overran by 100 mm; one that stops at once, by 0.
+    No truth, no figure."""
+    dt, a, v0 = 1e-3, 0.4, 0.2
+    t = np.arange(0.0, 3.0, dt)
+    pushed = t < 1.0
+
+    def log_with(speed: np.ndarray) -> SessionLog:
+        n, z6 = t.size, np.zeros((t.size, 6))
+        twist = z6.copy()
+        twist[:, 0] = speed
+        tcp = np.zeros((n, 3))
+        tcp[1:, 0] = np.cumsum(speed[:-1]) * dt
+        applied = z6.copy()
+        applied[pushed, 0] = 40.0
+        return SessionLog(robot="er20", time=t, q=z6, current=z6, tau_ext=z6, wrench_base=z6,
+                          q_cmd=z6, qd_cmd=z6, tcp_cmd_base=tcp,
+                          tcp_cmd_quat=np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)),
+                          twist_cmd_base=twist, state=np.zeros(n, np.int64),
+                          fault=np.zeros(n, np.int64), wrench_applied_base=applied)
+
+    after = np.clip(t - 1.0, 0.0, None)
+    stop = np.where(pushed, v0, np.clip(v0 - a * after, 0.0, None))
+    coast = np.where(after < 0.5, v0, np.clip(v0 - a * (after - 0.5), 0.0, None))
+    coast[pushed] = v0
+    over = release_overruns(log_with(stop), a)
+    assert over is not None and over.shape == (1,)
+    assert over[0] == pytest.approx(0.0, abs=5e-4)   # v·dt = 0.2 mm per end of the sum
+    over = release_overruns(log_with(coast), a)
+    assert over is not None and over[0] == pytest.approx(0.1, abs=5e-4)
+    bare = replace(log_with(stop), wrench_applied_base=None)
+    assert release_overruns(bare, a) is None
 
 
 def test_corrupt_or_foreign_session_files_are_clear_errors(tmp_path: Path) -> None:

@@ -77,8 +77,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         s = session.summary
         drift = "n/a" if s.rest_drift_m is None else f"{1000 * s.rest_drift_m:.3f} mm"
+        over = "n/a" if s.release_overrun_m is None else f"{1000 * s.release_overrun_m:.1f} mm"
         print(f"{args.operator} with {args.controller}: max speed {s.max_linear_speed:.3f} m/s, "
               f"{s.max_angular_speed:.3f} rad/s; max acc {s.max_linear_acc:.3f} m/s²; rest "
-              f"drift {drift}; faults {s.faults or 'none'}; cycle {s.cycle_time_us.median:.0f} "
-              f"µs median, {s.cycle_time_us.p99:.0f} µs p99 -> {args.output}")
+              f"drift {drift}; overrun after a release {over}; faults {s.faults or 'none'}; "
+              f"cycle {s.cycle_time_us.median:.0f} µs median, {s.cycle_time_us.p99:.0f} µs p99 "
+              f"-> {args.output}")
     return 0

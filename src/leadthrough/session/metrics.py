@@ -11,7 +11,7 @@ from leadthrough.control.safety import State
 from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
-__all__ = ["CycleTime", "SessionSummary", "rest_drift", "summarize"]
+__all__ = ["CycleTime", "SessionSummary", "release_overruns", "rest_drift", "summarize"]
 
 Array = NDArray[np.float64]
 
@@ -41,6 +41,9 @@ class SessionSummary:
         max_angular_acc: Peak commanded TCP angular acceleration [rad/s²].
         rest_drift_m: Commanded TCP displacement that started while no force was applied (the
             robot was at rest and nobody pushed) [m]; None without the simulator's truth.
+        release_overrun_m: The largest commanded TCP travel after a hand let go, beyond a
+            stop from the speed at the release at the acceleration limit
+            (:func:`release_overruns`) [m]; None without the simulator's truth.
         faults: Faults that occurred, in order (names).
         final_state: Safety state at the end (name).
         cycle_time_us: Compute time per controller cycle.
@@ -52,6 +55,7 @@ class SessionSummary:
     max_linear_acc: float
     max_angular_acc: float
     rest_drift_m: float | None
+    release_overrun_m: float | None
     faults: list[str]
     final_state: str
     cycle_time_us: CycleTime
@@ -88,12 +92,46 @@ def rest_drift(log: SessionLog) -> float | None:
     return drift
 
 
-def summarize(result: LoopResult, controller_dt: float) -> SessionSummary:
+def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
+    """Travel after each release beyond a stop at ``deceleration``, one value per release.
+
+    A release is the last sample of an applied wrench before an interval without one (the
+    simulator's truth). From there to the next push (or the end), the commanded TCP path
+    length minus v²/(2·a), v the commanded speed at the release: what the robot travelled
+    with no hand on it beyond the shortest stop the limits allow. The estimate's filter lag
+    and the stopping friction make some of it; a phantom force that keeps the robot going
+    makes the rest.
+
+    Args:
+        log: The session.
+        deceleration: a [m/s²], > 0 (the linear acceleration limit).
+
+    Returns:
+        Overrun per release [m], >= 0, shape (releases,); None without the truth.
+    """
+    if log.wrench_applied_base is None:
+        return None
+    pushed = np.any(log.wrench_applied_base != 0.0, axis=1)
+    speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    step = np.diff(log.tcp_cmd_base, axis=0)
+    travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])
+    releases = np.flatnonzero(pushed[:-1] & ~pushed[1:])
+    out = np.zeros(releases.size)
+    for k, r in enumerate(releases):
+        again = np.flatnonzero(pushed[r + 1:])
+        end = r + again[0] if again.size else len(pushed) - 1
+        out[k] = max(0.0, travel[end] - travel[r] - speed[r] ** 2 / (2.0 * deceleration))
+    return out
+
+
+def summarize(result: LoopResult, controller_dt: float,
+              deceleration: float = 0.4) -> SessionSummary:
     """Figures of a finished session.
 
     Args:
         result: The session.
         controller_dt: Controller cycle [s] (accelerations are taken per cycle).
+        deceleration: Linear acceleration limit [m/s²] for :func:`release_overruns`.
     """
     log = result.log
     twist = log.twist_cmd_base
@@ -104,6 +142,7 @@ def summarize(result: LoopResult, controller_dt: float) -> SessionSummary:
     faults = [e.cause.split(":", 1)[1] for e in log.events
               if e.kind == "transition" and ":" in e.cause]
     us = result.cycle_us if result.cycle_us.size else np.zeros(1)
+    overruns = release_overruns(log, deceleration)
     return SessionSummary(
         duration_s=float(log.time[-1] - log.time[0]) if log.time.size else 0.0,
         max_linear_speed=float(np.linalg.norm(twist[:, :3], axis=1).max()),
@@ -111,6 +150,8 @@ def summarize(result: LoopResult, controller_dt: float) -> SessionSummary:
         max_linear_acc=float(np.linalg.norm(acc[:, :3], axis=1).max()),
         max_angular_acc=float(np.linalg.norm(acc[:, 3:], axis=1).max()),
         rest_drift_m=rest_drift(log),
+        release_overrun_m=(None if overruns is None
+                           else float(overruns.max()) if overruns.size else 0.0),
         faults=faults,
         final_state=State(int(log.state[-1])).name,
         cycle_time_us=CycleTime(median=float(np.median(us)),

@@ -174,6 +174,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) 
                          paced=config.paced, settings=settings)
     p1 = getattr(operator, "p1_base", None)
     p2 = getattr(operator, "p2_base", None)
-    return SimSession(result=result, summary=summarize(result, guiding.dt),
+    return SimSession(result=result, summary=summarize(result, guiding.dt,
+                                                       guiding.limits.max_linear_acceleration),
                       p1_base=None if p1 is None else np.asarray(p1, dtype=float),
                       p2_base=None if p2 is None else np.asarray(p2, dtype=float))
