@@ -312,54 +312,18 @@ def test_friction_weights_count_a_turning_joint_less_and_recover() -> None:
     sigma = np.array([10.0, 1.0])
     level = np.array([50.0, 5.0])
     envelope, weight = np.zeros(2), np.zeros(2)
-    kernels.friction_weights(level, level.copy(), level.copy(), 0.9, 2.0, sigma, envelope,
-                             weight)
+    kernels.friction_weights(level, level.copy(), 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(weight, 1.0 / sigma)
     state = np.array([50.0, 0.0])  # joint 2 turning over after a reversal
-    kernels.friction_weights(level, state, state, 0.9, 2.0, sigma, envelope, weight)
+    kernels.friction_weights(level, state, 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(weight, [0.1, 1.0 / np.sqrt(1.0 + (2.0 * 5.0) ** 2)])
     for _ in range(10):  # turned over: the envelope holds the peak, decaying
-        kernels.friction_weights(level, -level, -level, 0.9, 2.0, sigma, envelope, weight)
+        kernels.friction_weights(level, -level, 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(envelope, [0.0, 5.0 * 0.9**10])
     np.testing.assert_allclose(weight[1], 1.0 / np.sqrt(1.0 + (2.0 * 5.0 * 0.9**10) ** 2))
 
 
-def test_a_joint_dithering_within_the_largest_presliding_counts_less() -> None:
-    """A joint commanded back and forth by less than ``presliding_max_rad`` (a wrist making
-    small corrections) may still be stuck: the model with the largest presliding has barely
-    turned, so the gap to it lowers the weight, even though the z₀ model reads steady sliding.
-    Once the joint has slid well past it, both models agree and the weight returns to 1/σ."""
-    from leadthrough.estimation import kernels
-
-    fp = np.zeros((8, 1))
-    fp[1, 0] = 8.0                                      # Coulomb only: g = 8 N·m
-    dt, z0, z_max = 1e-3, 4e-4, 2e-3
-    fast, slow, out, level = np.full(1, 8.0), np.full(1, 8.0), np.zeros(1), np.zeros(1)
-    envelope, weight, sigma = np.zeros(1), np.zeros(1), np.array([1.0])
-
-    def step(v: float) -> None:
-        qd = np.array([v])
-        kernels.presliding_friction_step(qd, fp, False, dt, z0, fast, out, level)
-        kernels.presliding_friction_step(qd, fp, False, dt, z_max, slow, np.zeros(1),
-                                         np.zeros(1))
-        kernels.friction_weights(level, fast, slow, 0.99, 1.0, sigma, envelope, weight)
-
-    for _ in range(100):                                # back by 1 mrad = 2.5 z0 < z_max
-        step(-0.01)
-    assert fast[0] < -0.8 * 8.0                         # the z0 model has turned over
-    assert slow[0] > 0.0                                # the largest presliding has not
-    assert weight[0] < 1.0 / np.sqrt(1.0 + 8.0**2)      # so the joint counts < 1/√(σ² + g²)
-    for _ in range(2000):                               # then slides 20 mrad = 10 z_max
-        step(-0.01)
-    np.testing.assert_allclose(slow, -8.0, rtol=1e-3)
-    for _ in range(2000):                               # the envelope decays: 1/σ again
-        step(-0.01)
-    np.testing.assert_allclose(weight, 1.0 / sigma, rtol=1e-3)
-
-
 def test_friction_weighting_needs_the_force_fit_and_commanded_friction() -> None:
-    with pytest.raises(DataError, match="presliding_max_rad"):
-        EstimatorConfig(presliding_rad=1e-3, presliding_max_rad=5e-4)
     with pytest.raises(DataError, match="friction_weighting"):
         EstimatorConfig(friction_weighting=1.0)  # wrench axes, measured friction
     with pytest.raises(DataError, match="friction_weighting"):

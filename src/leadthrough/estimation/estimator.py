@@ -105,13 +105,6 @@ class EstimatorConfig:
             model's friction ahead of the gear's, a larger one behind it: on the simulated er20
             (gear presliding 1.5–2.5e-4 rad plus the servo's lag) 1e-3 stalls a 40 N start and
             2e-4 over-reads starts and reversals by up to 2×; 4e-4 follows both.
-        presliding_max_rad: The largest plausible presliding [rad], ≥ ``presliding_rad``, for
-            the friction's uncertainty in the weighting below: a joint commanded back and forth
-            by less than this (a wrist making small corrections while the TCP moves) may not
-            have moved at all, held by its stiction while the servo's position error grows.
-            On the simulated er20 such a wrist read up to 13 N·m of friction the wrong way,
-            a 100 N phantom at the TCP; with 2e-3 (5 z₀), no collision fault in 24 random
-            sessions against 2 with the z₀ model alone.
         friction_weighting: κ of the ``axes="force"`` fit with ``"command"`` friction: each
             joint's weight 1/σ_j becomes 1/√(σ_j² + (κ·u_j)²), u_j the friction's uncertainty
             (see ``kernels.friction_weights``), held over two time constants of the output
@@ -134,7 +127,6 @@ class EstimatorConfig:
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
     presliding_rad: float = 4e-4
-    presliding_max_rad: float = 2e-3
     friction_weighting: float = 0.0
 
     def __post_init__(self) -> None:
@@ -154,8 +146,6 @@ class EstimatorConfig:
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
             ("presliding_rad", 0 < self.presliding_rad <= 0.1, "0 < z0 <= 0.1 rad"),
-            ("presliding_max_rad", self.presliding_rad <= self.presliding_max_rad <= 0.1,
-             "presliding_rad <= value <= 0.1 rad"),
             ("friction_weighting",
              0 <= self.friction_weighting < np.inf
              and (self.friction_weighting == 0
@@ -240,8 +230,6 @@ class ExternalForceEstimator:
         self._work = np.zeros(n)
         self._friction = np.zeros(n)
         self._presliding = np.zeros(n)
-        self._presliding_slow = np.zeros(n)
-        self._scratch = np.zeros((2, n))
         self._qd_drive = np.zeros(n)
         self._direct = cfg.method == "direct"
         self._force_only = cfg.axes == "force"
@@ -292,7 +280,6 @@ class ExternalForceEstimator:
         self._p0[:] = 0.0
         self._samples = 0
         self._presliding[:] = 0.0
-        self._presliding_slow[:] = 0.0
         self._envelope[:] = 0.0
         np.divide(1.0, self._std, out=self._w)
         self._fault = False
@@ -323,13 +310,7 @@ class ExternalForceEstimator:
                                              self.config.dt, self.config.presliding_rad,
                                              self._presliding, fr, self._level)
             if self._weigh:
-                kernels.presliding_friction_step(self._qd_drive, mdl.friction_rows,
-                                                 mdl.stribeck, self.config.dt,
-                                                 self.config.presliding_max_rad,
-                                                 self._presliding_slow, self._scratch[0],
-                                                 self._scratch[1])
-                kernels.friction_weights(self._level, self._presliding,
-                                         self._presliding_slow, self._env_decay,
+                kernels.friction_weights(self._level, self._presliding, self._env_decay,
                                          self.config.friction_weighting, self._std,
                                          self._envelope, self._w)
         else:

@@ -124,27 +124,21 @@ def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
 
 
 @njit(cache=True, nogil=True)
-def friction_weights(level: Array, state: Array, state_slow: Array, decay: float, kappa: float,
-                     std: Array, envelope: Array, weight: Array) -> None:
+def friction_weights(level: Array, state: Array, decay: float, kappa: float, std: Array,
+                     envelope: Array, weight: Array) -> None:
     """Per-joint weights of the force fit from the friction's uncertainty, one step.
 
-    u_j = max(|g_j(q̇) − |F_j||, |F_j − F_slow,j|). The first gap is between the friction
-    state F of :func:`presliding_friction_step` and the eq. 15 level at the current speed:
-    zero in steady sliding, up to g while the friction turns over after a reversal (|F| passes
-    through zero, and where the gear is then depends on its presliding, of which the model's z₀
-    is only a guess), and at standstill the gap to the static level (a stopped gear's friction
-    can be anything up to it). The second is between F and the same model with the largest
-    plausible presliding displacement: a joint commanded back and forth by less than that (a
-    wrist making small corrections while the TCP moves) may not have moved at all, held by its
-    stiction while the servo's position error grows, so its friction is anywhere between the
-    two. Both are zero once the joint has slid further than the largest presliding. The
-    envelope of u (peak hold decaying by ``decay`` per step, so that it covers the low-passed
-    τ_ext) enters the weight w_j = 1/√(σ_j² + (κ·u_j)²).
+    u_j = |g_j(q̇) − |F_j||, the gap between the friction state of
+    :func:`presliding_friction_step` and the eq. 15 level at the current speed: zero in steady
+    sliding, up to g while the friction turns over after a reversal (|F| passes through zero,
+    and where the gear is then depends on its presliding, of which the model's z₀ is only a
+    guess), and at standstill the gap to the static level (a stopped gear's friction can be
+    anything up to it). Its envelope (peak hold decaying by ``decay`` per step, so that it
+    covers the low-passed τ_ext) enters the weight w_j = 1/√(σ_j² + (κ·u_j)²).
 
     Args:
         level: g(q̇) [N·m], shape (n,).
         state: F [N·m], shape (n,).
-        state_slow: F of the model with the largest presliding [N·m], shape (n,).
         decay: Envelope factor per step, in [0, 1).
         kappa: κ [-], ≥ 0.
         std: σ_j of the calibration residual [N·m], shape (n,), > 0.
@@ -152,7 +146,7 @@ def friction_weights(level: Array, state: Array, state_slow: Array, decay: float
         weight: Weights [1/(N·m)], shape (n,) (written).
     """
     for j in range(level.size):
-        u = max(abs(level[j] - abs(state[j])), abs(state[j] - state_slow[j]))
+        u = abs(level[j] - abs(state[j]))
         held = envelope[j] * decay
         envelope[j] = u if u > held else held
         s = kappa * envelope[j]
