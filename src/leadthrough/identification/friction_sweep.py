@@ -38,7 +38,7 @@ import scipy.signal
 from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
-from leadthrough.dynamics.friction import StribeckParameters, stribeck_friction
+from leadthrough.dynamics.friction import StribeckParameters, stribeck_friction, stribeck_shapes
 from leadthrough.errors import DataError, check_fields
 from leadthrough.robot.description import Robot
 
@@ -230,12 +230,17 @@ def _fit_joint(v: Array, f: Array, R: float, vmax: float, grid: int) -> Array:
     w = 1.0 / np.maximum(np.abs(f), 1e-3 * max(float(np.max(np.abs(f))), 1e-9))
     grid_m = np.geomspace(0.5, R * vmax, grid)
     grid_g = np.geomspace(1e-3 * vmax, vmax, grid)
+    speeds, ratio = v[:, None], np.array([R])
+
+    def columns(sm: float, sg: float) -> Array:
+        """Eq. 15's columns [sgn, e_m, e_g, q̇] at the (positive) speeds, shape (K, 4)."""
+        sgn, motor, gear = stribeck_shapes(speeds, ratio, np.array([sm]), np.array([sg]))
+        return np.column_stack([sgn, motor, gear, v])
+
     best = (math.inf, np.zeros(6))
     for sm in grid_m:
-        em = np.exp(-np.square(R * v / sm))
         for sg in grid_g:
-            A = np.column_stack([np.ones_like(v), em, np.exp(-np.square(v / sg)), v])
-            x, res = scipy.optimize.nnls(A * w[:, None], f * w)
+            x, res = scipy.optimize.nnls(columns(sm, sg) * w[:, None], f * w)
             if res < best[0]:
                 best = (res, np.array([x[0], x[1], sm, x[2], sg, x[3]]))
     x0 = best[1]
@@ -243,9 +248,8 @@ def _fit_joint(v: Array, f: Array, R: float, vmax: float, grid: int) -> Array:
     hi = np.array([np.inf, np.inf, math.log(grid_m[-1]), np.inf, math.log(grid_g[-1]), np.inf])
 
     def resid(p: Array) -> Array:
-        model = (p[0] + p[1] * np.exp(-np.square(R * v / math.exp(p[2])))
-                 + p[3] * np.exp(-np.square(v / math.exp(p[4]))) + p[5] * v)
-        return (model - f) * w
+        c = columns(math.exp(p[2]), math.exp(p[4]))
+        return (p[0] * c[:, 0] + p[1] * c[:, 1] + p[3] * c[:, 2] + p[5] * c[:, 3] - f) * w
 
     start = np.array([x0[0], x0[1], math.log(x0[2]), x0[3], math.log(x0[4]), x0[5]])
     sol = scipy.optimize.least_squares(resid, np.clip(start, lo, hi), bounds=(lo, hi))

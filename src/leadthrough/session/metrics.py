@@ -76,13 +76,12 @@ def rest_drift(log: SessionLog) -> float | None:
     Returns:
         Drift [m], or None if the session has no applied-wrench truth.
     """
-    if log.wrench_applied_base is None:
+    intervals = _hands_off(log)
+    if intervals is None:
         return None
-    free = ~np.any(log.wrench_applied_base != 0.0, axis=1)
     at_rest = ~np.any(log.twist_cmd_base != 0.0, axis=1)
     drift = 0.0
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+    for start, stop in intervals:
         rested = np.flatnonzero(at_rest[start:stop])
         if rested.size == 0:
             continue
@@ -90,6 +89,16 @@ def rest_drift(log: SessionLog) -> float | None:
         d = np.linalg.norm(log.tcp_cmd_base[k0:stop] - log.tcp_cmd_base[k0], axis=1)
         drift = max(drift, float(d.max()))
     return drift
+
+
+def _hands_off(log: SessionLog) -> list[tuple[int, int]] | None:
+    """The intervals [start, stop) of samples where the applied wrench (the simulator's truth)
+    is exactly zero, in time order; None without the truth."""
+    if log.wrench_applied_base is None:
+        return None
+    free = ~np.any(log.wrench_applied_base != 0.0, axis=1)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
@@ -109,23 +118,19 @@ def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
     Returns:
         Overrun per release [m], >= 0, shape (releases,); None without the truth.
     """
-    if log.wrench_applied_base is None:
+    intervals = _hands_off(log)
+    if intervals is None:
         return None
-    pushed = np.any(log.wrench_applied_base != 0.0, axis=1)
     speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
     step = np.diff(log.tcp_cmd_base, axis=0)
     travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])
-    releases = np.flatnonzero(pushed[:-1] & ~pushed[1:])
-    out = np.zeros(releases.size)
-    for k, r in enumerate(releases):
-        again = np.flatnonzero(pushed[r + 1:])
-        end = r + again[0] if again.size else len(pushed) - 1
-        out[k] = max(0.0, travel[end] - travel[r] - speed[r] ** 2 / (2.0 * deceleration))
-    return out
+    # a release: the last pushed sample r before a hands-off interval, which ends at stop - 1
+    ends = [(start - 1, stop - 1) for start, stop in intervals if start > 0]
+    return np.array([max(0.0, travel[end] - travel[r] - speed[r] ** 2 / (2.0 * deceleration))
+                     for r, end in ends])
 
 
-def summarize(result: LoopResult, controller_dt: float,
-              deceleration: float = 0.4) -> SessionSummary:
+def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> SessionSummary:
     """Figures of a finished session.
 
     Args:
