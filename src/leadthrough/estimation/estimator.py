@@ -19,9 +19,9 @@ The joint torque is mapped to a wrench at the TCP through a damped pseudo-invers
 μ = √det(J Jᵀ) falls below μ₀, so the wrench shrinks toward zero near a singularity instead of
 blowing up. The frame is the base (axes of the base, at the TCP) or the tool.
 
-Per sample, ``update`` makes two or four Pinocchio calls (RNEA or CRBA/Coriolis/gravity, and
-the TCP Jacobian) and hands all element-wise work to the compiled kernels of
-:mod:`leadthrough.estimation.kernels`; ``benchmarks/estimator_speed.py`` measures it.
+Per sample, ``update`` makes two compiled calls (:mod:`leadthrough.estimation.fused`: the
+state lives in a few packed arrays) around two or four Pinocchio calls (RNEA or
+CRBA/Coriolis/gravity, and the TCP Jacobian); ``benchmarks/estimator_speed.py`` measures it.
 
 ``update`` validates nothing but finiteness (configuration is checked once at construction),
 never raises, never reads the clock: a non-finite sample sets ``Status.FAULT_NONFINITE`` and
@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.errors import DataError, check_fields
-from leadthrough.estimation import kernels
+from leadthrough.estimation import fused, kernels
 from leadthrough.estimation.filters import FirstOrderLowPass, StateVariableDifferentiator
 from leadthrough.estimation.identified_model import IdentifiedModel
 from leadthrough.robot.description import Robot
@@ -215,47 +215,47 @@ class ExternalForceEstimator:
         if noise_mean.shape != (n,):
             raise DataError("wrong size", field="noise_mean", value=noise_mean.shape,
                             expected=f"({n},)")
-        self.robot = robot
-        self.model = IdentifiedModel(robot, params, cfg.standstill_velocity)
-        self._noise_mean = noise_mean if cfg.remove_mean_noise else np.zeros(n)
-        self._tpa = robot.torque_per_amp
-        self._diff = StateVariableDifferentiator(n, cfg.velocity_cutoff_hz, cfg.dt)
-        self._lpf = FirstOrderLowPass(n, cfg.output_cutoff_hz, cfg.dt)
-        self._k_obs = 2.0 * np.pi * cfg.output_cutoff_hz
-        self._ref = pin.LOCAL_WORLD_ALIGNED if cfg.frame == "base" else pin.LOCAL
-        self._tau_j = np.zeros(n)
-        self._p0 = np.zeros(n)
-        self._integral = np.zeros(n)
-        self._r = np.zeros(n)
-        self._work = np.zeros(n)
-        self._friction = np.zeros(n)
-        self._presliding = np.zeros(n)
-        self._qd_drive = np.zeros(n)
-        self._direct = cfg.method == "direct"
-        self._force_only = cfg.axes == "force"
-        self._fric_cmd = cfg.friction_velocity == "command"
-        self._last_tau = np.zeros(n)
-        self._last_wrench = np.zeros(6)
         std = np.ones(n) if noise_std is None else np.asarray(noise_std, dtype=float)
         if std.shape != (n,) or not np.all(std > 0):
             raise DataError("wrong size or not positive", field="noise_std", value=std.tolist(),
                             expected=f"{n} positive values")
-        self._std = std
-        self._w = 1.0 / std
-        self._level = np.zeros(n)
-        self._envelope = np.zeros(n)
-        self._weigh = cfg.friction_weighting > 0
-        self._env_decay = float(np.exp(-cfg.dt * np.pi * cfg.output_cutoff_hz))
-        self._samples = 0
-        self._warm = round(cfg.warm_up_s / cfg.dt)
-        self._tare = np.zeros(n)
-        self._tare_sum = np.zeros(n)
+        self.robot = robot
+        self.model = mdl = IdentifiedModel(robot, params, cfg.standstill_velocity)
+        self._ref = pin.LOCAL_WORLD_ALIGNED if cfg.frame == "base" else pin.LOCAL
+        # packed state of the compiled sample (leadthrough.estimation.fused)
+        const = self._const = np.zeros((fused.CONST_ROWS, n))
+        const[:kernels.FRICTION_ROWS] = mdl.friction_rows
+        const[fused.TORQUE_PER_AMP] = robot.torque_per_amp
+        const[fused.STD] = std
+        const[fused.ROTOR] = mdl.rotor
+        const[fused.OFFSET] = mdl.offset
+        const[fused.NOISE_MEAN] = noise_mean if cfg.remove_mean_noise else 0.0
+        st = self._settings = np.zeros(fused.SETTINGS_SLOTS)
+        st[fused.SVF:fused.SVF + 7] = StateVariableDifferentiator(
+            n, cfg.velocity_cutoff_hz, cfg.dt).coef
+        st[fused.DT] = cfg.dt
+        st[fused.PRESLIDING_RAD] = cfg.presliding_rad
+        st[fused.ENVELOPE_DECAY] = float(np.exp(-cfg.dt * np.pi * cfg.output_cutoff_hz))
+        st[fused.KAPPA] = cfg.friction_weighting
+        st[fused.ALPHA] = FirstOrderLowPass(n, cfg.output_cutoff_hz, cfg.dt).alpha
+        st[fused.OBSERVER_GAIN] = 2.0 * np.pi * cfg.output_cutoff_hz
+        st[fused.MU0] = cfg.manipulability_threshold
+        st[fused.MAX_DAMPING] = cfg.max_damping
+        c = self._counters = np.zeros(fused.COUNTER_SLOTS, dtype=np.int64)
+        c[fused.WARM] = round(cfg.warm_up_s / cfg.dt)
+        c[fused.STRIBECK] = mdl.stribeck
+        c[fused.FRICTION_COMMAND] = cfg.friction_velocity == "command"
+        c[fused.WEIGH] = cfg.friction_weighting > 0
+        c[fused.DIRECT] = cfg.method == "direct"
+        c[fused.FORCE_ONLY] = cfg.axes == "force"
+        self._state = np.zeros((fused.STATE_ROWS, n))
+        # views handed to Pinocchio every sample
+        self._q, self._qd, self._qdd = (self._state[r] for r in (fused.POS, fused.VEL,
+                                                                 fused.ACC))
+        self._unused = np.zeros((n, n))
+        self._last_wrench = np.zeros(6)
         self._tare_len = round(cfg.tare_s / cfg.dt)
-        self._tare_left = self._tare_taken = self._tare_len
-        self._rezero_sum = np.zeros(n)
-        self._rezero_left = self._rezero_taken = 0
-        self._fault = False
-        self._first = True
+        self.reset(np.zeros(n))
 
     def make_input(self) -> EstimatorInput:
         """A preallocated input."""
@@ -269,87 +269,42 @@ class ExternalForceEstimator:
 
     def reset(self, q: Array) -> None:
         """Restart at rest at ``q``: clears a latched fault and the tare (re-tares if set)."""
-        self._tare[:] = 0.0
-        self._tare_sum[:] = 0.0
-        self._tare_left = self._tare_taken = self._tare_len
-        self._rezero_left = 0
-        self._diff.reset(q)
-        self._lpf.reset(np.zeros(self.robot.n))
-        self._integral[:] = 0.0
-        self._r[:] = 0.0
-        self._p0[:] = 0.0
-        self._samples = 0
-        self._presliding[:] = 0.0
-        self._envelope[:] = 0.0
-        np.divide(1.0, self._std, out=self._w)
-        self._fault = False
-        self._first = True
+        s, c = self._state, self._counters
+        s[:] = 0.0
+        s[fused.POS] = q
+        np.divide(1.0, self._const[fused.STD], out=s[fused.WEIGHT])
+        c[fused.TARE_LEFT] = c[fused.TARE_TAKEN] = self._tare_len
+        c[fused.REZERO_LEFT] = c[fused.SAMPLES] = c[fused.FAULT] = 0
+        c[fused.FIRST] = 1
+        c[fused.STATUS] = fused.STATUS_WARMING_UP
+        self._last_wrench[:] = 0.0
 
     def update(self, inp: EstimatorInput, out: EstimatorOutput) -> Status:
         """Process one sample; fills ``out``; never raises."""
-        if self._fault or not (np.isfinite(inp.q).all() and np.isfinite(inp.current).all()
-                               and np.isfinite(inp.t)):
-            self._fault = True
-            out.tau_ext[:] = self._last_tau
+        st, c, s, k = self._settings, self._counters, self._state, self._const
+        if not fused.sample_front(inp.q, inp.current, inp.qd_cmd, inp.t, k, st, c, s):
+            out.tau_ext[:] = s[fused.LAST_TAU]
             out.wrench[:] = self._last_wrench
             out.status = Status.FAULT_NONFINITE
             return out.status
-        if self._first:
-            self._diff.reset(inp.q)
-            self._first = False
-        self._diff.step(inp.q)
-        q, qd, qdd = self._diff.position, self._diff.velocity, self._diff.acceleration
-        np.multiply(inp.current, self._tpa, out=self._tau_j)
         mdl = self.model
-        if self._fric_cmd:
-            fr = self._friction
-            # driven by the command while it moves, by the measured motion when it is at rest
-            np.copyto(self._qd_drive, qd)
-            np.copyto(self._qd_drive, inp.qd_cmd, where=inp.qd_cmd != 0.0)
-            kernels.presliding_friction_step(self._qd_drive, mdl.friction_rows, mdl.stribeck,
-                                             self.config.dt, self.config.presliding_rad,
-                                             self._presliding, fr, self._level)
-            if self._weigh:
-                kernels.friction_weights(self._level, self._presliding, self._env_decay,
-                                         self.config.friction_weighting, self._std,
-                                         self._envelope, self._w)
+        m, d, q, u = mdl.model, mdl.data, self._q, self._unused
+        if c[fused.DIRECT]:
+            rnea = pin.rnea(m, d, q, self._qd, self._qdd)
+            J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
+            mu = fused.sample_back(rnea, u, u, q, J, k, st, c, s, out.tau_ext, out.wrench,
+                                   out.qd, self._last_wrench)
         else:
-            fr = mdl.friction_torque(qd)
-        if self._direct:
-            rnea = pin.rnea(mdl.model, mdl.data, q, qd, qdd)
-            kernels.direct_residual(rnea, fr, qdd, self._tau_j, mdl.rotor, mdl.offset,
-                                    self._lpf.alpha, self._lpf.value, self._noise_mean,
-                                    out.tau_ext)
-        else:
-            self._momentum(q, qd, fr, out.tau_ext)
-        out.tau_ext -= self._tare
-        self._wrench(q, out)
-        out.qd[:] = qd
-        self._last_tau[:] = out.tau_ext
-        self._last_wrench[:] = out.wrench
-        self._samples += 1
-        if self._samples <= self._warm:
-            out.status = Status.WARMING_UP
-        elif self._tare_left > 0:
-            self._tare_left = self._average_into_tare(self._tare_sum, self._tare_left,
-                                                      self._tare_taken, out.tau_ext)
-            out.status = Status.TARING
-        else:
-            if self._rezero_left > 0:
-                self._rezero_left = self._average_into_tare(self._rezero_sum, self._rezero_left,
-                                                            self._rezero_taken, out.tau_ext)
-            out.status = Status.OK
+            M = pin.crba(m, d, q)  # upper triangle only
+            C = pin.computeCoriolisMatrix(m, d, q, self._qd)
+            g = pin.computeGeneralizedGravity(m, d, q)
+            J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
+            mu = fused.sample_back(q, M, C, g, J, k, st, c, s, out.tau_ext, out.wrench,
+                                   out.qd, self._last_wrench)
+        out.manipulability = mu
+        out.damping = kernels.damping_of(mu, st[fused.MU0], st[fused.MAX_DAMPING])
+        out.status = _STATUS[c[fused.STATUS]]
         return out.status
-
-    def _average_into_tare(self, total: Array, left: int, taken: int, tau_ext: Array) -> int:
-        """One sample of an averaging window (tare or re-zero): add ``tau_ext`` to ``total``;
-        on the window's last sample add the mean to the tare. Returns the samples left."""
-        total += tau_ext
-        left -= 1
-        if left == 0:
-            total *= 1.0 / taken
-            self._tare += total
-        return left
 
     def rezero(self, samples: int) -> None:
         """Zero-velocity update: average τ_ext over the next ``samples`` samples and subtract
@@ -362,17 +317,18 @@ class ExternalForceEstimator:
         Args:
             samples: Window length [samples], >= 1.
         """
-        self._rezero_sum[:] = 0.0
-        self._rezero_left = self._rezero_taken = max(1, samples)
+        self._state[fused.REZERO_SUM] = 0.0
+        c = self._counters
+        c[fused.REZERO_LEFT] = c[fused.REZERO_TAKEN] = max(1, samples)
 
     def cancel_rezero(self) -> None:
         """Abandon a :meth:`rezero` in progress (the tare is kept as it was)."""
-        self._rezero_left = 0
+        self._counters[fused.REZERO_LEFT] = 0
 
     @property
     def rezeroing(self) -> bool:
         """A :meth:`rezero` is in progress."""
-        return self._rezero_left > 0
+        return bool(self._counters[fused.REZERO_LEFT] > 0)
 
     def tare(self, duration_s: float) -> None:
         """Start taring now: average τ_ext over ``duration_s`` and subtract it from then on.
@@ -386,31 +342,16 @@ class ExternalForceEstimator:
         if not (np.isfinite(duration_s) and duration_s > 0):
             raise DataError("tare duration must be > 0", field="duration_s", value=duration_s,
                             expected="> 0 s")
-        self._tare_sum[:] = 0.0
-        self._tare_left = self._tare_taken = max(1, round(duration_s / self.config.dt))
+        self._state[fused.TARE_SUM] = 0.0
+        c = self._counters
+        c[fused.TARE_LEFT] = c[fused.TARE_TAKEN] = max(1, round(duration_s / self.config.dt))
 
     @property
     def tare_torque(self) -> Array:
         """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
-        return self._tare.copy()
+        return self._state[fused.TARE].copy()
 
-    def _momentum(self, q: Array, qd: Array, friction: Array, tau_ext: Array) -> None:
-        mdl = self.model
-        m, d = mdl.model, mdl.data
-        M = pin.crba(m, d, q)  # upper triangle only
-        C = pin.computeCoriolisMatrix(m, d, q, qd)
-        g = pin.computeGeneralizedGravity(m, d, q)
-        kernels.momentum_step(M, mdl.rotor, C, g, qd, friction, self._tau_j,
-                              mdl.offset, self.config.dt,
-                              self._k_obs, self._samples == 0, self._p0, self._integral, self._r,
-                              self._work, self._noise_mean, tau_ext)
 
-    def _wrench(self, q: Array, out: EstimatorOutput) -> None:
-        m, d = self.model.model, self.model.data
-        J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
-        cfg = self.config
-        mu = kernels.wrench_from_torque(J, out.tau_ext, self._w, self._force_only,
-                                        cfg.manipulability_threshold, cfg.max_damping,
-                                        out.wrench)
-        out.manipulability = mu
-        out.damping = kernels.damping_of(mu, cfg.manipulability_threshold, cfg.max_damping)
+#: Status by the compiled sample's code (index -1: the fault)
+_STATUS = {fused.STATUS_OK: Status.OK, fused.STATUS_WARMING_UP: Status.WARMING_UP,
+           fused.STATUS_TARING: Status.TARING, fused.STATUS_FAULT: Status.FAULT_NONFINITE}

@@ -1,0 +1,221 @@
+"""One estimator sample in two compiled calls (Numba, ``nopython``, cached on disk).
+
+:class:`~leadthrough.estimation.estimator.ExternalForceEstimator` spends a sample in three parts:
+:func:`sample_front` (finiteness, the causal differentiator, τ̂_j from current, friction and
+the force fit's weights), the Pinocchio calls on the filtered state (RNEA, or CRBA + Coriolis +
+gravity for the observer, and the TCP Jacobian), and :func:`sample_back` (eq. 27 and 30 or the
+momentum observer, the tare, the wrench of eq. 28–30, and the warm-up / tare / re-zero
+bookkeeping). With six joints a Python-level NumPy call costs more in dispatch than in
+arithmetic, so the state lives in a few packed arrays instead of a dozen small ones: one call
+then passes four arrays instead of twenty. The arithmetic itself is that of the element-wise
+kernels in :mod:`leadthrough.estimation.kernels`, which these call.
+
+Packed arrays (row and slot names below):
+
+* ``state`` (:data:`STATE_ROWS`, n): per-joint state and scratch of one estimator;
+* ``const`` (:data:`CONST_ROWS`, n): per-joint constants: the friction rows of
+  :mod:`~leadthrough.estimation.kernels` (0–7) then torque per amp, σ, M_j, τ_0, τ̄_ω;
+* ``settings`` (:data:`SETTINGS_SLOTS`,): float settings;
+* ``counters`` (:data:`COUNTER_SLOTS`,): int64 counters, flags and the last status.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from leadthrough.estimation import kernels
+
+__all__ = [
+    "CONST_ROWS",
+    "COUNTER_SLOTS",
+    "SETTINGS_SLOTS",
+    "STATE_ROWS",
+    "sample_back",
+    "sample_front",
+]
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+# rows of ``state``
+POS, VEL, ACC = 0, 1, 2            # differentiator: filtered q, q̇, q̈
+TAU_J = 3                          # torque from current
+FRICTION = 4                       # friction torque τ_f
+PRESLIDING = 5                     # F of the friction with memory
+LEVEL = 6                          # eq. 15 level g(q̇)
+DRIVE = 7                          # velocity driving the friction (scratch)
+SIGN = 8                           # smoothed sign (scratch)
+ENVELOPE = 9                       # envelope of the friction's uncertainty
+WEIGHT = 10                        # weights of the force fit
+FILTERED = 11                      # low-pass state of τ̂_d − τ̂_j
+TARE, TARE_SUM, REZERO_SUM = 12, 13, 14
+LAST_TAU = 15                      # last valid τ_ext
+P0, INTEGRAL, RESIDUAL, WORK = 16, 17, 18, 19   # momentum observer
+STATE_ROWS = 20
+
+# rows of ``const`` after the friction rows
+TORQUE_PER_AMP = kernels.FRICTION_ROWS
+STD = TORQUE_PER_AMP + 1
+ROTOR = TORQUE_PER_AMP + 2
+OFFSET = TORQUE_PER_AMP + 3
+NOISE_MEAN = TORQUE_PER_AMP + 4
+CONST_ROWS = TORQUE_PER_AMP + 5
+
+# slots of ``settings``: the differentiator's 7 coefficients (kernels.svf_step) then
+SVF = 0
+DT = 7
+PRESLIDING_RAD = 8
+ENVELOPE_DECAY = 9
+KAPPA = 10
+ALPHA = 11                         # low-pass coefficient
+OBSERVER_GAIN = 12
+MU0 = 13
+MAX_DAMPING = 14
+SETTINGS_SLOTS = 15
+
+# slots of ``counters``
+SAMPLES, WARM = 0, 1
+TARE_LEFT, TARE_TAKEN, REZERO_LEFT, REZERO_TAKEN = 2, 3, 4, 5
+FAULT, FIRST = 6, 7
+STRIBECK, FRICTION_COMMAND, WEIGH, DIRECT, FORCE_ONLY = 8, 9, 10, 11, 12
+STATUS = 13
+COUNTER_SLOTS = 14
+
+# values of counters[STATUS] (the estimator's Status)
+STATUS_OK, STATUS_WARMING_UP, STATUS_TARING, STATUS_FAULT = 0, 1, 2, -1
+
+
+@njit(cache=True, nogil=True)
+def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array,
+                 settings: Array, counters: IntArray, state: Array) -> bool:
+    """First half of a sample: checks, differentiator, τ̂_j = K·i, friction, weights.
+
+    Args:
+        q: Measured joint positions [rad], shape (n,).
+        current: Motor currents [A], shape (n,).
+        qd_cmd: Joint velocity commanded to the servo [rad/s], shape (n,) (friction driven by
+            the command; else unused).
+        t: Time [s] (checked for finiteness only).
+        const: Per-joint constants, shape (CONST_ROWS, n).
+        settings: Float settings, shape (SETTINGS_SLOTS,).
+        counters: Counters and flags (in place), shape (COUNTER_SLOTS,).
+        state: Per-joint state (in place), shape (STATE_ROWS, n).
+
+    Returns:
+        False if the sample is not finite or a fault is latched (``counters[FAULT]`` set,
+        ``counters[STATUS]`` the fault; nothing else changes), else True.
+    """
+    n = q.size
+    ok = counters[FAULT] == 0 and np.isfinite(t)
+    for j in range(n):
+        if not (np.isfinite(q[j]) and np.isfinite(current[j])):
+            ok = False
+    if not ok:
+        counters[FAULT] = 1
+        counters[STATUS] = STATUS_FAULT
+        return False
+    if counters[FIRST] != 0:
+        for j in range(n):
+            state[POS, j] = q[j]
+            state[VEL, j] = 0.0
+            state[ACC, j] = 0.0
+        counters[FIRST] = 0
+    kernels.svf_step(settings[SVF:SVF + 7], q, state[POS], state[VEL], state[ACC])
+    for j in range(n):
+        state[TAU_J, j] = current[j] * const[TORQUE_PER_AMP, j]
+    fp = const[:kernels.FRICTION_ROWS]
+    stribeck = counters[STRIBECK] != 0
+    if counters[FRICTION_COMMAND] != 0:
+        # driven by the command while it moves, by the measured motion when it is at rest
+        for j in range(n):
+            state[DRIVE, j] = qd_cmd[j] if qd_cmd[j] != 0.0 else state[VEL, j]
+        kernels.presliding_friction_step(state[DRIVE], fp, stribeck, settings[DT],
+                                         settings[PRESLIDING_RAD], state[PRESLIDING],
+                                         state[FRICTION], state[LEVEL])
+        if counters[WEIGH] != 0:
+            kernels.friction_weights(state[LEVEL], state[PRESLIDING], settings[ENVELOPE_DECAY],
+                                     settings[KAPPA], const[STD], state[ENVELOPE],
+                                     state[WEIGHT])
+    else:
+        kernels.smooth_sign(state[VEL], fp, state[SIGN])
+        kernels.friction_torque(state[VEL], state[SIGN], fp, stribeck, state[FRICTION])
+    return True
+
+
+@njit(cache=True, nogil=True)
+def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
+                jacobian: Array, const: Array, settings: Array, counters: IntArray,
+                state: Array, tau_ext: Array, wrench: Array, qd: Array,
+                last_wrench: Array) -> float:
+    """Second half of a sample: τ_ext, tare, wrench, status (after :func:`sample_front`).
+
+    Args:
+        rnea: Rigid-body torque of the identified links at the filtered state [N·m], shape (n,)
+            (direct estimator; else unused).
+        mass_upper: M(q), upper triangle (observer; else unused), shape (n, n).
+        coriolis: C(q, q̇) (observer; else unused), shape (n, n).
+        gravity: g(q) [N·m] (observer; else unused), shape (n,).
+        jacobian: TCP Jacobian in the output frame, shape (6, n).
+        const: Per-joint constants, shape (CONST_ROWS, n).
+        settings: Float settings, shape (SETTINGS_SLOTS,).
+        counters: Counters and flags (in place); ``counters[STATUS]`` is set.
+        state: Per-joint state (in place), shape (STATE_ROWS, n).
+        tau_ext: Output: external joint torque [N·m], shape (n,).
+        wrench: Output: TCP wrench [N, N·m], shape (6,).
+        qd: Output: the estimated joint velocity [rad/s], shape (n,).
+        last_wrench: Copy of ``wrench`` kept for a fault (in place), shape (6,).
+
+    Returns:
+        The manipulability μ at the filtered position.
+    """
+    n = tau_ext.size
+    if counters[DIRECT] != 0:
+        kernels.direct_residual(rnea, state[FRICTION], state[ACC], state[TAU_J], const[ROTOR],
+                                const[OFFSET], settings[ALPHA], state[FILTERED],
+                                const[NOISE_MEAN], tau_ext)
+    else:
+        kernels.momentum_step(mass_upper, const[ROTOR], coriolis, gravity, state[VEL],
+                              state[FRICTION], state[TAU_J], const[OFFSET], settings[DT],
+                              settings[OBSERVER_GAIN], counters[SAMPLES] == 0, state[P0],
+                              state[INTEGRAL], state[RESIDUAL], state[WORK],
+                              const[NOISE_MEAN], tau_ext)
+    for j in range(n):
+        tau_ext[j] -= state[TARE, j]
+    mu = kernels.wrench_from_torque(jacobian, tau_ext, state[WEIGHT], counters[FORCE_ONLY] != 0,
+                                    settings[MU0], settings[MAX_DAMPING], wrench)
+    for j in range(n):
+        qd[j] = state[VEL, j]
+        state[LAST_TAU, j] = tau_ext[j]
+    for r in range(6):
+        last_wrench[r] = wrench[r]
+    counters[SAMPLES] += 1
+    if counters[SAMPLES] <= counters[WARM]:
+        counters[STATUS] = STATUS_WARMING_UP
+    elif counters[TARE_LEFT] > 0:
+        counters[TARE_LEFT] = _average_into_tare(state, TARE_SUM, counters[TARE_LEFT],
+                                                 counters[TARE_TAKEN], tau_ext)
+        counters[STATUS] = STATUS_TARING
+    else:
+        if counters[REZERO_LEFT] > 0:
+            counters[REZERO_LEFT] = _average_into_tare(state, REZERO_SUM, counters[REZERO_LEFT],
+                                                       counters[REZERO_TAKEN], tau_ext)
+        counters[STATUS] = STATUS_OK
+    return mu
+
+
+@njit(cache=True, nogil=True)
+def _average_into_tare(state: Array, row: int, left: int, taken: int, tau_ext: Array) -> int:
+    """One sample of an averaging window (tare or re-zero): add ``tau_ext`` to
+    ``state[row]``; on the window's last sample add the mean to the tare. Returns the samples
+    left."""
+    n = tau_ext.size
+    for j in range(n):
+        state[row, j] += tau_ext[j]
+    left -= 1
+    if left == 0:
+        for j in range(n):
+            state[row, j] *= 1.0 / taken
+            state[TARE, j] += state[row, j]
+    return left
