@@ -139,3 +139,39 @@ def test_bad_faults_raise(er20: Robot) -> None:
     with pytest.raises(SimulationError, match="offset"):
         Fault(FaultKind.Q_OFFSET, offset=math.nan)
     assert drv.faults == ()
+
+
+def test_recording_and_replay_drivers_deliver_the_same_reads(er20: Robot) -> None:
+    from leadthrough.drivers.replay import FeedbackTrace, RecordingDriver, ReplayDriver
+    from leadthrough.errors import DataError
+
+    sim = _driver(er20)
+    sim.inject(Fault(FaultKind.STALE, t_start=0.003, t_end=0.005))
+    rec = RecordingDriver(sim, capacity=4)
+    assert isinstance(rec, Driver)
+    fb = rec.make_feedback()
+    got = []
+    for _ in range(6):  # two reads more than kept: passed through, not recorded
+        rec.step()
+        got.append((rec.read(fb), fb.t, fb.q.copy()))
+    tr = rec.trace()
+    assert tr.reads == 4 and tr.fresh.tolist() == [True, True, True, False]  # t = 3 ms stale
+    rep = ReplayDriver(tr)
+    assert isinstance(rep, Driver) and rep.n == 6 and rep.dt == sim.dt
+    fb2 = rep.make_feedback()
+    for fresh, t, q in got[:4]:
+        assert rep.read(fb2) is fresh
+        if fresh:
+            assert fb2.t == t
+            np.testing.assert_array_equal(fb2.q, q)
+    assert rep.read(fb2) is False  # the trace is over: stale
+    cmd = rep.make_command()
+    cmd.q[:] = 1.0
+    rep.write(cmd)
+    np.testing.assert_array_equal(rep.last_command.q, 1.0)
+    with pytest.raises(DataError, match="trace"):
+        ReplayDriver(FeedbackTrace(dt=1e-3, t=np.zeros(2), q=np.zeros((3, 6)),
+                                   current=np.zeros((3, 6)), sequence=np.zeros(2, np.int64),
+                                   fresh=np.ones(2, bool)))
+    with pytest.raises(DataError, match="capacity"):
+        RecordingDriver(sim, capacity=0)

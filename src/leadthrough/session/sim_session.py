@@ -8,6 +8,7 @@ simulated robot is a different, richer plant than the identified model.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -15,6 +16,8 @@ from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig, GuidingController
 from leadthrough.control.interpolation import HermiteInterpolator
+from leadthrough.drivers.protocol import Driver
+from leadthrough.drivers.replay import FeedbackTrace, RecordingDriver, ReplayDriver
 from leadthrough.drivers.sim_driver import Fault, SimDriver
 from leadthrough.errors import ControlError, check_fields
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
@@ -25,8 +28,8 @@ from leadthrough.session.metrics import SessionSummary, summarize
 from leadthrough.sim.operator_scripts import make_operator
 from leadthrough.sim.robot import SimConfig, SimRobot
 
-__all__ = ["PUSH_MASS_KG", "SimSession", "SimSessionConfig", "guide_start_pose", "light_guiding",
-           "run_sim_session"]
+__all__ = ["PUSH_MASS_KG", "LoopParts", "SimSession", "SimSessionConfig", "build_loop",
+           "guide_start_pose", "light_guiding", "replay_session", "run_sim_session"]
 
 #: Virtual mass [kg] of the push demonstrations: 40 N for 3 s then reaches the 0.2 m/s cap
 #: ((40 − 15) N / 100 kg = 0.25 m/s²). With Table IV's 1000 kg it reaches 0.075 m/s.
@@ -93,12 +96,14 @@ class SimSession:
         summary: Speeds, accelerations, rest drift, faults, cycle times.
         p1_base: The operator's target P1 [m] (``seam`` only), shape (3,), or None.
         p2_base: The operator's target P2 [m] (``seam`` only), shape (3,), or None.
+        feedback: Every read of the driver (with ``record_feedback``), else None.
     """
 
     result: LoopResult
     summary: SessionSummary
     p1_base: Array | None = None
     p2_base: Array | None = None
+    feedback: FeedbackTrace | None = None
 
 
 def light_guiding(mass_kg: float = PUSH_MASS_KG, base: GuidingConfig | None = None
@@ -130,13 +135,54 @@ def guide_start_pose(robot: Robot) -> Array:
     return np.clip(q, robot.lower_limits + 0.05, robot.upper_limits - 0.05)
 
 
-def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) -> SimSession:
+class LoopParts(NamedTuple):
+    """The computing side of a session's loop, built from its settings.
+
+    Attributes:
+        estimator: External force estimator (base frame, at the servo period).
+        controller: Guiding controller.
+        interpolator: Controller cycle → servo period interpolation.
+        guiding: The controller's settings (with the session's controller law).
+    """
+
+    estimator: ExternalForceEstimator
+    controller: GuidingController
+    interpolator: HermiteInterpolator
+    guiding: GuidingConfig
+
+
+def build_loop(robot: Robot, params: ParamsFile, config: SimSessionConfig, dt: float
+               ) -> LoopParts:
+    """Estimator, controller and interpolator of a session, fresh (nothing run yet).
+
+    Args:
+        robot: The robot.
+        params: Identified parameters.
+        config: Session settings.
+        dt: Servo period of the driver [s].
+
+    Raises:
+        ControlError, DataError: Invalid settings.
+    """
+    est_cfg = replace(config.estimator, dt=dt, frame="base")
+    estimator = ExternalForceEstimator(robot, params.params, params.noise_mean, est_cfg,
+                                       noise_std=params.noise_std)
+    guiding = replace(config.guiding, controller=config.controller)
+    controller = GuidingController(robot, guiding, params.noise_mean, params.noise_std)
+    interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / dt))
+    return LoopParts(estimator, controller, interpolator, guiding)
+
+
+def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
+                    record_feedback: bool = False) -> SimSession:
     """Run one guiding session on the simulated robot.
 
     Args:
         robot: The robot (the simulator plays it with seed-drawn "true" parameters).
         params: Identified parameters (from calibration) for the estimator and eq. 36.
         config: Session settings.
+        record_feedback: Keep every read of the driver in ``SimSession.feedback`` (for
+            :func:`replay_session`).
 
     Returns:
         The session and its summary.
@@ -152,15 +198,14 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) 
     operator = make_operator(config.operator, seed=op_seed, tcp_start_base=tcp0)
     duration = operator.duration_s if config.duration_s is None else config.duration_s
     sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run), q0=q0, operator=operator)
-    driver = SimDriver(sim)
+    sim_driver = SimDriver(sim)
     for fault in config.faults:
-        driver.inject(fault)
-    est_cfg = replace(config.estimator, dt=driver.dt, frame="base")
-    estimator = ExternalForceEstimator(robot, params.params, params.noise_mean, est_cfg,
-                                       noise_std=params.noise_std)
-    guiding = replace(config.guiding, controller=config.controller)
-    controller = GuidingController(robot, guiding, params.noise_mean, params.noise_std)
-    interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / driver.dt))
+        sim_driver.inject(fault)
+    recorder = (RecordingDriver(sim_driver, round(duration / sim_driver.dt) + 1)
+                if record_feedback else None)
+    driver: Driver = sim_driver if recorder is None else recorder
+    parts = build_loop(robot, params, config, driver.dt)
+    est_cfg, guiding = parts.estimator.config, parts.guiding
     settings: dict[str, object] = {
         "operator": config.operator, "controller": config.controller, "seed": config.seed,
         "run": config.run, "operator_seed": op_seed, "duration_s": duration,
@@ -169,12 +214,37 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig) 
                       "output_cutoff_hz": est_cfg.output_cutoff_hz, "tare_s": est_cfg.tare_s},
         "friction_mode": guiding.friction_mode,
     }
-    result = run_session(driver, estimator, controller, interpolator, duration,
-                         marks=operator.marks, applied_wrench=lambda: sim.applied_wrench,
-                         paced=config.paced, settings=settings)
+    result = run_session(driver, parts.estimator, parts.controller, parts.interpolator,
+                         duration, marks=operator.marks,
+                         applied_wrench=lambda: sim.applied_wrench, paced=config.paced,
+                         settings=settings)
     p1 = getattr(operator, "p1_base", None)
     p2 = getattr(operator, "p2_base", None)
     return SimSession(result=result, summary=summarize(result, guiding.dt,
                                                        guiding.limits.max_linear_acceleration),
                       p1_base=None if p1 is None else np.asarray(p1, dtype=float),
-                      p2_base=None if p2 is None else np.asarray(p2, dtype=float))
+                      p2_base=None if p2 is None else np.asarray(p2, dtype=float),
+                      feedback=None if recorder is None else recorder.trace())
+
+
+def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
+                   feedback: FeedbackTrace) -> LoopResult:
+    """Run a session's loop again on its recorded feedback, without the simulator.
+
+    With the settings and parameters of the recording, the loop computes exactly what it
+    computed then (see :mod:`leadthrough.drivers.replay`); its cycle times are those of the
+    loop alone.
+
+    Args:
+        robot: The robot.
+        params: Identified parameters of the recorded session.
+        config: Settings of the recorded session.
+        feedback: ``SimSession.feedback`` of a session run with ``record_feedback=True``.
+
+    Raises:
+        ControlError, DataError: Invalid settings or trace.
+    """
+    driver = ReplayDriver(feedback)
+    parts = build_loop(robot, params, config, driver.dt)
+    duration = (feedback.reads - 1) * driver.dt
+    return run_session(driver, parts.estimator, parts.controller, parts.interpolator, duration)
