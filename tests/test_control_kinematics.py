@@ -15,7 +15,11 @@ from leadthrough.control import (
 )
 from leadthrough.control.ik import dls_damping
 from leadthrough.errors import ControlError
-from leadthrough.estimation.kernels import gram_manipulability
+from leadthrough.estimation.kernels import (
+    cholesky_factor,
+    cholesky_solve,
+    gram_manipulability,
+)
 from leadthrough.robot import Robot
 
 DT = 0.01
@@ -177,7 +181,7 @@ def test_ik_braking_at_a_position_limit_slows_no_other_joint_beyond_its_accelera
     qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
     scale = kernels.dls_step(np.eye(n), np.eye(n), 0.0, qd_prev * dt, dt, q, qd_prev, lower,
                              upper, np.full(n, 10.0), dv, np.full(n, 0.5 / a), qd_dls, qd,
-                             q_next)
+                             q_next, np.zeros((7, 6)))
     np.testing.assert_allclose(qd_dls, qd_prev, rtol=1e-12)
     assert scale == pytest.approx(bound / qd_prev[0], rel=1e-12)
     assert qd[0] == pytest.approx(bound, rel=1e-12)              # the bound holds
@@ -245,14 +249,35 @@ def test_compiled_base_frame_step_matches_pinocchio_exp3() -> None:
 def test_compiled_manipulability_matches_numpy(er20: Robot) -> None:
     """μ = √det(J Jᵀ) of the compiled kernel vs NumPy, at random and singular poses."""
     ik = DifferentialIK(er20, dt=DT)
-    gram = np.zeros((6, 6))
+    gram, factor = np.zeros((6, 6)), np.zeros((6, 6))
     for q in [*_random_poses(er20, 10, seed=8), Q_WRIST_SINGULAR]:
         ik.compute_kinematics(q)
         J = ik.jacobian
-        mu = gram_manipulability(J, gram)
+        mu = gram_manipulability(J, gram, factor)
         np.testing.assert_allclose(gram, J @ J.T, rtol=1e-12, atol=1e-14)
         assert mu == pytest.approx(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)), rel=1e-9,
                                    abs=1e-12)
+
+
+def test_compiled_cholesky_solves_like_numpy() -> None:
+    """The allocation-free solve of the kernels vs numpy.linalg.solve, shifted and not; a
+    singular matrix is reported, not solved."""
+    rng = np.random.default_rng(4)
+    factor = np.zeros((6, 6))
+    for m, shift in [(6, 0.0), (6, 1e-3), (3, 0.0), (3, 0.5)]:
+        B = rng.normal(size=(m, m + 2))
+        A = np.zeros((6, 6))
+        A[:m, :m] = B @ B.T
+        b = rng.normal(size=6)
+        x = b.copy()
+        assert cholesky_factor(A, m, shift, factor)
+        cholesky_solve(factor, m, x)
+        np.testing.assert_allclose(x[:m], np.linalg.solve(A[:m, :m] + shift * np.eye(m),
+                                                          b[:m]), rtol=1e-10)
+        np.testing.assert_array_equal(x[m:], b[m:])  # beyond the block: untouched
+    singular = np.ones((6, 6))  # rank 1
+    assert not cholesky_factor(singular, 6, 0.0, factor)
+    assert cholesky_factor(singular, 6, 1e-6, factor)
 
 
 @pytest.mark.parametrize("frame", ["base", "tool"])
@@ -324,3 +349,21 @@ def test_eq36_config_errors() -> None:
         AutoFriction(np.zeros(6), config=AutoFrictionConfig(basis="std"))
     with pytest.raises(ControlError, match="noise_mean"):
         AutoFriction(np.array([np.nan, 0.0]))
+
+
+def test_ik_step_on_a_singular_system_brakes_instead_of_failing() -> None:
+    """λ = 0 exactly at a singularity (manipulability threshold 0): J Jᵀ is singular, and the
+    step brakes every joint at its acceleration limit instead of raising in the loop."""
+    n = 6
+    J = np.zeros((6, n))
+    J[0, 0] = 1.0  # rank 1
+    dv = np.full(n, 0.05)
+    qd_prev = np.array([0.2, -0.2, 0.03, 0.0, -0.01, 0.1])
+    qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
+    q = np.zeros(n)
+    scale = kernels.dls_step(J, J @ J.T, 0.0, np.ones(6), DT, q, qd_prev, np.full(n, -3.0),
+                             np.full(n, 3.0), np.full(n, 10.0), dv, np.full(n, 0.1), qd_dls,
+                             qd, q_next, np.zeros((7, 6)))
+    assert scale == 0.0
+    np.testing.assert_allclose(qd, [0.15, -0.15, 0.0, 0.0, 0.0, 0.05])
+    np.testing.assert_allclose(q_next, qd * DT)

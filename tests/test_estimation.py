@@ -120,7 +120,7 @@ def test_wrench_stays_bounded_near_the_wrist_singularity(er20: Robot, q5: float,
     tau = scale * np.array([50.0, 50.0, 20.0, 5.0, 5.0, 5.0])
     wrench = np.zeros(6)
     mu = kernels.wrench_from_torque(J, tau, np.ones(6), False, cfg.manipulability_threshold,
-                                    cfg.max_damping, wrench)
+                                    cfg.max_damping, wrench, np.zeros((2, 6, 6)))
     assert np.all(np.isfinite(wrench))
     assert np.linalg.norm(wrench) < 1e4
     if mu < cfg.manipulability_threshold:

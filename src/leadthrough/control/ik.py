@@ -150,6 +150,8 @@ class DifferentialIK:
         #: λ of the damped least squares at the last q.
         self.damping = 0.0
         self._JJt = np.zeros((6, 6))
+        self._factor = np.zeros((6, 6))
+        self._scratch = np.zeros((7, 6))
         self._half_inv_a = 0.5 / self._amax
         self._dv_stop = self._dv * cfg.stop_acceleration_fraction
 
@@ -175,7 +177,7 @@ class DifferentialIK:
         pin.computeJointJacobians(m, d, q)
         self.transform_tool_to_base = pin.updateFramePlacement(m, d, self._fid)
         self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
-        self.manipulability = gram_manipulability(self.jacobian, self._JJt)
+        self.manipulability = gram_manipulability(self.jacobian, self._JJt, self._factor)
         self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
                                    self.config.max_damping)
 
@@ -207,6 +209,6 @@ class DifferentialIK:
         out.residual = math.sqrt(float(np.dot(err, err)))
         scale = kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt, q,
                                  qd_previous, self.lower, self.upper, self._vmax, self._dv,
-                                 self._half_inv_a, out.qd_dls, out.qd, out.q)
+                                 self._half_inv_a, out.qd_dls, out.qd, out.q, self._scratch)
         out.scale = scale
         out.limited = scale < 1.0

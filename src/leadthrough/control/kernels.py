@@ -7,8 +7,8 @@ call them document the algorithms: :mod:`~leadthrough.control.safety`,
 :mod:`~leadthrough.control.virtual_friction`, :mod:`~leadthrough.control.limits`,
 :mod:`~leadthrough.control.ik`). ``benchmarks/guiding.py`` measures the cycle.
 
-All kernels write into preallocated arrays and return a scalar or nothing; only the 6×6 solve
-allocates (inside LAPACK). J Jᵀ and μ come from the estimator's kernels
+All kernels write into preallocated arrays and return a scalar or nothing; none allocates. J Jᵀ,
+μ and the Cholesky solve come from the estimator's kernels
 (:func:`leadthrough.estimation.kernels.gram_manipulability`), one formula for both.
 """
 
@@ -19,6 +19,8 @@ import math
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+
+from leadthrough.estimation.kernels import cholesky_factor, cholesky_solve
 
 __all__ = [
     "FEEDBACK_COLLISION_FORCE",
@@ -297,7 +299,8 @@ def _speed_bound(v: float, q: float, lower: float, upper: float, vmax: float, dv
 @njit(cache=True, nogil=True)
 def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float,
              q: Array, qd_previous: Array, lower: Array, upper: Array, vmax: Array,
-             dv: Array, half_inv_a: Array, qd_dls: Array, qd: Array, q_next: Array) -> float:
+             dv: Array, half_inv_a: Array, qd_dls: Array, qd: Array, q_next: Array,
+             scratch: Array) -> float:
     """Damped least squares with the joint acceleration, speed and braking bounds (see
     :mod:`leadthrough.control.ik`).
 
@@ -317,20 +320,26 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
         qd_dls: Output joint velocity of the DLS step before the bounds [rad/s], shape (n,).
         qd: Output joint velocity [rad/s], shape (n,).
         q_next: Output q + q̇·dt [rad], shape (n,).
+        scratch: Work space, shape (7, 6): the factor of J Jᵀ + λ²·1, then the solution.
 
     Returns:
-        The fraction of the DLS step kept by the bounds (1: none active).
+        The fraction of the DLS step kept by the bounds (1: none active; 0: J Jᵀ + λ²·1 was
+        singular, λ = 0 at a singularity, and every joint brakes at its limit instead).
     """
     n = q.size
-    a = gram.copy()
-    if damping > 0.0:
-        for r in range(6):
-            a[r, r] += damping * damping
+    factor, y = scratch[:6], scratch[6]
+    if not cholesky_factor(gram, 6, damping * damping, factor):
+        # singular (λ = 0 exactly at a singularity): brake every joint at its limit
+        for j in range(n):
+            v = qd_previous[j]
+            qd[j] = max(v - dv[j], 0.0) if v > 0.0 else min(v + dv[j], 0.0)
+            qd_dls[j] = 0.0
+            q_next[j] = q[j] + qd[j] * dt
+        return 0.0
     inv_dt = 1.0 / dt
-    nu = np.empty(6)
     for r in range(6):
-        nu[r] = err[r] * inv_dt
-    y = np.linalg.solve(a, nu)
+        y[r] = err[r] * inv_dt
+    cholesky_solve(factor, 6, y)
     ratio = 0.0
     for j in range(n):
         s = 0.0
@@ -389,20 +398,18 @@ def integrate_base(rotation: Array, position: Array, twist: Array, dt: float,
         a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
     else:
         a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
-    e = np.empty((3, 3))
-    e[0, 0] = 1.0 - b * (wy * wy + wz * wz)
-    e[1, 1] = 1.0 - b * (wx * wx + wz * wz)
-    e[2, 2] = 1.0 - b * (wx * wx + wy * wy)
-    e[0, 1] = b * wx * wy - a * wz
-    e[1, 0] = b * wx * wy + a * wz
-    e[0, 2] = b * wx * wz + a * wy
-    e[2, 0] = b * wx * wz - a * wy
-    e[1, 2] = b * wy * wz - a * wx
-    e[2, 1] = b * wy * wz + a * wx
+    e00 = 1.0 - b * (wy * wy + wz * wz)
+    e11 = 1.0 - b * (wx * wx + wz * wz)
+    e22 = 1.0 - b * (wx * wx + wy * wy)
+    e01, e10 = b * wx * wy - a * wz, b * wx * wy + a * wz
+    e02, e20 = b * wx * wz + a * wy, b * wx * wz - a * wy
+    e12, e21 = b * wy * wz - a * wx, b * wy * wz + a * wx
+    for c in range(3):
+        r0, r1, r2 = rotation[0, c], rotation[1, c], rotation[2, c]
+        rotation_out[0, c] = e00 * r0 + e01 * r1 + e02 * r2
+        rotation_out[1, c] = e10 * r0 + e11 * r1 + e12 * r2
+        rotation_out[2, c] = e20 * r0 + e21 * r1 + e22 * r2
     for r in range(3):
-        for c in range(3):
-            rotation_out[r, c] = (e[r, 0] * rotation[0, c] + e[r, 1] * rotation[1, c]
-                                  + e[r, 2] * rotation[2, c])
         position_out[r] = position[r] + twist[r] * dt
 
 

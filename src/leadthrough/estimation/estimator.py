@@ -253,6 +253,7 @@ class ExternalForceEstimator:
         self._q, self._qd, self._qdd = (self._state[r] for r in (fused.POS, fused.VEL,
                                                                  fused.ACC))
         self._unused = np.zeros((n, n))
+        self._scratch = np.zeros((2, 6, 6))
         self._last_wrench = np.zeros(6)
         self._tare_len = round(cfg.tare_s / cfg.dt)
         self.reset(np.zeros(n))
@@ -293,14 +294,14 @@ class ExternalForceEstimator:
             rnea = pin.rnea(m, d, q, self._qd, self._qdd)
             J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
             mu = fused.sample_back(rnea, u, u, q, J, k, st, c, s, out.tau_ext, out.wrench,
-                                   out.qd, self._last_wrench)
+                                   out.qd, self._last_wrench, self._scratch)
         else:
             M = pin.crba(m, d, q)  # upper triangle only
             C = pin.computeCoriolisMatrix(m, d, q, self._qd)
             g = pin.computeGeneralizedGravity(m, d, q)
             J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
             mu = fused.sample_back(q, M, C, g, J, k, st, c, s, out.tau_ext, out.wrench,
-                                   out.qd, self._last_wrench)
+                                   out.qd, self._last_wrench, self._scratch)
         out.manipulability = mu
         out.damping = kernels.damping_of(mu, st[fused.MU0], st[fused.MAX_DAMPING])
         out.status = _STATUS[c[fused.STATUS]]

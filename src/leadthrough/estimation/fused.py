@@ -148,7 +148,7 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
 def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
                 jacobian: Array, const: Array, settings: Array, counters: IntArray,
                 state: Array, tau_ext: Array, wrench: Array, qd: Array,
-                last_wrench: Array) -> float:
+                last_wrench: Array, scratch: Array) -> float:
     """Second half of a sample: τ_ext, tare, wrench, status (after :func:`sample_front`).
 
     Args:
@@ -166,6 +166,7 @@ def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
         wrench: Output: TCP wrench [N, N·m], shape (6,).
         qd: Output: the estimated joint velocity [rad/s], shape (n,).
         last_wrench: Copy of ``wrench`` kept for a fault (in place), shape (6,).
+        scratch: Work space of the wrench, shape (2, 6, 6).
 
     Returns:
         The manipulability μ at the filtered position.
@@ -184,7 +185,7 @@ def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
     for j in range(n):
         tau_ext[j] -= state[TARE, j]
     mu = kernels.wrench_from_torque(jacobian, tau_ext, state[WEIGHT], counters[FORCE_ONLY] != 0,
-                                    settings[MU0], settings[MAX_DAMPING], wrench)
+                                    settings[MU0], settings[MAX_DAMPING], wrench, scratch)
     for j in range(n):
         qd[j] = state[VEL, j]
         state[LAST_TAU, j] = tau_ext[j]

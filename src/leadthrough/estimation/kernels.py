@@ -8,8 +8,8 @@ the smoothed sign (or, with memory, :func:`presliding_friction_step`); the offli
 (:mod:`leadthrough.dynamics.friction`, exact sign) is the reference, and
 ``tests/test_estimation.py`` checks that both agree away from standstill.
 
-All kernels write into preallocated arrays and return nothing (or a float); they never
-allocate on the heap except inside the 6×6 LAPACK solve of :func:`wrench_from_torque`.
+All kernels write into preallocated arrays and return nothing (or a float); none allocates
+(the small symmetric systems are solved by :func:`cholesky_factor` / :func:`cholesky_solve`).
 
 Friction parameter rows (``fp``, shape (8, n)), see :mod:`leadthrough.dynamics.friction`:
 ``0`` 1/v_ε (smoothed sign), ``1`` Coulomb f1, ``2`` viscous f4, ``3`` R/q̇_sm, ``4`` f2,
@@ -24,6 +24,8 @@ from numpy.typing import NDArray
 
 __all__ = [
     "FRICTION_ROWS",
+    "cholesky_factor",
+    "cholesky_solve",
     "damping_of",
     "direct_residual",
     "friction_torque",
@@ -260,9 +262,56 @@ def damping_of(mu: float, mu0: float, max_damping: float) -> float:
 
 
 @njit(cache=True, nogil=True)
-def gram_manipulability(jacobian: Array, gram: Array) -> float:
-    """J Jᵀ (into ``gram``, shape (6, 6)) and the manipulability μ = √det(J Jᵀ) (0 if not
-    positive), for the estimator's Jᵀ inverse and the controller's IK alike."""
+def cholesky_factor(a: Array, m: int, shift: float, factor: Array) -> bool:
+    """Lower Cholesky factor L (L Lᵀ = A + shift·1) of the leading m×m block of a symmetric
+    matrix (``a`` is not modified).
+
+    Args:
+        a: Symmetric matrix; its lower triangle of the leading m×m block is read.
+        m: Block size.
+        shift: Added to the diagonal (a damping λ²), ≥ 0.
+        factor: Output: L in the lower triangle of its leading m×m block (the rest untouched);
+            may not alias ``a``.
+
+    Returns:
+        False if the block is not (numerically) positive definite (``factor`` then partial).
+    """
+    for j in range(m):
+        s = a[j, j] + shift
+        for k in range(j):
+            s -= factor[j, k] * factor[j, k]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        factor[j, j] = d
+        for i in range(j + 1, m):
+            s = a[i, j]
+            for k in range(j):
+                s -= factor[i, k] * factor[j, k]
+            factor[i, j] = s / d
+    return True
+
+
+@njit(cache=True, nogil=True)
+def cholesky_solve(factor: Array, m: int, x: Array) -> None:
+    """Solve L Lᵀ·x = b in place (``x`` holds b on entry), L from :func:`cholesky_factor`."""
+    for i in range(m):
+        s = x[i]
+        for k in range(i):
+            s -= factor[i, k] * x[k]
+        x[i] = s / factor[i, i]
+    for i in range(m - 1, -1, -1):
+        s = x[i]
+        for k in range(i + 1, m):
+            s -= factor[k, i] * x[k]
+        x[i] = s / factor[i, i]
+
+
+@njit(cache=True, nogil=True)
+def gram_manipulability(jacobian: Array, gram: Array, factor: Array) -> float:
+    """J Jᵀ (into ``gram``, shape (6, 6)) and the manipulability μ = √det(J Jᵀ) = ∏ L_ii of
+    its Cholesky factor (into ``factor``, shape (6, 6); μ = 0 if J Jᵀ is not positive
+    definite), for the estimator's Jᵀ inverse and the controller's IK alike. No allocation."""
     n = jacobian.shape[1]
     for r in range(6):
         for c in range(r, 6):
@@ -271,19 +320,24 @@ def gram_manipulability(jacobian: Array, gram: Array) -> float:
                 s += jacobian[r, k] * jacobian[c, k]
             gram[r, c] = s
             gram[c, r] = s
-    det = np.linalg.det(gram)
-    return np.sqrt(det) if det > 0.0 else 0.0
+    if not cholesky_factor(gram, 6, 0.0, factor):
+        return 0.0
+    mu = 1.0
+    for r in range(6):
+        mu *= factor[r, r]
+    return mu
 
 
 @njit(cache=True, nogil=True)
 def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: bool,
-                       mu0: float, max_damping: float, wrench: Array) -> float:
+                       mu0: float, max_damping: float, wrench: Array, scratch: Array) -> float:
     """Joint torque → TCP wrench through a damped pseudo-inverse of Jᵀ (eq. 28–30, in place).
 
     ``force_only``: the three force components are the weighted least-squares fit of Jᵥᵀf to τ
     (weights ``weight`` per joint) and the torque components are zero; otherwise the full
     wrench (J Jᵀ + λ²·1)⁻¹·J·τ. λ² = λ_max²·(1 − (μ/μ₀)²) when the manipulability
-    μ = √det(J Jᵀ) < μ₀, else 0.
+    μ = √det(J Jᵀ) < μ₀, else 0. Solved by Cholesky in ``scratch``, no allocation; a system
+    that is still singular (λ_max = 0 at a singularity) gives a zero wrench.
 
     Args:
         jacobian: TCP Jacobian in the output frame, shape (6, n).
@@ -293,35 +347,36 @@ def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: b
         mu0: Manipulability threshold μ₀.
         max_damping: λ_max.
         wrench: Output [N, N·m], shape (6,).
+        scratch: Work space, shape (2, 6, 6).
 
     Returns:
         The manipulability μ (the damping used is :func:`damping_of` of it).
     """
     n = tau.size
-    jjt = np.empty((6, 6))
-    mu = gram_manipulability(jacobian, jjt)
+    a, factor = scratch[0], scratch[1]
+    mu = gram_manipulability(jacobian, a, factor)
     lam2 = damping_of(mu, mu0, max_damping) ** 2
+    m = 3 if force_only else 6
     if force_only:
-        a = np.zeros((3, 3))
-        b = np.zeros(3)
         for r in range(3):
-            for c in range(3):
+            for c in range(r + 1):
                 s = 0.0
                 for k in range(n):
                     s += jacobian[r, k] * jacobian[c, k] * weight[k] * weight[k]
-                a[r, c] = s + (lam2 if r == c else 0.0)
+                a[r, c] = s
             s = 0.0
             for k in range(n):
                 s += jacobian[r, k] * weight[k] * weight[k] * tau[k]
-            b[r] = s
-        f = np.linalg.solve(a, b)
-        for r in range(3):
-            wrench[r] = f[r]
+            wrench[r] = s
             wrench[r + 3] = 0.0
     else:
         for r in range(6):
-            jjt[r, r] += lam2
-        w = np.linalg.solve(jjt, jacobian @ tau)
-        for r in range(6):
-            wrench[r] = w[r]
+            s = 0.0
+            for k in range(n):
+                s += jacobian[r, k] * tau[k]
+            wrench[r] = s
+    if cholesky_factor(a, m, lam2, factor):
+        cholesky_solve(factor, m, wrench)
+    else:
+        wrench[:] = 0.0
     return mu
