@@ -198,16 +198,25 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
     smooth, peak = np.zeros(6), np.zeros(6)
     rng = np.random.default_rng(3)
     noise = rng.uniform(-10.0, 10.0, size=(2000, 6))
-    assert not any(kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak)
+    assert not any(kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, False)
                    for w in noise)
     smooth[:], peak[:] = 0.0, 0.0
     w = np.zeros(6)
     for k in range(100):                   # rising, then steady at 12 N (below δ)
         w[1] = min(12.0, 0.5 * k)
-        assert not kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak)
+        assert not kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, False)
     assert peak[1] == pytest.approx(12.0, rel=1e-6)
     w[1] = -5.0                            # let go (the estimate overshoots past zero)
-    seen = [kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak)
+    seen = [kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, False)
             for _ in range(10)]
     first = seen.index(True)
     assert first <= 3 and not any(seen[first + 1:])   # once, within 40 ms
+    # in motion the peak follows the smoothed force: letting go is not a release at rest
+    smooth[:], peak[:] = 0.0, 0.0
+    w[1] = 30.0
+    for _ in range(20):
+        kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, True)
+    w[1] = 0.0
+    assert not any(kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, True)
+                   for _ in range(20))
+    np.testing.assert_array_equal(peak, smooth)

@@ -217,7 +217,8 @@ class GuidingController:
             Whether the fault was cleared (False while the twist or the joints are still
             decelerating, or if not in FAULT).
         """
-        ok = self._safety.clear_fault(t, not self._twist.any() and not self._qd_cmd.any())
+        ok = self._safety.clear_fault(t, kernels.is_zero(self._twist)
+                                      and kernels.is_zero(self._qd_cmd))
         if ok:
             self._resync = True
         return ok
@@ -263,7 +264,7 @@ class GuidingController:
             self._T_cmd = T_fk.copy()
             self._resync = False
         err = pin.log6(T_fk.actInv(self._T_cmd)).vector
-        residual = math.sqrt(float(np.dot(err, err)))
+        residual = kernels.norm(err)
         mu = ik.manipulability
         twist, new = self._twist, self._twist_new
         # cycles a stop gives the joints (IKConfig.stop_acceleration_fraction) from the setpoint;
@@ -272,7 +273,8 @@ class GuidingController:
         sup.check_motion(t, mu, self._q_cmd, self._qd_cmd, residual)
         sup.deadman(t, inp.deadman)
         scale = sup.speed_scale(mu)
-        self._control_wrench(inp.wrench_base, T_fk.rotation)
+        kernels.control_wrench(inp.wrench_base, T_fk.rotation, self._tool,
+                               sup.inputs_finite, self._mask, self._wrench)
         if sup.state == State.GUIDING:
             if self._auto is not None:
                 ik.jacobian_in_frame(self.config.frame, self._Jc)
@@ -280,13 +282,11 @@ class GuidingController:
             # settling after a stop, or after a release at rest (the force on some axis falls
             # back from its peak: the gears unload, and the estimate swings the other way):
             # breaking away takes the stopping friction
-            at_rest_now = not twist.any()
+            at_rest_now = kernels.is_zero(twist)
             if kernels.release_step(self._wrench, self._friction, RELEASE_DROP,
-                                    self._release_alpha, self._smooth, self._peak) \
-                    and at_rest_now:
+                                    self._release_alpha, self._smooth, self._peak,
+                                    not at_rest_now) and at_rest_now:
                 self._release_s = 0.0
-            if not at_rest_now:
-                self._peak[:] = self._smooth
             settling = at_rest_now and (self._rest_s < self._hold_s
                                         or self._release_s < self._hold_s)
             self._release_s += self.config.dt
@@ -320,8 +320,8 @@ class GuidingController:
             T_new = self._integrate(new)
         # at rest: no twist, and joints slow enough to halt within one cycle's acceleration
         # (else the IK keeps tracking the held pose and brakes them at their limits)
-        at_rest = not new.any()
-        if at_rest and self._qd_cmd.any():
+        at_rest = kernels.is_zero(new)
+        if at_rest and not kernels.is_zero(self._qd_cmd):
             if joint_stop < 0.0:
                 joint_stop = ik.stop_cycles(self._qd_cmd)
             at_rest = joint_stop * ik.config.stop_acceleration_fraction <= 1.0
@@ -347,16 +347,6 @@ class GuidingController:
         self._write(out, scale)
         return out.status
 
-    def _control_wrench(self, wrench_base: Array, R: Array) -> None:
-        w = self._wrench
-        if not self._safety.inputs_finite:
-            w[:] = math.nan                                 # unknown (and the law is not run)
-            return
-        if self._tool:
-            kernels.rotate_to_tool(R, wrench_base, w)
-        else:
-            w[:] = wrench_base
-        w *= self._mask
 
     def _integrate(self, twist: Array) -> pin.SE3:
         """Pose after one cycle of ``twist``: tool frame T·exp6(ν·dt); base frame (axes of the
@@ -372,21 +362,10 @@ class GuidingController:
     def _write(self, out: GuidingOutput, scale: float) -> None:
         sup = self._safety
         T = self._T_cmd
-        R = T.rotation
-        out.q[:] = self._q_cmd
-        out.qd[:] = self._qd_cmd
-        out.transform_tool_to_base[:3, :3] = R
-        out.transform_tool_to_base[:3, 3] = T.translation
-        tw = self._twist
-        if self._tool:
-            out.twist_tool[:] = tw
-            kernels.rotate_to_base(R, tw, out.twist_base)
-        else:
-            out.twist_base[:] = tw
-            kernels.rotate_to_tool(R, tw, out.twist_tool)
-        out.wrench[:] = self._wrench
-        out.friction[:] = self._friction
-        out.stopping_friction[:] = self._stop_friction
+        kernels.write_output(self._q_cmd, self._qd_cmd, T.rotation, T.translation, self._twist,
+                             self._tool, self._wrench, self._friction, self._stop_friction,
+                             out.q, out.qd, out.transform_tool_to_base, out.twist_base,
+                             out.twist_tool, out.wrench, out.friction, out.stopping_friction)
         out.state = sup.state
         out.fault = sup.fault
         out.status = Status.FAULT if sup.state == State.FAULT else Status.OK

@@ -24,7 +24,6 @@ has to catch up with a large error.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -206,7 +205,7 @@ class DifferentialIK:
             out: Result, filled in place.
         """
         err = pin.log6(self.transform_tool_to_base.actInv(target)).vector
-        out.residual = math.sqrt(float(np.dot(err, err)))
+        out.residual = kernels.norm(err)
         scale = kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt, q,
                                  qd_previous, self.lower, self.upper, self._vmax, self._dv,
                                  self._half_inv_a, out.qd_dls, out.qd, out.q, self._scratch)

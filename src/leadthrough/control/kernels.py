@@ -30,19 +30,23 @@ __all__ = [
     "FEEDBACK_OK",
     "FEEDBACK_POSITION",
     "all_finite",
+    "control_wrench",
     "decelerate_twist",
     "dls_step",
     "feedback_fault",
     "hermite_point",
     "integrate_base",
+    "is_zero",
     "joint_limit_index",
     "joint_stop_cycles",
     "limit_twist",
+    "norm",
     "release_step",
     "rotate_to_base",
     "rotate_to_tool",
     "twist_stop_cycles",
     "virtual_friction_step",
+    "write_output",
 ]
 
 Array = NDArray[np.float64]
@@ -190,7 +194,7 @@ def limit_twist(previous: Array, desired: Array, max_speed: Array, max_step: Arr
 
 @njit(cache=True, nogil=True)
 def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smooth: Array,
-                 peak: Array) -> bool:
+                 peak: Array, moving: bool) -> bool:
     """A release at rest: on some axis the smoothed w_i held a peak of at least ``drop``·δ_i
     and fell back from it, toward zero or beyond, by ``drop``·δ_i or more (a smaller hold
     needs no settling: the estimate's swing after letting go stays below δ).
@@ -203,6 +207,11 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smoo
         smooth: Smoothed wrench, shape (6,); updated in place.
         peak: Signed smoothed w_i of largest magnitude since the tool came to rest or since
             the last release, shape (6,); updated in place.
+        moving: The tool moves: the peak follows the smoothed wrench (a release counts only
+            from rest).
+
+    Returns:
+        Whether some axis was released this cycle.
     """
     released = False
     for i in range(wrench.size):
@@ -215,7 +224,80 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smoo
             peak[i] = w
         elif abs(w) > abs(p):
             peak[i] = w
+        if moving:
+            peak[i] = w
     return released
+
+
+@njit(cache=True, nogil=True)
+def is_zero(x: Array) -> bool:
+    """Whether every entry is exactly 0.0 (``not x.any()`` for a float vector, compiled)."""
+    for i in range(x.size):  # noqa: SIM110 (a plain loop compiles to the fastest code)
+        if x[i] != 0.0:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def norm(x: Array) -> float:
+    """Euclidean norm √(Σ x_i²) of a vector."""
+    s = 0.0
+    for i in range(x.size):
+        s += x[i] * x[i]
+    return math.sqrt(s)
+
+
+@njit(cache=True, nogil=True)
+def control_wrench(wrench_base: Array, rotation: Array, tool: bool, finite: bool, mask: Array,
+                   out: Array) -> None:
+    """The wrench the law sees: the estimate in the controller's frame, disabled axes zeroed;
+    all NaN if the inputs are not finite (the law is then not run).
+
+    Args:
+        wrench_base: Estimated wrench in base axes at the TCP, shape (6,).
+        rotation: R, tool axes in the base frame, shape (3, 3).
+        tool: The controller's frame is the tool's (else the base's).
+        finite: The loop's inputs are finite.
+        mask: 1.0 for an enabled axis, 0.0 for a disabled one, shape (6,).
+        out: Result, shape (6,).
+    """
+    if not finite:
+        out[:] = math.nan
+        return
+    if tool:
+        rotate_to_tool(rotation, wrench_base, out)
+    else:
+        out[:] = wrench_base
+    for i in range(6):
+        out[i] *= mask[i]
+
+
+@njit(cache=True, nogil=True)
+def write_output(q_cmd: Array, qd_cmd: Array, rotation: Array, position: Array, twist: Array,
+                 tool: bool, wrench: Array, friction: Array, stopping_friction: Array,
+                 q_out: Array, qd_out: Array, transform_out: Array, twist_base_out: Array,
+                 twist_tool_out: Array, wrench_out: Array, friction_out: Array,
+                 stopping_friction_out: Array) -> None:
+    """Copy a cycle's arrays into the controller's output (``GuidingOutput``): the setpoint,
+    the commanded pose as a 4×4 transform, the twist in both frames (``twist`` is in the
+    tool's if ``tool``, else in the base's), the wrench and both frictions."""
+    for j in range(q_cmd.size):
+        q_out[j] = q_cmd[j]
+        qd_out[j] = qd_cmd[j]
+    for r in range(3):
+        for c in range(3):
+            transform_out[r, c] = rotation[r, c]
+        transform_out[r, 3] = position[r]
+    if tool:
+        twist_tool_out[:] = twist
+        rotate_to_base(rotation, twist, twist_base_out)
+    else:
+        twist_base_out[:] = twist
+        rotate_to_tool(rotation, twist, twist_tool_out)
+    for i in range(6):
+        wrench_out[i] = wrench[i]
+        friction_out[i] = friction[i]
+        stopping_friction_out[i] = stopping_friction[i]
 
 
 @njit(cache=True, nogil=True)
