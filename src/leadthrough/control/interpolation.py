@@ -116,20 +116,11 @@ class HermiteInterpolator:
         self.period = period
         self.substeps = substeps
         s = np.arange(1, substeps + 1) / substeps
-        # position basis (h01 and T·h10, T·h11) and velocity basis (h'/T)
-        self._c01 = (3 * s**2 - 2 * s**3).tolist()
-        self._c10 = (period * (s**3 - 2 * s**2 + s)).tolist()
-        self._c11 = (period * (s**3 - s**2)).tolist()
-        self._d01 = ((6 * s - 6 * s**2) / period).tolist()
-        self._d10 = (3 * s**2 - 4 * s + 1).tolist()
-        self._d11 = (3 * s**2 - 2 * s).tolist()
-        self._p0 = np.zeros(n)
-        self._v0 = np.zeros(n)
-        self._p1 = np.zeros(n)
-        self._v1 = np.zeros(n)
-        self._dp = np.zeros(n)
-        self._q = np.zeros(n)       # last command
-        self._qd = np.zeros(n)
+        # per substep: position basis (h01 and T·h10, T·h11) and velocity basis (h'/T)
+        self._basis = np.column_stack([3 * s**2 - 2 * s**3, period * (s**3 - 2 * s**2 + s),
+                                       period * (s**3 - s**2), (6 * s - 6 * s**2) / period,
+                                       3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s])
+        self._segment = np.zeros((7, n))  # rows kernels.HERMITE_*
         self._k = substeps
 
     def make_command(self) -> JointCommand:
@@ -138,40 +129,25 @@ class HermiteInterpolator:
 
     def reset(self, q: Array) -> None:
         """Hold ``q`` at rest (shape (n,) [rad])."""
-        self._q[:] = q
-        self._qd[:] = 0.0
-        self._p1[:] = q
-        self._v1[:] = 0.0
+        seg = self._segment
+        seg[:] = 0.0
+        seg[kernels.HERMITE_Q] = q
+        seg[kernels.HERMITE_P1] = q
         self._k = self.substeps
 
     def set_target(self, q: Array, qd: Array) -> None:
         """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each."""
-        self._p0[:] = self._q
-        self._v0[:] = self._qd
-        self._p1[:] = q
-        self._v1[:] = qd
-        np.subtract(self._p1, self._p0, out=self._dp)
+        kernels.hermite_start(self._segment, q, qd)
         self._k = 0
 
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
         """Advance one servo period and write the command into ``out.q``, ``out.qd``."""
         k = self._k
-        if k >= self.substeps:
-            # no new setpoint: hold the end position at rest
-            self._qd[:] = 0.0
-            out.q[:] = self._q
-            out.qd[:] = 0.0
-            return InterpolatorStatus.STARVED
-        self._k = k + 1
-        if k == self.substeps - 1:
-            self._q[:] = self._p1
-            self._qd[:] = self._v1
-            status = InterpolatorStatus.FINISHED
-        else:
-            kernels.hermite_point(self._p0, self._v0, self._dp, self._v1, self._c01[k],
-                                  self._c10[k], self._c11[k], self._d01[k], self._d10[k],
-                                  self._d11[k], self._q, self._qd)
-            status = InterpolatorStatus.WORKING
-        out.q[:] = self._q
-        out.qd[:] = self._qd
-        return status
+        if k < self.substeps:
+            self._k = k + 1
+        return _STATUS[kernels.hermite_step(self._segment, self._basis, k, out.q, out.qd)]
+
+
+#: InterpolatorStatus by the code of ``kernels.hermite_step``.
+_STATUS = {0: InterpolatorStatus.WORKING, 1: InterpolatorStatus.FINISHED,
+           -1: InterpolatorStatus.STARVED}

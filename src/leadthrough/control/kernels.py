@@ -34,7 +34,8 @@ __all__ = [
     "decelerate_twist",
     "dls_step",
     "feedback_fault",
-    "hermite_point",
+    "hermite_start",
+    "hermite_step",
     "integrate_base",
     "is_zero",
     "joint_limit_index",
@@ -519,14 +520,63 @@ def rotate_to_base(rotation: Array, tool: Array, base: Array) -> None:
                            + rotation[r, 2] * tool[i + 2])
 
 
+#: Rows of the Hermite interpolator's segment state (``hermite_start`` / ``hermite_step``):
+#: start position and velocity, end position and velocity, end − start, last command.
+HERMITE_P0, HERMITE_V0, HERMITE_P1, HERMITE_V1, HERMITE_DP, HERMITE_Q, HERMITE_QD = range(7)
+
+
 @njit(cache=True, nogil=True)
-def hermite_point(p0: Array, v0: Array, dp: Array, v1: Array, c01: float, c10: float,
-                  c11: float, d01: float, d10: float, d11: float, q: Array, qd: Array) -> None:
-    """One point of a cubic Hermite segment (see :mod:`leadthrough.control.interpolation`):
-    q = p0 + c01·Δp + c10·v0 + c11·v1, q̇ = d01·Δp + d10·v0 + d11·v1."""
+def hermite_start(segment: Array, q: Array, qd: Array) -> None:
+    """A new segment from the last command to the setpoint (q, q̇) (see
+    :mod:`leadthrough.control.interpolation`).
+
+    Args:
+        segment: Segment state, shape (7, n), rows ``HERMITE_*`` (in place).
+        q: Setpoint [rad], shape (n,).
+        qd: Velocity at the setpoint [rad/s], shape (n,).
+    """
     for j in range(q.size):
-        q[j] = dp[j] * c01 + v0[j] * c10 + v1[j] * c11 + p0[j]
-        qd[j] = dp[j] * d01 + v0[j] * d10 + v1[j] * d11
+        segment[HERMITE_P0, j] = segment[HERMITE_Q, j]
+        segment[HERMITE_V0, j] = segment[HERMITE_QD, j]
+        segment[HERMITE_P1, j] = q[j]
+        segment[HERMITE_V1, j] = qd[j]
+        segment[HERMITE_DP, j] = q[j] - segment[HERMITE_Q, j]
+
+
+@njit(cache=True, nogil=True)
+def hermite_step(segment: Array, basis: Array, k: int, q_out: Array, qd_out: Array) -> int:
+    """Command k of the segment (0-based): q = p0 + c01·Δp + c10·v0 + c11·v1,
+    q̇ = d01·Δp + d10·v0 + d11·v1; the last one is the setpoint itself; past it, the end
+    position is held at rest.
+
+    Args:
+        segment: Segment state, shape (7, n), rows ``HERMITE_*`` (last command updated).
+        basis: Rows (c01, c10, c11, d01, d10, d11) per substep, shape (substeps, 6).
+        k: Substep.
+        q_out: Position command [rad], shape (n,).
+        qd_out: Velocity command [rad/s], shape (n,).
+
+    Returns:
+        0 inside the segment, 1 at its end, -1 past it (the ``InterpolatorStatus`` codes).
+    """
+    substeps = basis.shape[0]
+    status = 0
+    for j in range(q_out.size):
+        if k >= substeps:
+            segment[HERMITE_QD, j] = 0.0
+            status = -1
+        elif k == substeps - 1:
+            segment[HERMITE_Q, j] = segment[HERMITE_P1, j]
+            segment[HERMITE_QD, j] = segment[HERMITE_V1, j]
+            status = 1
+        else:
+            dp, v0, v1 = segment[HERMITE_DP, j], segment[HERMITE_V0, j], segment[HERMITE_V1, j]
+            segment[HERMITE_Q, j] = (dp * basis[k, 0] + v0 * basis[k, 1] + v1 * basis[k, 2]
+                                     + segment[HERMITE_P0, j])
+            segment[HERMITE_QD, j] = dp * basis[k, 3] + v0 * basis[k, 4] + v1 * basis[k, 5]
+        q_out[j] = segment[HERMITE_Q, j]
+        qd_out[j] = segment[HERMITE_QD, j]
+    return status
 
 
 @njit(cache=True, nogil=True)
