@@ -1,7 +1,7 @@
 """Table III: payload weight from motion with the unloaded robot's identified model (simulated
 er20), plus the real UR10e payload pair.
 
-    python benchmarks/table3.py [--seconds 60] [--quick]
+    python benchmarks/table3.py [--seconds 240] [--quick]
 
 Parameters come from calibration on the unloaded simulated robot (seed 1, 60 s), never from the
 simulator's truth. Each payload is recorded on its own run of the held-out trajectory.
@@ -14,7 +14,7 @@ import warnings
 from pathlib import Path
 
 from leadthrough.data.io import load_recording
-from leadthrough.demo.guiding_steps import PAPER_WEIGHTS_N, payload_table
+from leadthrough.demo.guiding_steps import PAPER_WEIGHTS_N, PAYLOAD_RUN_S, payload_table
 from leadthrough.errors import DataWarning
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.excitation.design import ExcitationConfig
@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seconds", type=float, default=60.0, help="payload run length [s]")
+    parser.add_argument("--seconds", type=float, default=PAYLOAD_RUN_S,
+                        help="payload run length [s]")
     parser.add_argument("--quick", action="store_true")
     args = parser.parse_args()
     robot = load_robot("er20")

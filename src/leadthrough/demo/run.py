@@ -25,7 +25,13 @@ import numpy as np
 
 from leadthrough.data.io import save_recording
 from leadthrough.data.preprocess import preprocess
-from leadthrough.demo.guiding_steps import GuidingDemo, PayloadRow, payload_table, run_guiding_demo
+from leadthrough.demo.guiding_steps import (
+    PAYLOAD_RUN_S,
+    GuidingDemo,
+    PayloadRow,
+    payload_table,
+    run_guiding_demo,
+)
 from leadthrough.errors import LeadthroughError
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig
@@ -168,7 +174,7 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
 
     say("[4/6] payload test (Table III): weight from motion with the unloaded model ...")
     res.payload = payload_table(robot, cal, {m: pf.params for m, pf in params.items()}, seed,
-                                20.0 if quick else 60.0)
+                                20.0 if quick else PAYLOAD_RUN_S)
     for k, row in enumerate(res.payload[GUIDING_METHOD]):
         cells = ", ".join(f"{m} {rows[k].estimated_n:7.2f} N ({rows[k].error_pct:+.2f} %)"
                           for m, rows in res.payload.items())
