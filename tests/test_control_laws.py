@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from leadthrough.control import (
     VirtualFrictionConfig,
     kernels,
 )
-from leadthrough.control.guiding import RELEASE_DROP, RELEASE_SMOOTHING_S
+from leadthrough.control.guiding import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
 from leadthrough.control.limits import TwistLimiter
 from leadthrough.errors import ControlError
 
@@ -194,29 +195,50 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
     """A release: the smoothed force falls back from its peak by half of δ (toward zero or past
     it); estimator noise below δ (±10 N per cycle, white) and a steady or rising push are not."""
     alpha = DT / (RELEASE_SMOOTHING_S + DT)
+    forget = np.exp(-DT / RELEASE_WINDOW_S)
     friction = np.full(6, 15.0)
     smooth, peak = np.zeros(6), np.zeros(6)
     rng = np.random.default_rng(3)
     noise = rng.uniform(-10.0, 10.0, size=(2000, 6))
-    assert not any(kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, False)
-                   for w in noise)
+    step = partial(kernels.release_step, friction=friction, drop=RELEASE_DROP, alpha=alpha,
+                   forget=forget, smooth=smooth, peak=peak)
+    assert not any(step(w, moving=False) for w in noise)
     smooth[:], peak[:] = 0.0, 0.0
     w = np.zeros(6)
     for k in range(100):                   # rising, then steady at 12 N (below δ)
         w[1] = min(12.0, 0.5 * k)
-        assert not kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, False)
+        assert not step(w, moving=False)
     assert peak[1] == pytest.approx(12.0, rel=1e-6)
     w[1] = -5.0                            # let go (the estimate overshoots past zero)
-    seen = [kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, False)
-            for _ in range(10)]
+    seen = [step(w, moving=False) for _ in range(10)]
     first = seen.index(True)
     assert first <= 3 and not any(seen[first + 1:])   # once, within 40 ms
     # in motion the peak follows the smoothed force: letting go is not a release at rest
     smooth[:], peak[:] = 0.0, 0.0
     w[1] = 30.0
     for _ in range(20):
-        kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, True)
+        step(w, moving=True)
     w[1] = 0.0
-    assert not any(kernels.release_step(w, friction, RELEASE_DROP, alpha, smooth, peak, True)
-                   for _ in range(20))
+    assert not any(step(w, moving=True) for _ in range(20))
     np.testing.assert_array_equal(peak, smooth)
+
+
+def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:
+    """At rest under a steady 49 N pull the estimate drifts by 10 N/s (the drives' static
+    friction takes up load): the peak forgets it, so the stopping friction is not renewed
+    again and again (with a peak that never forgets, it would be, every ~0.75 s)."""
+    alpha = DT / (RELEASE_SMOOTHING_S + DT)
+    friction = np.full(6, 15.0)
+    w = np.zeros(6)
+
+    def releases(forget: float) -> int:
+        smooth, peak = np.zeros(6), np.zeros(6)
+        count = 0
+        for k in range(700):                  # 7 s
+            w[1] = 49.0 - 10.0 * max(0.0, k * DT - 1.0)
+            count += kernels.release_step(w, friction, RELEASE_DROP, alpha, forget, smooth,
+                                          peak, False)
+        return count
+
+    assert releases(float(np.exp(-DT / RELEASE_WINDOW_S))) == 0
+    assert releases(1.0) >= 5

@@ -22,7 +22,8 @@ One cycle:
    [14] (:mod:`~leadthrough.control.velocity_baseline`), with fixed friction or eq. 36
    (:mod:`~leadthrough.control.auto_friction`). At rest, for ``settle_s + rezero_s`` after a
    stop or after a release (the force on an axis falling back from its peak by
-   :data:`RELEASE_DROP` × δ or more), breaking away takes the stopping friction: the paper's
+   :data:`RELEASE_DROP` × δ or more within about :data:`RELEASE_WINDOW_S`: the peak forgets
+   slow drifts), breaking away takes the stopping friction: the paper's
    "larger friction once the force is removed", applied while the drives settle or unload.
    Then the speed and acceleration limits
    (:mod:`~leadthrough.control.limits`, speed scaled down near singularities). STOPPING and
@@ -85,6 +86,11 @@ RELEASE_DROP = 0.5
 #: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
 #: below δ must not look like a release).
 RELEASE_SMOOTHING_S = 0.05
+#: Time constant with which the release's peak forgets slow changes [s]: letting go drops the
+#: estimate within ~0.2 s (the estimator's 3 Hz filter), while under a steady hand at rest the
+#: estimate drifts by up to ~10 N/s as the drives' static friction takes up or gives back
+#: load; such a drift must not renew the stopping friction again and again.
+RELEASE_WINDOW_S = 0.3
 
 
 class GuidingController:
@@ -145,6 +151,7 @@ class GuidingController:
         self._peak = np.zeros(6)    # signed peak force per axis at rest since then
         self._smooth = np.zeros(6)  # the wrench smoothed for the release
         self._release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
+        self._release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
         # cycles of the stop the last workspace check planned (inf: no box, no plan)
         self._stop_plan = math.inf
         self._hold_s = cfg.settle_s + cfg.rezero_s
@@ -284,7 +291,8 @@ class GuidingController:
             # breaking away takes the stopping friction
             at_rest_now = kernels.is_zero(twist)
             if kernels.release_step(self._wrench, self._friction, RELEASE_DROP,
-                                    self._release_alpha, self._smooth, self._peak,
+                                    self._release_alpha, self._release_forget, self._smooth,
+                                    self._peak,
                                     not at_rest_now) and at_rest_now:
                 self._release_s = 0.0
             settling = at_rest_now and (self._rest_s < self._hold_s

@@ -194,20 +194,23 @@ def limit_twist(previous: Array, desired: Array, max_speed: Array, max_step: Arr
 
 
 @njit(cache=True, nogil=True)
-def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smooth: Array,
-                 peak: Array, moving: bool) -> bool:
+def release_step(wrench: Array, friction: Array, drop: float, alpha: float, forget: float,
+                 smooth: Array, peak: Array, moving: bool) -> bool:
     """A release at rest: on some axis the smoothed w_i held a peak of at least ``drop``·δ_i
     and fell back from it, toward zero or beyond, by ``drop``·δ_i or more (a smaller hold
-    needs no settling: the estimate's swing after letting go stays below δ).
+    needs no settling: the estimate's swing after letting go stays below δ). Letting go is
+    quick; the peak forgets slow changes (it relaxes toward w_i by the factor ``forget`` per
+    cycle), so that the estimate's slow drift at rest under a steady hand is not a release.
 
     Args:
         wrench: Estimated wrench in the controller's frame, shape (6,).
         friction: δ per axis, shape (6,).
         drop: Fraction of δ that counts as a release.
         alpha: Weight of the new sample in the first-order smoothing, in (0, 1].
+        forget: Per-cycle factor of the peak's relaxation, in [0, 1] (1: never forgets).
         smooth: Smoothed wrench, shape (6,); updated in place.
         peak: Signed smoothed w_i of largest magnitude since the tool came to rest or since
-            the last release, shape (6,); updated in place.
+            the last release, relaxed by ``forget``, shape (6,); updated in place.
         moving: The tool moves: the peak follows the smoothed wrench (a release counts only
             from rest).
 
@@ -217,7 +220,8 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smoo
     released = False
     for i in range(wrench.size):
         smooth[i] += alpha * (wrench[i] - smooth[i])
-        w, p = smooth[i], peak[i]
+        w = smooth[i]
+        p = w + (peak[i] - w) * forget
         back = p - w if p >= 0.0 else w - p      # how far w fell back from the peak
         level = drop * friction[i]
         if back >= level and abs(p) >= level:
@@ -225,6 +229,8 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, smoo
             peak[i] = w
         elif abs(w) > abs(p):
             peak[i] = w
+        else:
+            peak[i] = p
         if moving:
             peak[i] = w
     return released
