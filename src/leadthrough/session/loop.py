@@ -29,12 +29,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from leadthrough.control.guiding import GuidingController
+from leadthrough.control.guiding import GuidingController, GuidingInput
 from leadthrough.control.interpolation import JointInterpolator
 from leadthrough.control.safety import Event
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError
-from leadthrough.estimation.estimator import ExternalForceEstimator, Status
+from leadthrough.estimation.estimator import EstimatorInput, ExternalForceEstimator, Status
 from leadthrough.session.record import SessionEvent, SessionLog
 from leadthrough.sim.operator import Mark
 
@@ -112,8 +112,12 @@ def run_session(
     rezero_samples = round(controller.config.rezero_s / dt)
     rec = _Buffers(steps, n, applied_wrench is not None)
     fb, cmd = driver.make_feedback(), driver.make_command()
-    e_in, e_out = estimator.make_input(), estimator.make_output()
-    c_in, c_out = controller.make_input(), controller.make_output()
+    e_out, c_out = estimator.make_output(), controller.make_output()
+    # the inputs share the arrays they are read from (the driver fills fb in place, cmd holds
+    # the command sent this period until the interpolator writes the next one at its end, and
+    # neither the estimator nor the controller writes its inputs): no copies in the cycle
+    e_in = EstimatorInput(t=0.0, q=fb.q, current=fb.current, qd_cmd=cmd.qd)
+    c_in = GuidingInput(t=0.0, sequence=0, q=fb.q, current=fb.current, wrench_base=e_out.wrench)
     driver.step()
     driver.read(fb)
     q0 = fb.q.copy()
@@ -136,17 +140,11 @@ def run_session(
         t0 = time.perf_counter()
         if fresh:
             e_in.t = fb.t
-            e_in.q[:] = fb.q
-            e_in.current[:] = fb.current
-            e_in.qd_cmd[:] = cmd.qd
             estimator.update(e_in, e_out)
         is_cycle = i % every == 0
         if is_cycle:
             c_in.t = t_loop
             c_in.sequence = fb.sequence
-            c_in.q[:] = fb.q
-            c_in.current[:] = fb.current
-            c_in.wrench_base[:] = e_out.wrench
             held = True if deadman is None else deadman(t_loop)
             c_in.deadman = held and e_out.status == Status.OK
             controller.update(c_in, c_out)
