@@ -137,3 +137,40 @@ def test_identify_consistent_json_adds_pseudo_inertia(workdir: Path, tmp_path: P
     assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
                  "proposed", "--bound", "none", "-o", str(tmp_path / "p.toml")]) == 2
     assert "finite bounds" in capsys.readouterr().err
+
+
+def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """record --seed → the recording → identify → the params' [meta] sim_seed → guide runs on
+    that robot by default and refuses another; payload refuses a recording of another one."""
+    from leadthrough.identification.params_file import load_params
+    from leadthrough.robot import load_robot
+    from leadthrough.session.record import load_session
+
+    rec = workdir / "rec0.parquet"
+    assert load_recording(rec).sim_seed == 1
+    params = tmp_path / "p.toml"
+    assert main(["identify", str(rec), "--robot", "er20", "--method", "ols-cv",
+                 "-o", str(params)]) == 0
+    assert load_params(params, load_robot("er20")).sim_seed == 1
+    session = tmp_path / "s.parquet"
+    assert main(["guide", "--params", str(params), "--operator", "rest", "--duration", "1",
+                 "-o", str(session)]) == 0
+    assert load_session(session).settings["seed"] == 1
+    capsys.readouterr()
+    other = tmp_path / "t.parquet"
+    assert main(["guide", "--params", str(params), "--operator", "rest", "--duration", "1",
+                 "--seed", "2", "-o", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert "--seed" in err and "2" in err and "sim_seed" in err
+    assert not other.exists()
+    rec2 = tmp_path / "rec_seed2.csv"
+    assert main(["record", "--robot", "er20", "--trajectory", str(workdir / "traj.csv"),
+                 "--seed", "2", "-o", str(rec2)]) == 0
+    assert load_recording(rec2).sim_seed == 2  # CSV keeps it too
+    assert main(["payload", str(rec2), "--robot", "er20", "--params", str(params)]) == 2
+    assert "sim_seed" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text(params.read_text().replace("sim_seed = 1", 'sim_seed = "one"'))
+    assert main(["guide", "--params", str(bad), "--operator", "rest", "-o", str(other)]) == 2
+    assert "meta.sim_seed" in capsys.readouterr().err

@@ -34,6 +34,25 @@ def test_round_trip_is_exact(tmp_path: Path, suffix: str) -> None:
     assert back.torque is None
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_simulated_robot_instance_round_trips(tmp_path: Path, suffix: str) -> None:
+    from dataclasses import replace
+
+    path = save_recording(replace(_rec(), sim_seed=4), tmp_path / f"r{suffix}")
+    assert load_recording(path).sim_seed == 4
+    assert load_recording(save_recording(_rec(), tmp_path / f"real{suffix}")).sim_seed is None
+    with pytest.raises(DataError, match="sim_seed"):
+        replace(_rec(), sim_seed=-1)
+
+
+def test_malformed_sim_seed_in_a_csv_header_is_a_clear_error(tmp_path: Path) -> None:
+    path = save_recording(_rec(), tmp_path / "r.csv")
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join([lines[0], lines[1], "# sim_seed: two", *lines[2:]]) + "\n")
+    with pytest.raises(DataError, match=r"r\.csv.*sim_seed.*two"):
+        load_recording(path)
+
+
 def test_csv_header_has_units(tmp_path: Path) -> None:
     path = save_recording(_rec(2), tmp_path / "r.csv")
     header = path.read_text().splitlines()[2]

@@ -267,7 +267,7 @@ def run_record(args: argparse.Namespace) -> int:
     log = run_trajectory(sim, q_cmd, qd_cmd, progress=bar)
     bar.close()
     rec = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
-                    robot=robot.name)
+                    robot=robot.name, sim_seed=args.seed)
     save_recording(rec, args.output)
     out = {"robot": robot.name, "samples": rec.samples, "duration_s": rec.duration,
            "seed": args.seed, "run": args.run, "payload_mass_kg": args.payload_mass,
@@ -289,13 +289,18 @@ def run_identify(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot)
     rec = _load(args, robot)
     bar = Progress(f"identifying ({args.method})", 1)
+    sim_seed = rec.sim_seed
     if args.friction_sweep is not None:
         sweep = load_recording(args.friction_sweep, args.columns)
+        if sweep.sim_seed != rec.sim_seed:
+            raise DataError("recorded on another robot than the identification data",
+                            source=args.friction_sweep, field="sim_seed", value=sweep.sim_seed,
+                            expected=f"{rec.sim_seed} (that of {args.recording})")
         result = identify_with_sweep(rec, sweep, robot, _identify_config(args)).result
     else:
         result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
     bar.close(f"J = {result.J:.3f}")
-    save_params(args.output, robot, args.method, result.params, result.stats)
+    save_params(args.output, robot, args.method, result.params, result.stats, sim_seed)
     if args.urdf_out is not None:
         write_urdf_with_inertias(robot, result.params.phi, args.urdf_out)
     eig = {jn: float(v) for jn, v in zip(robot.joint_names, result.min_pseudo_inertia_eig,

@@ -13,7 +13,12 @@ from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
 from leadthrough.session.record import save_session
-from leadthrough.session.sim_session import SimSessionConfig, light_guiding, run_sim_session
+from leadthrough.session.sim_session import (
+    SimSessionConfig,
+    light_guiding,
+    run_sim_session,
+    sim_robot_seed,
+)
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES
 
 __all__ = ["register"]
@@ -46,9 +51,9 @@ def register(sub: Any) -> None:
                         "push demonstrations use 100 so that 40 N reaches the 0.2 m/s cap)")
     p.add_argument("--duration", type=float, default=None,
                    help="session length [s] (default: the operator script's)")
-    p.add_argument("--seed", type=int, default=1,
-                   help="simulated robot instance (default: 1); use the one the params were "
-                        "identified on (leadthrough record --seed)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="simulated robot instance (default: the one the params were identified "
+                        "on, their [meta] sim_seed, else 1); another one is refused")
     p.add_argument("--operator-seed", type=int, default=None, metavar="N",
                    help="seed of the random operator's pushes (default: --seed); vary this "
                         "for other push sequences on the same robot")
@@ -62,9 +67,10 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
     pf = load_params(args.params, robot)
+    seed = sim_robot_seed(args.seed, pf)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     cfg = SimSessionConfig(operator=args.operator, controller=args.controller,
-                           duration_s=args.duration, seed=args.seed,
+                           duration_s=args.duration, seed=seed,
                            operator_seed=args.operator_seed, paced=args.realtime,
                            guiding=replace(guiding, friction_mode=args.friction))
     require_folder(args.output)

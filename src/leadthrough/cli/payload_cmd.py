@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from leadthrough.data.io import load_recording
+from leadthrough.errors import DataError
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
@@ -40,6 +41,10 @@ def run(args: argparse.Namespace) -> int:
     pf = load_params(args.params, robot)
     rec = load_recording(args.recording, args.columns)
     rec.check_robot(robot)
+    if None not in (rec.sim_seed, pf.sim_seed) and rec.sim_seed != pf.sim_seed:
+        raise DataError("recorded on another simulated robot than the params were identified "
+                        "on", source=args.recording, field="sim_seed", value=rec.sim_seed,
+                        expected=f"{pf.sim_seed} (the params' [meta] sim_seed)")
     est = estimate_payload(rec, robot, pf.params, args.method)
     out: dict[str, Any] = {"robot": robot.name, "method": est.method, "mass_kg": est.mass_kg,
                            "weight_N": est.weight_n, "samples": est.samples}

@@ -9,7 +9,8 @@ Our CSV::
     # robot: er20
     time [s],q1 [rad],...,q6 [rad],current1 [A],...,current6 [A],q_cmd1 [rad],...
 
-Parquet files use the same column names and keep the robot name in the schema metadata.
+Parquet files use the same column names and keep the robot name in the schema metadata (and
+the simulated robot instance, ``sim_seed``, of a simulated recording; CSV: a comment line).
 Writing is atomic (temporary file, then rename). Rows with non-finite values are dropped on
 load and counted in a :class:`~leadthrough.errors.DataWarning`; anything else malformed raises a
 :class:`~leadthrough.errors.DataError` naming the file and column.
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import re
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -66,17 +68,36 @@ def save_recording(rec: Recording, path: str | Path) -> Path:
             with tmp.open("w", encoding="utf-8") as f:
                 f.write("# leadthrough recording\n")
                 f.write(f"# robot: {rec.robot or ''}\n")
+                if rec.sim_seed is not None:
+                    f.write(f"# sim_seed: {rec.sim_seed}\n")
                 np.savetxt(f, data, delimiter=",", header=header, comments="", fmt="%.17g")
         return atomic_write(path, write_csv)
     if suffix in (".parquet", ".pq"):
-        table = pa.table(cols).replace_schema_metadata(
-            {"leadthrough.robot": rec.robot or "", "leadthrough.kind": "recording"})
+        meta = {"leadthrough.robot": rec.robot or "", "leadthrough.kind": "recording"}
+        if rec.sim_seed is not None:
+            meta["leadthrough.sim_seed"] = str(rec.sim_seed)
+        table = pa.table(cols).replace_schema_metadata(meta)
         return atomic_write(path, lambda tmp: pq.write_table(table, tmp))
     raise DataError("unknown recording format", source=path, field="suffix", value=suffix,
                     expected=".csv or .parquet")
 
 
-def _assemble(columns: dict[str, Array], source: str, robot: str | None) -> Recording:
+def _sim_seed(value: str | None, source: str) -> int | None:
+    """The ``sim_seed`` entry of a file's metadata (None if absent)."""
+    if value is None or value == "":
+        return None
+    try:
+        seed = int(value)
+    except ValueError:
+        seed = -1
+    if seed < 0:
+        raise DataError("malformed", source=source, field="sim_seed", value=value,
+                        expected="an integer >= 0 (the simulated robot instance)")
+    return seed
+
+
+def _assemble(columns: dict[str, Array], source: str, robot: str | None,
+              sim_seed: int | None = None) -> Recording:
     """Build a Recording from named columns, dropping rows with non-finite values."""
     groups: dict[str, dict[int, Array]] = {}
     for name, values in columns.items():
@@ -101,7 +122,8 @@ def _assemble(columns: dict[str, Array], source: str, robot: str | None) -> Reco
                 raise DataError("joint columns are not numbered 1..n", source=source,
                                 field=sig, value=idx, expected="1, 2, ..., n")
             arrays[sig] = np.column_stack([groups[sig][j] for j in idx])
-    return _finite_recording(arrays, source, robot)
+    rec = _finite_recording(arrays, source, robot)
+    return rec if sim_seed is None else replace(rec, sim_seed=sim_seed)
 
 
 def _finite_recording(arrays: dict[str, Array], source: str, robot: str | None,
@@ -181,7 +203,8 @@ def _to_float(table: pa.Table, source: Path) -> dict[str, Array]:
 def _load_native_csv(path: Path) -> Recording:
     skip, meta = read_comment_header(path)
     table = _read_csv_table(path, ",", skip, header=True)
-    return _assemble(_to_float(table, path), str(path), meta.get("robot") or None)
+    return _assemble(_to_float(table, path), str(path), meta.get("robot") or None,
+                     _sim_seed(meta.get("sim_seed"), str(path)))
 
 
 def _load_parquet(path: Path) -> Recording:
@@ -191,7 +214,9 @@ def _load_parquet(path: Path) -> Recording:
         raise DataError(f"not a readable Parquet file: {e}", source=path) from e
     meta = table.schema.metadata or {}
     robot = meta.get(b"leadthrough.robot", b"").decode() or None
-    return _assemble(_to_float(table, path), str(path), robot)
+    seed = meta.get(b"leadthrough.sim_seed")
+    return _assemble(_to_float(table, path), str(path), robot,
+                     _sim_seed(None if seed is None else seed.decode(), str(path)))
 
 
 def _load_mat(path: Path, cmap: ColumnMap) -> Recording:

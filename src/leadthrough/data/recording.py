@@ -33,6 +33,9 @@ class Recording:
         q_cmd: Commanded joint positions [rad], shape (N, n), or None.
         robot: Name of the robot it was recorded on, if known.
         source: Where it came from (file path), for error messages.
+        sim_seed: The simulated robot instance that recorded it (``leadthrough record
+            --seed``); None for a real robot. Carried into the params file, so that a session
+            runs on the simulated robot the parameters were identified on.
     """
 
     time: Array
@@ -42,9 +45,14 @@ class Recording:
     q_cmd: Array | None = None
     robot: str | None = None
     source: str | None = None
+    sim_seed: int | None = None
 
     def __post_init__(self) -> None:
         src = self.source
+        if self.sim_seed is not None and not (isinstance(self.sim_seed, int)
+                                              and self.sim_seed >= 0):
+            raise DataError("not a simulated robot instance", source=src, field="sim_seed",
+                            value=self.sim_seed, expected="None or an integer >= 0")
         t = np.asarray(self.time, dtype=float)
         q = np.asarray(self.q, dtype=float)
         if t.ndim != 1 or t.size < 2:

@@ -156,14 +156,14 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
     params: dict[str, ParamsFile] = {}
     for m in ("proposed", GUIDING_METHOD):
         r = comp.results[m]
-        path = save_params(out / f"params_{m}.toml", robot, m, r.params, r.stats)
+        path = save_params(out / f"params_{m}.toml", robot, m, r.params, r.stats, seed)
         res.files[f"params ({m})"] = path
-        params[m] = ParamsFile.from_result(r, path)
+        params[m] = ParamsFile.from_result(r, path, seed)
     guided = identify_with_sweep(cal.identification.measured, sweep.measured, robot, cfg)
     path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
-                       guided.result.params, guided.result.stats)
+                       guided.result.params, guided.result.stats, seed)
     res.files["params (guiding: consistent + friction sweep)"] = path
-    guiding_params = ParamsFile.from_result(guided.result, path)
+    guiding_params = ParamsFile.from_result(guided.result, path, seed)
     res.sweep_rms = guided.sweep.rms.tolist()
     say("      guiding parameters: consistent with the friction sweep (fit RMS "
         + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m)")

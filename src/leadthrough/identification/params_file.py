@@ -71,6 +71,8 @@ class ParamsFile:
         noise_std: σ of τ_ω per joint [N·m], shape (n,).
         J: J on the identification data [N·m].
         path: The file.
+        sim_seed: The simulated robot instance the identification data came from (``[meta]
+            sim_seed``); None for a real robot.
     """
 
     robot: str
@@ -80,14 +82,15 @@ class ParamsFile:
     noise_std: Array
     J: float
     path: Path | None = None
+    sim_seed: int | None = None
 
     @classmethod
-    def from_result(cls, result: IdentificationResult, path: Path | None = None
-                    ) -> ParamsFile:
+    def from_result(cls, result: IdentificationResult, path: Path | None = None,
+                    sim_seed: int | None = None) -> ParamsFile:
         """The params file an identification result would be saved as (without writing it)."""
         return cls(robot=result.robot, method=result.method, params=result.params,
                    noise_mean=result.stats.mean, noise_std=result.stats.std, J=result.J,
-                   path=path)
+                   path=path, sim_seed=sim_seed)
 
 
 def _fmt(v: float) -> str:
@@ -96,7 +99,7 @@ def _fmt(v: float) -> str:
 
 def save_params(
     path: str | Path, robot: Robot, method: str, params: DriveModelParameters,
-    stats: ResidualStats,
+    stats: ResidualStats, sim_seed: int | None = None,
 ) -> Path:
     """Write a params file atomically.
 
@@ -106,6 +109,7 @@ def save_params(
         method: Identification method.
         params: Identified parameters.
         stats: Residual statistics on the identification data (J, τ̄_ω, σ).
+        sim_seed: The simulated robot instance the data came from (None: a real robot).
 
     Returns:
         The path written.
@@ -119,6 +123,7 @@ def save_params(
         f'leadthrough_version = "{__version__}"',
         f"J = {_fmt(stats.J)}",
         f"k_omega = {_fmt(stats.k_omega)}",
+        *([] if sim_seed is None else [f"sim_seed = {int(sim_seed)}"]),
         "",
         "[noise]",
         "mean = [" + ", ".join(_fmt(v) for v in stats.mean) + "]",
@@ -226,6 +231,11 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
             phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
             coulomb=fr["coulomb"], viscous=fr["viscous"],
             cbrt=fr.get("cbrt", np.zeros(n)), offset=offset if has_offset else np.zeros(0))
+    seed = meta.get("sim_seed")
+    if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool)
+                                 and seed >= 0):
+        raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,
+                        expected="an integer >= 0 (the simulated robot instance)")
     return ParamsFile(robot=robot.name, method=str(meta.get("method", "")), params=params,
                       noise_mean=arrays["mean"], noise_std=arrays["std"],
-                      J=_number(path, "meta.J", meta.get("J")), path=path)
+                      J=_number(path, "meta.J", meta.get("J")), path=path, sim_seed=seed)

@@ -19,7 +19,7 @@ from leadthrough.control.interpolation import HermiteInterpolator
 from leadthrough.drivers.protocol import Driver
 from leadthrough.drivers.replay import FeedbackTrace, RecordingDriver, ReplayDriver
 from leadthrough.drivers.sim_driver import Fault, SimDriver
-from leadthrough.errors import ControlError, check_fields
+from leadthrough.errors import ControlError, DataError, check_fields
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
@@ -28,8 +28,9 @@ from leadthrough.session.metrics import SessionSummary, summarize
 from leadthrough.sim.operator_scripts import make_operator
 from leadthrough.sim.robot import SimConfig, SimRobot
 
-__all__ = ["PUSH_MASS_KG", "LoopParts", "SimSession", "SimSessionConfig", "build_loop",
-           "guide_start_pose", "light_guiding", "replay_session", "run_sim_session"]
+__all__ = ["DEFAULT_SIM_SEED", "PUSH_MASS_KG", "LoopParts", "SimSession", "SimSessionConfig",
+           "build_loop", "guide_start_pose", "light_guiding", "replay_session",
+           "run_sim_session", "sim_robot_seed"]
 
 #: Virtual mass [kg] of the push demonstrations: 40 N for 3 s then reaches the 0.2 m/s cap
 #: ((40 − 15) N / 100 kg = 0.25 m/s²). With Table IV's 1000 kg it reaches 0.075 m/s.
@@ -120,6 +121,33 @@ def light_guiding(mass_kg: float = PUSH_MASS_KG, base: GuidingConfig | None = No
     cfg = base if base is not None else GuidingConfig()
     vf = cfg.virtual_friction
     return replace(cfg, virtual_friction=replace(vf, mass=(mass_kg,) * 3 + tuple(vf.mass[3:])))
+
+
+#: The simulated robot instance when nothing says which (the demo's).
+DEFAULT_SIM_SEED = 1
+
+
+def sim_robot_seed(requested: int | None, params: ParamsFile) -> int:
+    """The simulated robot instance a session runs on: the one the parameters were identified
+    on (``ParamsFile.sim_seed``), else the requested one, else :data:`DEFAULT_SIM_SEED`.
+
+    Guiding another instance than the identified one runs the estimator with another robot's
+    model (up to 20 N·m of rigid-body error on the er20), which looks like a controller fault.
+
+    Args:
+        requested: The instance asked for (``--seed``), or None.
+        params: The parameters.
+
+    Raises:
+        DataError: ``requested`` differs from the parameters' instance.
+    """
+    if params.sim_seed is None:
+        return DEFAULT_SIM_SEED if requested is None else requested
+    if requested is not None and requested != params.sim_seed:
+        raise DataError("the params were identified on another simulated robot",
+                        source=params.path, field="--seed", value=requested,
+                        expected=f"{params.sim_seed} (their [meta] sim_seed), or leave it out")
+    return params.sim_seed
 
 
 def guide_start_pose(robot: Robot) -> Array:

@@ -99,9 +99,9 @@ def _run(robot: Robot, samples: TrajectorySamples, config: SimConfig, payload: P
     log = run_trajectory(sim, samples.q, samples.qd, progress=progress)
     src = f"sim seed {config.seed} run {config.run}{what}"
     measured = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
-                         robot=robot.name, source=src)
+                         robot=robot.name, source=src, sim_seed=config.seed)
     true = Recording(time=log.time, q=log.q, current=log.truth.current, robot=robot.name,
-                     source=f"{src} (true current)")
+                     source=f"{src} (true current)", sim_seed=config.seed)
     return SimRecording(measured=measured, true=true, log=log)
 
 
