@@ -355,7 +355,6 @@ class GuidingController:
         self._write(out, scale)
         return out.status
 
-
     def _integrate(self, twist: Array) -> pin.SE3:
         """Pose after one cycle of ``twist``: tool frame T·exp6(ν·dt); base frame (axes of the
         base at the TCP) p + v·dt and exp3(ω·dt)·R (the TCP point moves with v)."""
