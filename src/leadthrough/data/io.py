@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import re
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -122,16 +121,16 @@ def _assemble(columns: dict[str, Array], source: str, robot: str | None,
                 raise DataError("joint columns are not numbered 1..n", source=source,
                                 field=sig, value=idx, expected="1, 2, ..., n")
             arrays[sig] = np.column_stack([groups[sig][j] for j in idx])
-    rec = _finite_recording(arrays, source, robot)
-    return rec if sim_seed is None else replace(rec, sim_seed=sim_seed)
+    return _finite_recording(arrays, source, robot, sim_seed=sim_seed)
 
 
 def _finite_recording(arrays: dict[str, Array], source: str, robot: str | None,
-                      extra_bad: NDArray[np.bool_] | None = None, why: str = "") -> Recording:
+                      extra_bad: NDArray[np.bool_] | None = None, why: str = "",
+                      sim_seed: int | None = None) -> Recording:
     cut = _clean_rows(arrays, source, extra_bad, why)
     return Recording(time=cut["time"], q=cut["q"], current=cut.get("current"),
                      torque=cut.get("torque"), q_cmd=cut.get("q_cmd"), robot=robot,
-                     source=source)
+                     source=source, sim_seed=sim_seed)
 
 
 def _clean_rows(arrays: dict[str, Array], source: str,
