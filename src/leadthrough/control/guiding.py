@@ -310,8 +310,7 @@ class GuidingController:
                 # (ahead while their acceleration holds them back), plus this cycle's step
                 stop = max(self._limiter.stop_cycles(twist), joint_stop,
                            ik.stop_cycles(self._ik_result.qd_dls)) + 1.0
-                speed = math.sqrt(float(new[0]) ** 2 + float(new[1]) ** 2
-                                  + float(new[2]) ** 2)
+                speed = kernels.norm(new[:3])
                 clearance = sup.workspace_clearance(T_new.translation, speed,
                                                     stop * self.config.dt)
                 if clearance < 0.0:
