@@ -11,6 +11,7 @@ from leadthrough.control import (
     AutoFrictionConfig,
     DifferentialIK,
     IKConfig,
+    joint_kernels,
     kernels,
 )
 from leadthrough.control.ik import dls_damping
@@ -175,13 +176,13 @@ def test_ik_braking_at_a_position_limit_slows_no_other_joint_beyond_its_accelera
     lower, upper = np.full(n, -3.0), np.full(n, 3.0)
     q = np.zeros(n)
     q[0] = upper[0] - 0.05
-    bound = kernels._braking_speed(0.05, dv[0], dt)
+    bound = joint_kernels._braking_speed(0.05, dv[0], dt)
     qd_prev = np.zeros(n)
     qd_prev[0], qd_prev[1] = bound + 0.5 * dv[0], 2.0           # both keep their speed
     qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
-    scale = kernels.dls_step(np.eye(n), np.eye(n), 0.0, qd_prev * dt, dt, q, qd_prev, lower,
-                             upper, np.full(n, 10.0), dv, np.full(n, 0.5 / a), qd_dls, qd,
-                             q_next, np.zeros((7, 6)))
+    scale = joint_kernels.dls_step(np.eye(n), np.eye(n), 0.0, qd_prev * dt, dt, q, qd_prev,
+                                   lower, upper, np.full(n, 10.0), dv, np.full(n, 0.5 / a),
+                                   qd_dls, qd, q_next, np.zeros((7, 6)))
     np.testing.assert_allclose(qd_dls, qd_prev, rtol=1e-12)
     assert scale == pytest.approx(bound / qd_prev[0], rel=1e-12)
     assert qd[0] == pytest.approx(bound, rel=1e-12)              # the bound holds
@@ -361,9 +362,9 @@ def test_ik_step_on_a_singular_system_brakes_instead_of_failing() -> None:
     qd_prev = np.array([0.2, -0.2, 0.03, 0.0, -0.01, 0.1])
     qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
     q = np.zeros(n)
-    scale = kernels.dls_step(J, J @ J.T, 0.0, np.ones(6), DT, q, qd_prev, np.full(n, -3.0),
-                             np.full(n, 3.0), np.full(n, 10.0), dv, np.full(n, 0.1), qd_dls,
-                             qd, q_next, np.zeros((7, 6)))
+    scale = joint_kernels.dls_step(J, J @ J.T, 0.0, np.ones(6), DT, q, qd_prev,
+                                   np.full(n, -3.0), np.full(n, 3.0), np.full(n, 10.0), dv,
+                                   np.full(n, 0.1), qd_dls, qd, q_next, np.zeros((7, 6)))
     assert scale == 0.0
     np.testing.assert_allclose(qd, [0.15, -0.15, 0.0, 0.0, 0.0, 0.05])
     np.testing.assert_allclose(q_next, qd * DT)

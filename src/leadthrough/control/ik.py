@@ -30,7 +30,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from leadthrough.control import kernels
+from leadthrough.control import joint_kernels, kernels
 from leadthrough.errors import ControlError, check_fields, check_period
 from leadthrough.estimation.kernels import damping_of, gram_manipulability
 from leadthrough.robot.description import Robot
@@ -164,7 +164,7 @@ class DifferentialIK:
             max_j |q̇_j|/(f·a_j·dt) (not rounded), f the ``stop_acceleration_fraction`` and
             a_j the IK's joint acceleration limits.
         """
-        return float(kernels.joint_stop_cycles(qd, self._dv_stop))
+        return float(joint_kernels.joint_stop_cycles(qd, self._dv_stop))
 
     def make_result(self) -> IKResult:
         """A preallocated result."""
@@ -206,8 +206,9 @@ class DifferentialIK:
         """
         err = pin.log6(self.transform_tool_to_base.actInv(target)).vector
         out.residual = kernels.norm(err)
-        scale = kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt, q,
-                                 qd_previous, self.lower, self.upper, self._vmax, self._dv,
-                                 self._half_inv_a, out.qd_dls, out.qd, out.q, self._scratch)
+        scale = joint_kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt,
+                                       q, qd_previous, self.lower, self.upper, self._vmax,
+                                       self._dv, self._half_inv_a, out.qd_dls, out.qd, out.q,
+                                       self._scratch)
         out.scale = scale
         out.limited = scale < 1.0

@@ -27,7 +27,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control import kernels
+from leadthrough.control import joint_kernels
 from leadthrough.errors import ControlError, check_period
 
 __all__ = [
@@ -120,7 +120,7 @@ class HermiteInterpolator:
         self._basis = np.column_stack([3 * s**2 - 2 * s**3, period * (s**3 - 2 * s**2 + s),
                                        period * (s**3 - s**2), (6 * s - 6 * s**2) / period,
                                        3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s])
-        self._segment = np.zeros((7, n))  # rows kernels.HERMITE_*
+        self._segment = np.zeros((7, n))  # rows joint_kernels.HERMITE_*
         self._k = substeps
 
     def make_command(self) -> JointCommand:
@@ -131,13 +131,13 @@ class HermiteInterpolator:
         """Hold ``q`` at rest (shape (n,) [rad])."""
         seg = self._segment
         seg[:] = 0.0
-        seg[kernels.HERMITE_Q] = q
-        seg[kernels.HERMITE_P1] = q
+        seg[joint_kernels.HERMITE_Q] = q
+        seg[joint_kernels.HERMITE_P1] = q
         self._k = self.substeps
 
     def set_target(self, q: Array, qd: Array) -> None:
         """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each."""
-        kernels.hermite_start(self._segment, q, qd)
+        joint_kernels.hermite_start(self._segment, q, qd)
         self._k = 0
 
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
@@ -145,9 +145,10 @@ class HermiteInterpolator:
         k = self._k
         if k < self.substeps:
             self._k = k + 1
-        return _STATUS[kernels.hermite_step(self._segment, self._basis, k, out.q, out.qd)]
+        code = joint_kernels.hermite_step(self._segment, self._basis, k, out.q, out.qd)
+        return _STATUS[code]
 
 
-#: InterpolatorStatus by the code of ``kernels.hermite_step``.
+#: InterpolatorStatus by the code of ``joint_kernels.hermite_step``.
 _STATUS = {0: InterpolatorStatus.WORKING, 1: InterpolatorStatus.FINISHED,
            -1: InterpolatorStatus.STARVED}
