@@ -170,13 +170,11 @@ class LoopParts(NamedTuple):
         estimator: External force estimator (base frame, at the servo period).
         controller: Guiding controller.
         interpolator: Controller cycle → servo period interpolation.
-        guiding: The controller's settings (with the session's controller law).
     """
 
     estimator: ExternalForceEstimator
     controller: GuidingController
     interpolator: HermiteInterpolator
-    guiding: GuidingConfig
 
 
 def build_loop(robot: Robot, params: ParamsFile, config: SimSessionConfig, dt: float
@@ -198,7 +196,7 @@ def build_loop(robot: Robot, params: ParamsFile, config: SimSessionConfig, dt: f
     guiding = replace(config.guiding, controller=config.controller)
     controller = GuidingController(robot, guiding, params.noise_mean, params.noise_std)
     interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / dt))
-    return LoopParts(estimator, controller, interpolator, guiding)
+    return LoopParts(estimator, controller, interpolator)
 
 
 def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
@@ -233,7 +231,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
                 if record_feedback else None)
     driver: Driver = sim_driver if recorder is None else recorder
     parts = build_loop(robot, params, config, driver.dt)
-    est_cfg, guiding = parts.estimator.config, parts.guiding
+    est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
         "operator": config.operator, "controller": config.controller, "seed": config.seed,
         "run": config.run, "operator_seed": op_seed, "duration_s": duration,
