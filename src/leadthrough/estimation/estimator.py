@@ -290,16 +290,15 @@ class ExternalForceEstimator:
             return out.status
         mdl = self.model
         m, d, q, u = mdl.model, mdl.data, self._q, self._unused
+        J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
         if c[fused.DIRECT]:
             rnea = pin.rnea(m, d, q, self._qd, self._qdd)
-            J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
             mu = fused.sample_back(rnea, u, u, q, J, k, st, c, s, out.tau_ext, out.wrench,
                                    out.qd, self._last_wrench, self._scratch)
         else:
             M = pin.crba(m, d, q)  # upper triangle only
             C = pin.computeCoriolisMatrix(m, d, q, self._qd)
             g = pin.computeGeneralizedGravity(m, d, q)
-            J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
             mu = fused.sample_back(q, M, C, g, J, k, st, c, s, out.tau_ext, out.wrench,
                                    out.qd, self._last_wrench, self._scratch)
         out.manipulability = mu
