@@ -11,8 +11,8 @@ from leadthrough.control import (
     AutoFrictionConfig,
     DifferentialIK,
     IKConfig,
+    guiding_kernel,
     joint_kernels,
-    kernels,
 )
 from leadthrough.control.ik import dls_damping
 from leadthrough.errors import ControlError
@@ -64,6 +64,22 @@ def test_jacobian_matches_finite_differences(er20: Robot, frame: str) -> None:
                 fd[3:, j] = (pin.log3(Tp.rotation @ T0.rotation.T)
                              - pin.log3(Tm.rotation @ T0.rotation.T)) / (2 * h)
         np.testing.assert_allclose(J, fd, atol=1e-8)
+
+
+def test_tcp_pose_and_its_views_follow_each_kinematics_update(er20: Robot) -> None:
+    """``transform_tool_to_base`` is Pinocchio's frame placement, updated in place, and the
+    rotation / translation views follow it."""
+    ik = DifferentialIK(er20, dt=DT)
+    data = er20.model.createData()
+    T, R, p = ik.transform_tool_to_base, ik.rotation_tool_to_base, ik.translation_tool_to_base
+    for q in (Q_WORK, Q_WRIST_SINGULAR):
+        ik.compute_kinematics(q)
+        pin.framesForwardKinematics(er20.model, data, q)
+        ref = data.oMf[er20.tcp_frame_id]
+        assert ik.transform_tool_to_base is T
+        np.testing.assert_array_equal(R, ref.rotation)
+        np.testing.assert_array_equal(p, ref.translation)
+        np.testing.assert_array_equal(T.homogeneous, ref.homogeneous)
 
 
 def test_manipulability_and_damping(er20: Robot) -> None:
@@ -242,7 +258,7 @@ def test_compiled_base_frame_step_matches_pinocchio_exp3() -> None:
             twist = rng.normal(size=6) * scale
             R = pin.exp3(rng.normal(size=3))
             p = rng.normal(size=3)
-            kernels.integrate_base(R, p, twist, DT, R_out, p_out)
+            guiding_kernel.integrate_base(R, p, twist, DT, R_out, p_out)
             np.testing.assert_allclose(R_out, pin.exp3(twist[3:] * DT) @ R, atol=1e-14)
             np.testing.assert_allclose(p_out, p + twist[:3] * DT, atol=1e-15)
 

@@ -6,7 +6,11 @@ import math
 from functools import partial
 
 import numpy as np
+import pinocchio as pin
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from leadthrough.control import (
     CartesianLimits,
@@ -16,6 +20,7 @@ from leadthrough.control import (
     VirtualFrictionConfig,
     kernels,
 )
+from leadthrough.control import guiding_kernel as gk
 from leadthrough.control.guiding import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
 from leadthrough.control.limits import TwistLimiter
 from leadthrough.errors import ControlError
@@ -242,3 +247,58 @@ def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:
 
     assert releases(float(np.exp(-DT / RELEASE_WINDOW_S))) == 0
     assert releases(1.0) >= 5
+
+
+_vec6 = arrays(np.float64, 6, elements=st.floats(-80.0, 80.0))
+
+
+@settings(max_examples=300, deadline=None)
+@given(twist=_vec6, wrench=_vec6, friction=arrays(np.float64, 6, elements=st.floats(0.0, 30.0)),
+       extra=arrays(np.float64, 6, elements=st.floats(0.0, 40.0)), smooth=_vec6, peak=_vec6,
+       at_rest=st.booleans(), law_id=st.sampled_from([gk.LAW_VIRTUAL_FRICTION, gk.LAW_VELOCITY]),
+       rest_s=st.sampled_from([0.0, 0.05, 0.6, math.inf]),
+       release_s=st.sampled_from([0.0, 0.05, 0.6, math.inf]), scale=st.floats(0.1, 1.0),
+       angle=st.floats(-3.0, 3.0))
+def test_guiding_step_is_the_chain_of_its_kernels(
+        twist: np.ndarray, wrench: np.ndarray, friction: np.ndarray, extra: np.ndarray,
+        smooth: np.ndarray, peak: np.ndarray, at_rest: bool, law_id: int, rest_s: float,
+        release_s: float, scale: float, angle: float) -> None:
+    """The fused GUIDING step computes bit for bit what its links compute one by one: release
+    detection, settling friction, law, limits, base-frame integration."""
+    twist = np.zeros(6) if at_rest else twist / 200.0
+    law: VirtualFriction | VelocityBaseline = (
+        VirtualFriction(VirtualFrictionConfig(mass=(100.0,) * 3 + (1000.0,) * 3), DT)
+        if law_id == gk.LAW_VIRTUAL_FRICTION else VelocityBaseline(dt=DT))
+    limiter = TwistLimiter(CartesianLimits(), DT)
+    hold, alpha = 0.5, DT / (RELEASE_SMOOTHING_S + DT)
+    forget = math.exp(-DT / RELEASE_WINDOW_S)
+    R = pin.rpy.rpyToMatrix(angle, 0.5 * angle, -angle)
+    p = np.array([0.8, -0.2, 1.1])
+    axes = np.zeros((gk.AXES_ROWS, 6))
+    for row, v in ((gk.TWIST, twist), (gk.WRENCH, wrench), (gk.FRICTION, friction),
+                   (gk.STOP_FRICTION, friction + extra), (gk.SMOOTH, smooth), (gk.PEAK, peak),
+                   (gk.LAW, law.coefficients)):
+        axes[row] = v
+    R_out, p_out = np.zeros((3, 3)), np.zeros(3)
+    settings_ = np.array([hold, DT, RELEASE_DROP, alpha, forget])
+    release_after = gk.guiding_step(axes, law.law_id, law.alpha, settings_, limiter.max_speed,
+                                    limiter.max_step, scale, rest_s, release_s, True, R, p,
+                                    R_out, p_out)
+    # the chain, link by link
+    smooth_ref, peak_ref = smooth.copy(), peak.copy()
+    resting = not twist.any()
+    if kernels.release_step(wrench, friction, RELEASE_DROP, alpha, forget, smooth_ref,
+                            peak_ref, not resting) and resting:
+        release_s = 0.0
+    settling = resting and (rest_s < hold or release_s < hold)
+    desired, new = np.zeros(6), np.zeros(6)
+    law.step(twist, wrench, friction + extra if settling else friction, friction + extra,
+             desired)
+    limiter.limit(twist, desired, scale, new)
+    R_ref, p_ref = np.zeros((3, 3)), np.zeros(3)
+    gk.integrate_base(R, p, new, DT, R_ref, p_ref)
+    assert release_after == release_s + DT
+    for got, want in ((axes[gk.SMOOTH], smooth_ref), (axes[gk.PEAK], peak_ref),
+                      (axes[gk.DESIRED], desired), (axes[gk.NEW], new), (R_out, R_ref),
+                      (p_out, p_ref)):
+        np.testing.assert_array_equal(got, want)

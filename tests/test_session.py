@@ -3,6 +3,7 @@ the ``guide`` CLI."""
 
 from __future__ import annotations
 
+import gc
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -12,16 +13,19 @@ import pytest
 
 from leadthrough.cli import main
 from leadthrough.control.safety import State
+from leadthrough.drivers.replay import ReplayDriver
 from leadthrough.drivers.sim_driver import Fault, FaultKind
 from leadthrough.dynamics import nominal_drive_parameters
 from leadthrough.errors import ControlError, DataError
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot
+from leadthrough.session.loop import run_session
 from leadthrough.session.metrics import release_overruns
 from leadthrough.session.record import SessionLog, load_session, save_session
 from leadthrough.session.sim_session import (
     SimSessionConfig,
+    build_loop,
     light_guiding,
     replay_session,
     run_sim_session,
@@ -91,6 +95,33 @@ def test_replayed_feedback_repeats_the_session_bit_for_bit(er20: Robot,
     for name in ("q_cmd", "qd_cmd", "tau_ext", "wrench_base", "twist_cmd_base", "state",
                  "fault"):
         np.testing.assert_array_equal(getattr(replayed, name), getattr(log, name), name)
+
+
+def test_the_loop_pauses_the_garbage_collector_and_leaves_no_cycles(
+        er20: Robot, nominal_params: ParamsFile) -> None:
+    """The cyclic collector is off while the loop runs (a collection would stall a cycle) and
+    back on after; pausing it is free because the loop creates no reference cycles."""
+    cfg = SimSessionConfig(operator="push-x", duration_s=2.0, guiding=light_guiding())
+    s = run_sim_session(er20, nominal_params, cfg, record_feedback=True)
+    assert s.feedback is not None
+    duration = (s.feedback.reads - 1) * 1e-3
+    seen: list[bool] = []
+    parts = build_loop(er20, nominal_params, cfg, 1e-3)
+    assert gc.isenabled()
+    run_session(ReplayDriver(s.feedback), *parts, duration,
+                deadman=lambda t: seen.append(gc.isenabled()) or True)
+    assert len(seen) == 200 and not any(seen)
+    assert gc.isenabled()
+    parts = build_loop(er20, nominal_params, cfg, 1e-3)
+    driver = ReplayDriver(s.feedback)
+    gc.collect()
+    gc.disable()
+    try:
+        run_session(driver, *parts, duration)
+        assert not gc.isenabled()          # left as it was
+        assert gc.collect() == 0           # nothing for a collection to find
+    finally:
+        gc.enable()
 
 
 def test_session_file_round_trip(er20: Robot, nominal_params: ParamsFile,

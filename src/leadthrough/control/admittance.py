@@ -27,7 +27,19 @@ AXIS_NAMES: tuple[str, ...] = ("x", "y", "z", "rx", "ry", "rz")
 
 
 class AdmittanceLaw(Protocol):
-    """One cycle of a force-following law (before speed and acceleration limits)."""
+    """One cycle of a force-following law (before speed and acceleration limits).
+
+    The guiding controller runs the law compiled, inside
+    :func:`~leadthrough.control.guiding_kernel.guiding_step`: ``law_id`` names the kernel and
+    ``coefficients`` / ``alpha`` are its parameters; ``step`` runs the same kernel alone.
+    """
+
+    #: The compiled law (``guiding_kernel.LAW_*``).
+    law_id: int
+    #: Its per-axis coefficients, shape (6,).
+    coefficients: Array
+    #: Its scalar coefficient (0.0 if it has none).
+    alpha: float
 
     def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
              out: Array) -> None:

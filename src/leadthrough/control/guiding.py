@@ -51,6 +51,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from leadthrough.control import guiding_kernel as gk
 from leadthrough.control import kernels
 from leadthrough.control.admittance import AdmittanceLaw
 from leadthrough.control.auto_friction import AutoFriction
@@ -131,30 +132,41 @@ class GuidingController:
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
         self._tool = cfg.frame == "tool"
         self._mask = np.array([1.0 if a else 0.0 for a in cfg.axes_enabled])
-        self._friction = np.array(cfg.virtual_friction.friction, dtype=float)
-        self._stop_friction = np.array(cfg.virtual_friction.stopping_friction, dtype=float)
-        self._twist = np.zeros(6)
-        self._twist_des = np.zeros(6)
-        self._twist_new = np.zeros(6)
-        self._wrench = np.zeros(6)
+        # the per-axis state, one row per vector (guiding_kernel's layout); the names are views
+        self._axes = axes = np.zeros((gk.AXES_ROWS, 6))
+        self._twist = axes[gk.TWIST]
+        self._twist_des = axes[gk.DESIRED]
+        self._twist_new = axes[gk.NEW]
+        self._wrench = axes[gk.WRENCH]
+        self._friction = axes[gk.FRICTION]
+        self._stop_friction = axes[gk.STOP_FRICTION]
+        self._smooth = axes[gk.SMOOTH]  # the wrench smoothed for the release
+        self._peak = axes[gk.PEAK]      # signed peak force per axis at rest since the release
+        self._friction[:] = cfg.virtual_friction.friction
+        self._stop_friction[:] = cfg.virtual_friction.stopping_friction
+        axes[gk.LAW] = self._law.coefficients
         self._vdt = np.zeros(6)
-        self._R = np.zeros((3, 3))
-        self._p = np.zeros(3)
         self._Jc = np.zeros((6, n))
         self._q_cmd = np.zeros(n)
         self._qd_cmd = np.zeros(n)
+        # the commanded TCP pose and the next cycle's, two poses swapped when the step is taken;
+        # the kernels write them through views of their rotation and translation (no SE3 is
+        # built in the cycle)
         self._T_cmd = pin.SE3.Identity()
+        self._R_cmd, self._p_cmd = self._T_cmd.rotation, self._T_cmd.translation
+        self._T_new = pin.SE3.Identity()
+        self._R_new, self._p_new = self._T_new.rotation, self._T_new.translation
         self._resync = False
         self._started = False
         self._rest_s = math.inf
         self._release_s = math.inf  # time since the force was removed at rest [s]
-        self._peak = np.zeros(6)    # signed peak force per axis at rest since then
-        self._smooth = np.zeros(6)  # the wrench smoothed for the release
-        self._release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
-        self._release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
         # cycles of the stop the last workspace check planned (inf: no box, no plan)
         self._stop_plan = math.inf
         self._hold_s = cfg.settle_s + cfg.rezero_s
+        # guiding_step's settings: hold, dt, release drop, smoothing weight, forgetting factor
+        self._step_settings = np.array([self._hold_s, cfg.dt, RELEASE_DROP,
+                                        cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt),
+                                        math.exp(-cfg.dt / RELEASE_WINDOW_S)])
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
@@ -206,7 +218,7 @@ class GuidingController:
         self._ik_result.qd_dls[:] = 0.0
         self._stop_plan = math.inf if not self._safety.has_box else 0.0
         self._twist[:] = 0.0
-        self._T_cmd = self._ik.transform_tool_to_base.copy()
+        self._hold_fk()
         self._resync = False
         self._started = True
         self._release_s = math.inf
@@ -268,7 +280,7 @@ class GuidingController:
         ik.compute_kinematics(self._q_cmd)
         T_fk = ik.transform_tool_to_base
         if self._resync:
-            self._T_cmd = T_fk.copy()
+            self._hold_fk()
             self._resync = False
         err = pin.log6(T_fk.actInv(self._T_cmd)).vector
         residual = kernels.norm(err)
@@ -280,7 +292,7 @@ class GuidingController:
         sup.check_motion(t, mu, self._q_cmd, self._qd_cmd, residual)
         sup.deadman(t, inp.deadman)
         scale = sup.speed_scale(mu)
-        kernels.control_wrench(inp.wrench_base, T_fk.rotation, self._tool,
+        kernels.control_wrench(inp.wrench_base, ik.rotation_tool_to_base, self._tool,
                                sup.inputs_finite, self._mask, self._wrench)
         if sup.state == State.GUIDING:
             if self._auto is not None:
@@ -288,21 +300,15 @@ class GuidingController:
                 self._auto.update(self._Jc, mu, self._friction, self._stop_friction)
             # settling after a stop, or after a release at rest (the force on some axis falls
             # back from its peak: the gears unload, and the estimate swings the other way):
-            # breaking away takes the stopping friction
-            at_rest_now = kernels.is_zero(twist)
-            if kernels.release_step(self._wrench, self._friction, RELEASE_DROP,
-                                    self._release_alpha, self._release_forget, self._smooth,
-                                    self._peak,
-                                    not at_rest_now) and at_rest_now:
-                self._release_s = 0.0
-            settling = at_rest_now and (self._rest_s < self._hold_s
-                                        or self._release_s < self._hold_s)
-            self._release_s += self.config.dt
-            self._law.step(twist, self._wrench,
-                           self._stop_friction if settling else self._friction,
-                           self._stop_friction, self._twist_des)
-            self._limiter.limit(twist, self._twist_des, scale, new)
-            T_new = self._integrate(new)
+            # breaking away takes the stopping friction; then the law, the limits and (base
+            # frame) the next pose, in one compiled call
+            law, lim = self._law, self._limiter
+            self._release_s = gk.guiding_step(
+                self._axes, law.law_id, law.alpha, self._step_settings, lim.max_speed,
+                lim.max_step, scale, self._rest_s, self._release_s, not self._tool,
+                self._R_cmd, self._p_cmd, self._R_new, self._p_new)
+            if self._tool:
+                self._integrate(new)
             if sup.has_box:
                 joint_stop = ik.stop_cycles(self._qd_cmd)
                 # a stop starting next cycle lasts at most this long: the Cartesian one, or the
@@ -311,7 +317,7 @@ class GuidingController:
                 stop = max(self._limiter.stop_cycles(twist), joint_stop,
                            ik.stop_cycles(self._ik_result.qd_dls)) + 1.0
                 speed = kernels.norm(new[:3])
-                clearance = sup.workspace_clearance(T_new.translation, speed,
+                clearance = sup.workspace_clearance(self._p_new, speed,
                                                     stop * self.config.dt)
                 if clearance < 0.0:
                     # stop from the last cycle's twist, as planned (and checked) there
@@ -324,7 +330,7 @@ class GuidingController:
             # at the joints' pace, but never longer than the stop the last check planned
             self._limiter.decelerate(twist, new, min(joint_stop, self._stop_plan))
             self._stop_plan = max(self._stop_plan - 1.0, 0.0)
-            T_new = self._integrate(new)
+            self._integrate(new)
         # at rest: no twist, and joints slow enough to halt within one cycle's acceleration
         # (else the IK keeps tracking the held pose and brakes them at their limits)
         at_rest = kernels.is_zero(new)
@@ -340,12 +346,12 @@ class GuidingController:
             # hold: the setpoint stays bit for bit, the target is the pose of the setpoint
             self._qd_cmd[:] = 0.0
             res.qd_dls[:] = 0.0
-            self._T_cmd = T_fk
+            self._hold_fk()
             res.scale = 1.0
         else:
             self._rest_s = 0.0
-            self._T_cmd = T_new
-            ik.solve(self._q_cmd, self._qd_cmd, T_new, res)
+            self._take_new_pose()
+            ik.solve(self._q_cmd, self._qd_cmd, self._T_cmd, res)
             self._q_cmd[:] = res.q
             self._qd_cmd[:] = res.qd
             self._resync = res.limited
@@ -354,27 +360,39 @@ class GuidingController:
         self._write(out, scale)
         return out.status
 
-    def _integrate(self, twist: Array) -> pin.SE3:
-        """Pose after one cycle of ``twist``: tool frame T·exp6(ν·dt); base frame (axes of the
-        base at the TCP) p + v·dt and exp3(ω·dt)·R (the TCP point moves with v)."""
-        T = self._T_cmd
+    def _integrate(self, twist: Array) -> None:
+        """The next pose (``_T_new``) after one cycle of ``twist`` from the commanded one: tool
+        frame T·exp6(ν·dt); base frame (axes of the base at the TCP) p + v·dt and
+        exp3(ω·dt)·R (the TCP point moves with v)."""
         if self._tool:
             np.multiply(twist, self.config.dt, out=self._vdt)
-            return T * pin.exp6(self._vdt)
-        kernels.integrate_base(T.rotation, T.translation, twist, self.config.dt, self._R,
-                               self._p)
-        return pin.SE3(self._R, self._p)
+            T = self._T_cmd * pin.exp6(self._vdt)
+            gk.copy_pose(T.rotation, T.translation, self._R_new, self._p_new)
+            return
+        gk.integrate_base(self._R_cmd, self._p_cmd, twist, self.config.dt, self._R_new,
+                               self._p_new)
+
+    def _hold_fk(self) -> None:
+        """The commanded pose becomes the pose of the joint setpoint (a copy of its FK)."""
+        ik = self._ik
+        gk.copy_pose(ik.rotation_tool_to_base, ik.translation_tool_to_base, self._R_cmd,
+                          self._p_cmd)
+
+    def _take_new_pose(self) -> None:
+        """The next pose becomes the commanded one (the two poses swap)."""
+        self._T_cmd, self._T_new = self._T_new, self._T_cmd
+        self._R_cmd, self._R_new = self._R_new, self._R_cmd
+        self._p_cmd, self._p_new = self._p_new, self._p_cmd
 
     def _write(self, out: GuidingOutput, scale: float) -> None:
         sup = self._safety
-        T = self._T_cmd
-        kernels.write_output(self._q_cmd, self._qd_cmd, T.rotation, T.translation, self._twist,
+        kernels.write_output(self._q_cmd, self._qd_cmd, self._R_cmd, self._p_cmd, self._twist,
                              self._tool, self._wrench, self._friction, self._stop_friction,
                              out.q, out.qd, out.transform_tool_to_base, out.twist_base,
                              out.twist_tool, out.wrench, out.friction, out.stopping_friction)
         out.state = sup.state
         out.fault = sup.fault
-        out.status = Status.FAULT if sup.state == State.FAULT else Status.OK
+        out.status = Status.FAULT if sup.state is State.FAULT else Status.OK
         out.speed_scale = scale
         out.ik_scale = self._ik_result.scale
         out.rest_s = self._rest_s

@@ -142,8 +142,12 @@ class DifferentialIK:
         self._dv = self._amax * dt
         #: Frame Jacobian of the TCP in tool axes (``pin.LOCAL``), shape (6, n), at the last q.
         self.jacobian = np.zeros((6, n))
-        #: TCP pose at the last q.
-        self.transform_tool_to_base = pin.SE3.Identity()
+        #: TCP pose at the last q: Pinocchio's own frame placement (``data.oMf``), updated in
+        #: place by :meth:`compute_kinematics` (copy it to keep a pose).
+        self.transform_tool_to_base: pin.SE3 = self._data.oMf[self._fid]
+        #: Views of its rotation, shape (3, 3), and translation [m], shape (3,): they follow it.
+        self.rotation_tool_to_base: Array = self.transform_tool_to_base.rotation
+        self.translation_tool_to_base: Array = self.transform_tool_to_base.translation
         #: μ = √det(J Jᵀ) at the last q.
         self.manipulability = 0.0
         #: λ of the damped least squares at the last q.
@@ -174,7 +178,7 @@ class DifferentialIK:
         """Jacobian, TCP pose, manipulability and damping at ``q`` (shape (n,) [rad])."""
         m, d = self._model, self._data
         pin.computeJointJacobians(m, d, q)
-        self.transform_tool_to_base = pin.updateFramePlacement(m, d, self._fid)
+        pin.updateFramePlacement(m, d, self._fid)   # in place: transform_tool_to_base
         self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
         self.manipulability = gram_manipulability(self.jacobian, self._JJt, self._factor)
         self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
@@ -191,7 +195,7 @@ class DifferentialIK:
         if frame == "tool":
             out[:] = self.jacobian
             return
-        R = self.transform_tool_to_base.rotation
+        R = self.rotation_tool_to_base
         np.matmul(R, self.jacobian[:3], out=out[:3])
         np.matmul(R, self.jacobian[3:], out=out[3:])
 

@@ -9,7 +9,8 @@ call them document the algorithms: :mod:`~leadthrough.control.safety`,
 
 All kernels write into preallocated arrays and return a scalar or nothing; none allocates. These
 are the Cartesian-space ones (safety checks, law, limits, frames, output); the joint-space ones
-(the IK step, joint stops, the 1 ms interpolation) are in :mod:`leadthrough.control.joint_kernels`.
+(the IK step, joint stops, the 1 ms interpolation) are in :mod:`leadthrough.control.joint_kernels`,
+and the GUIDING state's step, which chains these, in :mod:`leadthrough.control.guiding_kernel`.
 """
 
 from __future__ import annotations
@@ -25,13 +26,13 @@ __all__ = [
     "FEEDBACK_COLLISION_TORQUE",
     "FEEDBACK_CURRENT",
     "FEEDBACK_FOLLOWING",
+    "FEEDBACK_NONFINITE",
     "FEEDBACK_OK",
     "FEEDBACK_POSITION",
     "all_finite",
     "control_wrench",
     "decelerate_twist",
     "feedback_fault",
-    "integrate_base",
     "is_zero",
     "joint_limit_index",
     "limit_twist",
@@ -52,6 +53,7 @@ FEEDBACK_CURRENT = 2
 FEEDBACK_FOLLOWING = 3
 FEEDBACK_COLLISION_FORCE = 4
 FEEDBACK_COLLISION_TORQUE = 5
+FEEDBACK_NONFINITE = 6
 
 
 @njit(cache=True, nogil=True)
@@ -66,30 +68,32 @@ def all_finite(q: Array, current: Array, wrench: Array) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def feedback_fault(q: Array, current: Array, wrench: Array, q_commanded: Array, mid: Array,
-                   half_tolerance: Array, max_current: Array, following_limit: float,
-                   max_force: float, max_torque: float, info: Array) -> int:
-    """The range checks of the feedback, in order: position, current, following error,
-    collision force, collision torque.
+def feedback_fault(q: Array, current: Array, wrench: Array, q_commanded: Array,
+                   joint_bounds: Array, limits: Array, info: Array) -> int:
+    """The checks of the feedback, in order: finite (q, current, wrench), position, current,
+    following error, collision force, collision torque.
 
     Args:
         q: Measured joint positions [rad], shape (n,).
         current: Measured currents [A], shape (n,).
         wrench: Estimated wrench, force first [N, N·m], shape (6,).
         q_commanded: Commanded joint positions [rad], shape (n,).
-        mid: Middle of each joint range [rad], shape (n,).
-        half_tolerance: Half range + position tolerance [rad], shape (n,).
-        max_current: Current bound [A], shape (n,).
-        following_limit: Largest |q − q_cmd| [rad].
-        max_force: Collision force [N].
-        max_torque: Collision torque [N·m].
+        joint_bounds: Per joint, shape (3, n): the middle of its range [rad], half its range
+            + the position tolerance [rad], its current bound [A].
+        limits: Largest |q − q_cmd| [rad], collision force [N], collision torque [N·m],
+            shape (3,).
         info: Output (value, index) of the first failed check, shape (2,).
 
     Returns:
         ``FEEDBACK_OK`` or the code of the first failed check (value and index in ``info``:
-        the joint with the largest excess, or the wrench norm and 0/1).
+        the joint with the largest excess, or the wrench norm and 0/1; not set for
+        ``FEEDBACK_NONFINITE``).
     """
+    if not all_finite(q, current, wrench):
+        return FEEDBACK_NONFINITE
     n = q.size
+    mid, half_tolerance, max_current = joint_bounds[0], joint_bounds[1], joint_bounds[2]
+    following_limit, max_force, max_torque = limits[0], limits[1], limits[2]
     for code in range(FEEDBACK_POSITION, FEEDBACK_FOLLOWING + 1):
         worst, jw = -math.inf, 0
         for j in range(n):
@@ -340,32 +344,6 @@ def decelerate_twist(previous: Array, max_step: Array, min_cycles: float, out: A
         k = 1.0 - 1.0 / n
         for i in range(6):
             out[i] = previous[i] * k
-
-
-@njit(cache=True, nogil=True)
-def integrate_base(rotation: Array, position: Array, twist: Array, dt: float,
-                   rotation_out: Array, position_out: Array) -> None:
-    """Pose after one cycle of a base-axes twist: p + v·dt, exp3(ω·dt)·R (Rodrigues)."""
-    wx, wy, wz = twist[3] * dt, twist[4] * dt, twist[5] * dt
-    th2 = wx * wx + wy * wy + wz * wz
-    th = math.sqrt(th2)
-    if th < 1e-8:
-        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
-    else:
-        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
-    e00 = 1.0 - b * (wy * wy + wz * wz)
-    e11 = 1.0 - b * (wx * wx + wz * wz)
-    e22 = 1.0 - b * (wx * wx + wy * wy)
-    e01, e10 = b * wx * wy - a * wz, b * wx * wy + a * wz
-    e02, e20 = b * wx * wz + a * wy, b * wx * wz - a * wy
-    e12, e21 = b * wy * wz - a * wx, b * wy * wz + a * wx
-    for c in range(3):
-        r0, r1, r2 = rotation[0, c], rotation[1, c], rotation[2, c]
-        rotation_out[0, c] = e00 * r0 + e01 * r1 + e02 * r2
-        rotation_out[1, c] = e10 * r0 + e11 * r1 + e12 * r2
-        rotation_out[2, c] = e20 * r0 + e21 * r1 + e22 * r2
-    for r in range(3):
-        position_out[r] = position[r] + twist[r] * dt
 
 
 @njit(cache=True, nogil=True)

@@ -86,8 +86,10 @@ class TwistLimiter:
         check_period("dt", dt, ControlError)
         self.limits = limits
         self.dt = dt
-        self._speed = np.array([limits.max_linear_speed, limits.max_angular_speed])
-        self._step = np.array([limits.max_linear_acceleration * dt,
+        #: (v_max, ω_max) [m/s, rad/s].
+        self.max_speed = np.array([limits.max_linear_speed, limits.max_angular_speed])
+        #: Largest change of the speed per cycle, (a_max·dt, α_max·dt) [m/s, rad/s].
+        self.max_step = np.array([limits.max_linear_acceleration * dt,
                                limits.max_angular_acceleration * dt])
 
     def limit(self, previous: Array, desired: Array, speed_scale: float, out: Array) -> bool:
@@ -102,7 +104,7 @@ class TwistLimiter:
         Returns:
             Whether a limit was active.
         """
-        return bool(kernels.limit_twist(previous, desired, self._speed, self._step,
+        return bool(kernels.limit_twist(previous, desired, self.max_speed, self.max_step,
                                         speed_scale, out))
 
     def stop_cycles(self, twist: Array) -> float:
@@ -111,7 +113,7 @@ class TwistLimiter:
         Args:
             twist: Twist, shape (6,) [m/s, rad/s].
         """
-        return float(kernels.twist_stop_cycles(twist, self._step))
+        return float(kernels.twist_stop_cycles(twist, self.max_step))
 
     def decelerate(self, previous: Array, out: Array, min_cycles: float = 0.0) -> None:
         """One cycle of a stop at the acceleration limit (exactly zero once reached).
@@ -127,4 +129,4 @@ class TwistLimiter:
                 at their own acceleration limits (slower than the Cartesian limit near a
                 singularity), so that the joints can follow the decelerating twist.
         """
-        kernels.decelerate_twist(previous, self._step, min_cycles, out)
+        kernels.decelerate_twist(previous, self.max_step, min_cycles, out)

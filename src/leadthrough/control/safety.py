@@ -215,11 +215,19 @@ class SafetySupervisor:
     def __init__(self, robot: Robot, config: SafetyConfig, limits: CartesianLimits) -> None:
         self.config = cfg = config
         self.limits = limits
-        self._mid = 0.5 * (robot.lower_limits + robot.upper_limits)
-        self._half_tol = 0.5 * (robot.upper_limits - robot.lower_limits) + cfg.position_tolerance
+        # per joint: middle of the range, half range + tolerance [rad], current bound [A]
+        self._joint_bounds = np.vstack([
+            0.5 * (robot.lower_limits + robot.upper_limits),
+            0.5 * (robot.upper_limits - robot.lower_limits) + cfg.position_tolerance,
+            robot.max_current * cfg.current_range_factor])
+        self._feedback_limits = np.array([cfg.following_error_limit, cfg.max_force,
+                                          cfg.max_torque])
+        # speed scale near a singularity: s = (μ − μ_stop)/_scale_span, in [min_speed_scale, 1]
+        self._mu_stop = cfg.stop_manipulability
+        self._scale_span = cfg.slow_manipulability - cfg.stop_manipulability
+        self._min_scale = cfg.min_speed_scale
         self._lo_margin = robot.lower_limits + cfg.joint_limit_margin
         self._hi_margin = robot.upper_limits - cfg.joint_limit_margin
-        self._max_current = robot.max_current * cfg.current_range_factor
         self._box_lo = np.asarray(cfg.workspace_min, dtype=float)
         self._box_hi = np.asarray(cfg.workspace_max, dtype=float)
         self._has_box = bool(np.isfinite(self._box_lo).any() or np.isfinite(self._box_hi).any())
@@ -308,8 +316,11 @@ class SafetySupervisor:
             wrench: Estimated wrench [N, N·m], shape (6,), force first (any frame: norms only).
             q_commanded: Joint position commanded for now [rad], shape (n,).
         """
-        self.inputs_finite = math.isfinite(t) and kernels.all_finite(q, current, wrench)
-        if self.state == State.FAULT:
+        info = self._info
+        code = kernels.feedback_fault(q, current, wrench, q_commanded, self._joint_bounds,
+                                      self._feedback_limits, info)
+        self.inputs_finite = math.isfinite(t) and code != kernels.FEEDBACK_NONFINITE
+        if self.state is State.FAULT:
             return
         if not self.inputs_finite:
             self.trip(t, Fault.NONFINITE_INPUT)
@@ -322,11 +333,6 @@ class SafetySupervisor:
         else:
             self._missed = 0
             self._last_seq = sequence
-        cfg, info = self.config, self._info
-        code = kernels.feedback_fault(q, current, wrench, q_commanded, self._mid,
-                                      self._half_tol, self._max_current,
-                                      cfg.following_error_limit, cfg.max_force, cfg.max_torque,
-                                      info)
         if code != kernels.FEEDBACK_OK:
             self.trip(t, _FEEDBACK_FAULTS[code], float(info[0]), int(info[1]))
 
@@ -356,11 +362,11 @@ class SafetySupervisor:
             self.trip(t, Fault.TRACKING, residual)
 
     def speed_scale(self, manipulability: float) -> float:
-        """Factor of the speed limits near a singularity, in [min_speed_scale, 1]."""
-        cfg = self.config
-        s = (manipulability - cfg.stop_manipulability) / (cfg.slow_manipulability
-                                                          - cfg.stop_manipulability)
-        return min(1.0, max(cfg.min_speed_scale, s))
+        """Factor of the speed limits near a singularity, in [min_speed_scale, 1]: linear from
+        ``min_speed_scale`` at (and below) ``stop_manipulability`` to 1 at
+        ``slow_manipulability``."""
+        s = (manipulability - self._mu_stop) / self._scale_span
+        return min(1.0, max(self._min_scale, s))
 
     @property
     def has_box(self) -> bool:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control.guiding_kernel import LAW_VELOCITY, velocity_baseline_step
 from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["VelocityBaseline", "VelocityBaselineConfig"]
@@ -68,6 +69,11 @@ class VelocityBaseline:
         self.dt = dt
         self._alpha = 1.0 - math.exp(-dt / cfg.time_constant)
         self._gain = np.asarray(cfg.gain, dtype=float)
+        self.law_id = LAW_VELOCITY
+        #: K_i per axis.
+        self.coefficients = self._gain
+        #: 1 − e^(−dt/T).
+        self.alpha = self._alpha
 
     def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
              out: Array) -> None:
@@ -80,7 +86,4 @@ class VelocityBaseline:
             stopping_friction: Ignored.
             out: Desired twist, shape (6,), written in place; must not alias an input.
         """
-        np.multiply(self._gain, wrench, out=out)
-        out -= twist
-        out *= self._alpha
-        out += twist
+        velocity_baseline_step(twist, wrench, self._gain, self._alpha, out)

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control import kernels
+from leadthrough.control.guiding_kernel import LAW_VIRTUAL_FRICTION
 from leadthrough.errors import ControlError, check_fields, check_period
 
 __all__ = ["VirtualFriction", "VirtualFrictionConfig"]
@@ -89,6 +90,10 @@ class VirtualFriction:
         self.config = cfg = config if config is not None else VirtualFrictionConfig()
         self.dt = dt
         self._dt_over_m = dt / np.asarray(cfg.mass, dtype=float)
+        self.law_id = LAW_VIRTUAL_FRICTION
+        #: dt/M_i per axis [s/kg, s/(kg·m²)].
+        self.coefficients = self._dt_over_m
+        self.alpha = 0.0
 
     def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
              out: Array) -> None:
