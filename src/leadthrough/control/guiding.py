@@ -342,12 +342,15 @@ class GuidingController:
         twist[:] = new
         res = self._ik_result
         if at_rest:
+            if self._rest_s == 0.0:
+                # came to rest (a reset or an earlier rest cycle did this already, and the
+                # setpoint has not moved since): hold, the setpoint stays bit for bit, the
+                # target is the pose of the setpoint
+                self._qd_cmd[:] = 0.0
+                res.qd_dls[:] = 0.0
+                self._hold_fk()
+                res.scale = 1.0
             self._rest_s += self.config.dt
-            # hold: the setpoint stays bit for bit, the target is the pose of the setpoint
-            self._qd_cmd[:] = 0.0
-            res.qd_dls[:] = 0.0
-            self._hold_fk()
-            res.scale = 1.0
         else:
             self._rest_s = 0.0
             self._take_new_pose()
