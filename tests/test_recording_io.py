@@ -41,8 +41,9 @@ def test_simulated_robot_instance_round_trips(tmp_path: Path, suffix: str) -> No
     path = save_recording(replace(_rec(), sim_seed=4), tmp_path / f"r{suffix}")
     assert load_recording(path).sim_seed == 4
     assert load_recording(save_recording(_rec(), tmp_path / f"real{suffix}")).sim_seed is None
-    with pytest.raises(DataError, match="sim_seed"):
-        replace(_rec(), sim_seed=-1)
+    for bad in (-1, True):  # True is an int to Python, not a robot instance
+        with pytest.raises(DataError, match="sim_seed"):
+            replace(_rec(), sim_seed=bad)
 
 
 def test_malformed_sim_seed_in_a_csv_header_is_a_clear_error(tmp_path: Path) -> None:

@@ -29,7 +29,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from leadthrough.data.column_map import ColumnMap, parse_column_map
-from leadthrough.data.recording import Recording
+from leadthrough.data.recording import Recording, is_sim_seed
 from leadthrough.errors import DataError, DataWarning
 from leadthrough.fileio import atomic_write, read_comment_header
 
@@ -89,7 +89,7 @@ def _sim_seed(value: str | None, source: str) -> int | None:
         seed = int(value)
     except ValueError:
         seed = -1
-    if seed < 0:
+    if not is_sim_seed(seed):
         raise DataError("malformed", source=source, field="sim_seed", value=value,
                         expected="an integer >= 0 (the simulated robot instance)")
     return seed

@@ -16,9 +16,15 @@ from numpy.typing import NDArray
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
-__all__ = ["Recording"]
+__all__ = ["Recording", "is_sim_seed"]
 
 Array = NDArray[np.float64]
+
+
+def is_sim_seed(value: object) -> bool:
+    """Whether ``value`` names a simulated robot instance: an integer >= 0 (not a bool). The
+    one rule for a recording's, a params file's and a session's ``sim_seed``."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,8 +55,7 @@ class Recording:
 
     def __post_init__(self) -> None:
         src = self.source
-        if self.sim_seed is not None and not (isinstance(self.sim_seed, int)
-                                              and self.sim_seed >= 0):
+        if self.sim_seed is not None and not is_sim_seed(self.sim_seed):
             raise DataError("not a simulated robot instance", source=src, field="sim_seed",
                             value=self.sim_seed, expected="None or an integer >= 0")
         t = np.asarray(self.time, dtype=float)

@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough import __version__
+from leadthrough.data.recording import is_sim_seed
 from leadthrough.dynamics.friction import StribeckParameters
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
@@ -232,8 +233,7 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
             coulomb=fr["coulomb"], viscous=fr["viscous"],
             cbrt=fr.get("cbrt", np.zeros(n)), offset=offset if has_offset else np.zeros(0))
     seed = meta.get("sim_seed")
-    if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool)
-                                 and seed >= 0):
+    if seed is not None and not is_sim_seed(seed):
         raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,
                         expected="an integer >= 0 (the simulated robot instance)")
     return ParamsFile(robot=robot.name, method=str(meta.get("method", "")), params=params,

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig, GuidingController
 from leadthrough.control.interpolation import HermiteInterpolator
+from leadthrough.data.recording import is_sim_seed
 from leadthrough.drivers.protocol import Driver
 from leadthrough.drivers.replay import FeedbackTrace, RecordingDriver, ReplayDriver
 from leadthrough.drivers.sim_driver import Fault, SimDriver
@@ -81,7 +82,7 @@ class SimSessionConfig:
         check_fields("session", self, [
             ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600,
              "0 < duration <= 3600 s"),
-            ("seed", isinstance(self.seed, int) and self.seed >= 0, "an integer >= 0"),
+            ("seed", is_sim_seed(self.seed), "an integer >= 0"),
             ("operator_seed", self.operator_seed is None
              or (isinstance(self.operator_seed, int) and self.operator_seed >= 0),
              "None or an integer >= 0"),
