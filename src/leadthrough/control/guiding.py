@@ -373,13 +373,13 @@ class GuidingController:
             gk.copy_pose(T.rotation, T.translation, self._R_new, self._p_new)
             return
         gk.integrate_base(self._R_cmd, self._p_cmd, twist, self.config.dt, self._R_new,
-                               self._p_new)
+                          self._p_new)
 
     def _hold_fk(self) -> None:
         """The commanded pose becomes the pose of the joint setpoint (a copy of its FK)."""
         ik = self._ik
         gk.copy_pose(ik.rotation_tool_to_base, ik.translation_tool_to_base, self._R_cmd,
-                          self._p_cmd)
+                     self._p_cmd)
 
     def _take_new_pose(self) -> None:
         """The next pose becomes the commanded one (the two poses swap)."""
@@ -395,7 +395,7 @@ class GuidingController:
                              out.twist_tool, out.wrench, out.friction, out.stopping_friction)
         out.state = sup.state
         out.fault = sup.fault
-        out.status = Status.FAULT if sup.state is State.FAULT else Status.OK
+        out.status = Status.FAULT if sup.state == State.FAULT else Status.OK
         out.speed_scale = scale
         out.ik_scale = self._ik_result.scale
         out.rest_s = self._rest_s

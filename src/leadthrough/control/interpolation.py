@@ -150,5 +150,6 @@ class HermiteInterpolator:
 
 
 #: InterpolatorStatus by the code of ``joint_kernels.hermite_step``.
-_STATUS = {0: InterpolatorStatus.WORKING, 1: InterpolatorStatus.FINISHED,
-           -1: InterpolatorStatus.STARVED}
+_STATUS = {joint_kernels.HERMITE_WORKING: InterpolatorStatus.WORKING,
+           joint_kernels.HERMITE_FINISHED: InterpolatorStatus.FINISHED,
+           joint_kernels.HERMITE_STARVED: InterpolatorStatus.STARVED}

@@ -21,12 +21,15 @@ from leadthrough.estimation.kernels import cholesky_factor, cholesky_solve
 
 __all__ = [
     "HERMITE_DP",
+    "HERMITE_FINISHED",
     "HERMITE_P0",
     "HERMITE_P1",
     "HERMITE_Q",
     "HERMITE_QD",
+    "HERMITE_STARVED",
     "HERMITE_V0",
     "HERMITE_V1",
+    "HERMITE_WORKING",
     "dls_step",
     "hermite_start",
     "hermite_step",
@@ -168,6 +171,8 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
 #: Rows of the Hermite interpolator's segment state (``hermite_start`` / ``hermite_step``):
 #: start position and velocity, end position and velocity, end − start, last command.
 HERMITE_P0, HERMITE_V0, HERMITE_P1, HERMITE_V1, HERMITE_DP, HERMITE_Q, HERMITE_QD = range(7)
+#: Codes of ``hermite_step``: inside the segment, at its end, past it (no new setpoint).
+HERMITE_WORKING, HERMITE_FINISHED, HERMITE_STARVED = 0, 1, -1
 
 
 @njit(cache=True, nogil=True)
@@ -202,18 +207,19 @@ def hermite_step(segment: Array, basis: Array, k: int, q_out: Array, qd_out: Arr
         qd_out: Velocity command [rad/s], shape (n,).
 
     Returns:
-        0 inside the segment, 1 at its end, -1 past it (the ``InterpolatorStatus`` codes).
+        ``HERMITE_WORKING`` inside the segment, ``HERMITE_FINISHED`` at its end,
+        ``HERMITE_STARVED`` past it.
     """
     substeps = basis.shape[0]
-    status = 0
+    status = HERMITE_WORKING
     for j in range(q_out.size):
         if k >= substeps:
             segment[HERMITE_QD, j] = 0.0
-            status = -1
+            status = HERMITE_STARVED
         elif k == substeps - 1:
             segment[HERMITE_Q, j] = segment[HERMITE_P1, j]
             segment[HERMITE_QD, j] = segment[HERMITE_V1, j]
-            status = 1
+            status = HERMITE_FINISHED
         else:
             dp, v0, v1 = segment[HERMITE_DP, j], segment[HERMITE_V0, j], segment[HERMITE_V1, j]
             segment[HERMITE_Q, j] = (dp * basis[k, 0] + v0 * basis[k, 1] + v1 * basis[k, 2]

@@ -320,7 +320,7 @@ class SafetySupervisor:
         code = kernels.feedback_fault(q, current, wrench, q_commanded, self._joint_bounds,
                                       self._feedback_limits, info)
         self.inputs_finite = math.isfinite(t) and code != kernels.FEEDBACK_NONFINITE
-        if self.state is State.FAULT:
+        if self.state == State.FAULT:
             return
         if not self.inputs_finite:
             self.trip(t, Fault.NONFINITE_INPUT)
@@ -362,9 +362,9 @@ class SafetySupervisor:
             self.trip(t, Fault.TRACKING, residual)
 
     def speed_scale(self, manipulability: float) -> float:
-        """Factor of the speed limits near a singularity, in [min_speed_scale, 1]: linear from
-        ``min_speed_scale`` at (and below) ``stop_manipulability`` to 1 at
-        ``slow_manipulability``."""
+        """Factor of the speed limits near a singularity: (μ − μ_stop)/(μ_slow − μ_stop) of
+        ``stop_manipulability`` and ``slow_manipulability``, clipped to
+        [``min_speed_scale``, 1]."""
         s = (manipulability - self._mu_stop) / self._scale_span
         return min(1.0, max(self._min_scale, s))
 

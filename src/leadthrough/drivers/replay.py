@@ -10,7 +10,7 @@ settings repeats its computation exactly: the same estimates, the same states, t
 bit for bit. That serves two purposes:
 
 * timing the loop's own computation without the simulator (or the fieldbus) between cycles,
-  whose work evicts the loop's data and code from the caches (``benchmarks/cycle_speed.py``);
+  whose work evicts the loop's data and code from the caches (``benchmarks/guiding.py``);
 * re-running a recorded session offline, e.g. to inspect it with more logging. With other
   settings the replay is open loop: the recorded robot did not follow the new commands.
 """
