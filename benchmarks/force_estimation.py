@@ -25,10 +25,11 @@ import numpy as np
 
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.excitation.design import ExcitationConfig
-from leadthrough.identification.api import identify
+from leadthrough.identification.api import identify, identify_with_sweep
 from leadthrough.robot import load_robot
+from leadthrough.session.sim_session import guide_start_pose
 from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, hold
-from leadthrough.sim.calibration_set import record_calibration_set
+from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 
 DIRECTIONS = np.vstack([np.eye(3), -np.eye(3)])
 
@@ -42,16 +43,24 @@ def main() -> None:
     cal = record_calibration_set(robot, seed=1, duration=60.0,
                                  excitation_config=ExcitationConfig(starts=4))
     res = identify(cal.identification.measured, robot, "consistent")
+    sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
+    res_sweep = identify_with_sweep(cal.identification.measured, sweep.measured, robot).result
     rng = np.random.default_rng(0)
     poses = [rng.uniform(0.6 * robot.lower_limits, 0.6 * robot.upper_limits)
              for _ in range(args.poses)]
-    variants = {f"{m}/{a} 3 Hz": EstimatorConfig(method=m, axes=a)
+    variants = {f"{m}/{a} 3 Hz": (res, EstimatorConfig(method=m, axes=a))
                 for m in ("direct", "momentum") for a in ("wrench", "force")}
     for m in ("direct", "momentum"):
         for tare in (0.0, 0.25):
             name = f"{m}/force presliding{' tare' if tare else ''}"
-            variants[name] = EstimatorConfig(method=m, axes="force", friction_velocity="command",
-                                             presliding_rad=2e-4, tare_s=tare)
+            variants[name] = (res, EstimatorConfig(method=m, axes="force",
+                                                   friction_velocity="command",
+                                                   presliding_rad=2e-4, tare_s=tare))
+        for kappa in (0.0, 1.0):
+            name = f"{m}/force presliding tare{' weighted' if kappa else ''} +sweep"
+            variants[name] = (res_sweep, EstimatorConfig(
+                method=m, axes="force", friction_velocity="command", presliding_rad=2e-4,
+                tare_s=0.25, friction_weighting=kappa))
     stats: dict[str, dict[str, list[float]]] = {v: {"rms": [], "settle": [], "rest": []}
                                                 for v in variants}
     k = 0
@@ -64,9 +73,9 @@ def main() -> None:
                            operator=ConstantWrench((*force, 0.0, 0.0, 0.0), 1.0, 3.0))
             log = hold(sim, 3.5)
             t = log.time
-            for name, cfg in variants.items():
-                est = ExternalForceEstimator(robot, res.params, res.stats.mean, cfg,
-                                             noise_std=res.stats.std)
+            for name, (r, cfg) in variants.items():
+                est = ExternalForceEstimator(robot, r.params, r.stats.mean, cfg,
+                                             noise_std=r.stats.std)
                 inp, out = est.make_input(), est.make_output()
                 est.reset(log.q[0])
                 f = np.empty((t.size, 3))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from leadthrough.dynamics import nominal_drive_parameters
@@ -118,13 +118,92 @@ def test_wrench_stays_bounded_near_the_wrist_singularity(er20: Robot, q5: float,
     J = pin.computeFrameJacobian(er20.model, er20.model.createData(), q, er20.tcp_frame_id,
                                  pin.LOCAL_WORLD_ALIGNED)
     tau = scale * np.array([50.0, 50.0, 20.0, 5.0, 5.0, 5.0])
-    wrench = np.zeros(6)
-    mu = kernels.wrench_from_torque(J, tau, np.ones(6), False, cfg.manipulability_threshold,
-                                    cfg.max_damping, wrench, np.zeros((2, 6, 6)))
+    wrench, info = np.zeros(6), np.zeros(2)
+    kernels.wrench_from_torque(J, tau, np.ones(6), False, cfg.manipulability_threshold,
+                               cfg.max_damping, cfg.min_force_lever, wrench,
+                               np.zeros((2, 6, 6)), info)
     assert np.all(np.isfinite(wrench))
     assert np.linalg.norm(wrench) < 1e4
+    mu, lam = info
+    assert mu == pytest.approx(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)), rel=1e-6, abs=1e-6)
+    assert lam == kernels.damping_of(mu, cfg.manipulability_threshold, cfg.max_damping)
     if mu < cfg.manipulability_threshold:
-        assert kernels.damping_of(mu, cfg.manipulability_threshold, cfg.max_damping) > 0
+        assert lam > 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-10.0, 10.0), min_size=6, max_size=6),
+       st.floats(0.0, 1.0))
+@example([0.0, 0.0, 0.0, 0.0, 0.0, 2e-117], 0.0)    # p³ would underflow
+@example([1e150, 0.0, 0.0, -1e150, 0.0, 1e150], 0.0)  # and overflow
+def test_smallest_eigenvalue_3_matches_lapack(entries: list[float], shrink: float) -> None:
+    """Closed form vs ``numpy.linalg.eigvalsh``, including (near) repeated and zero
+    eigenvalues (``shrink`` pulls the matrix toward a multiple of the identity) and extreme
+    scales, to the documented accuracy (~1e-8 of the scale; the arccos near a repeated
+    eigenvalue)."""
+    a = np.zeros((6, 6))
+    a[np.triu_indices(3)] = entries
+    a[:3, :3] = a[:3, :3] + np.triu(a[:3, :3], 1).T
+    a[:3, :3] = (1 - shrink) * a[:3, :3] + shrink * entries[0] * np.eye(3)
+    a[3:, 3:] = -1e3 * np.eye(3)          # outside the leading block: never read
+    ref = np.linalg.eigvalsh(a[:3, :3])[0]
+    scale = max(1.0, float(np.abs(a[:3, :3]).max()))
+    assert kernels.smallest_eigenvalue_3(a) == pytest.approx(ref, abs=5e-8 * scale)
+
+
+def test_force_fit_is_undamped_at_the_wrist_singularity(er20: Robot) -> None:
+    """At q5 = 0 the full wrench is damped (μ = 0) but a pure force is still observed by the
+    other joints: the force fit recovers it exactly, undamped."""
+    cfg = EstimatorConfig(axes="force")
+    q = np.array([0.2, -0.5, 0.3, 0.4, 0.0, 0.1])
+    J = pin.computeFrameJacobian(er20.model, er20.model.createData(), q, er20.tcp_frame_id,
+                                 pin.LOCAL_WORLD_ALIGNED)
+    force = np.array([30.0, -40.0, 20.0])
+    tau = J[:3].T @ force
+    weight = 1.0 / np.array([15.0, 19.0, 3.0, 0.8, 0.8, 0.25])
+    wrench, info = np.zeros(6), np.zeros(2)
+    kernels.wrench_from_torque(J, tau, weight, True, cfg.manipulability_threshold,
+                               cfg.max_damping, cfg.min_force_lever, wrench,
+                               np.zeros((2, 6, 6)), info)
+    assert info[0] < 1e-9 < cfg.manipulability_threshold
+    assert info[1] == 0.0
+    np.testing.assert_allclose(wrench[:3], force, rtol=1e-9)
+    np.testing.assert_array_equal(wrench[3:], 0.0)
+    full, full_info = np.zeros(6), np.zeros(2)
+    kernels.wrench_from_torque(J, tau, weight, False, cfg.manipulability_threshold,
+                               cfg.max_damping, cfg.min_force_lever, full,
+                               np.zeros((2, 6, 6)), full_info)
+    assert full_info[1] == pytest.approx(cfg.max_damping)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(0.0, 0.1), st.floats(0.1, 10.0), st.integers(0, 2**31 - 1))
+def test_force_fit_damping_follows_the_shortest_lever(lever: float, w: float, seed: int
+                                                      ) -> None:
+    """A Jacobian whose translational part has the shortest lever ``lever``: with equal
+    weights w the force fit is the unweighted damped least squares
+    (Jᵥ Jᵥᵀ + λ²·1)⁻¹·Jᵥ·τ, λ from the lever (the weights' scale does not change it), and
+    it stays finite at lever 0."""
+    cfg = EstimatorConfig(axes="force")
+    rng = np.random.default_rng(seed)
+    u, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    v, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    J = np.zeros((6, 6))
+    J[:3] = u @ np.diag([1.2, 0.7, lever]) @ v[:3]
+    J[3:] = rng.normal(size=(3, 6))
+    tau = rng.normal(scale=20.0, size=6)
+    wrench, info = np.zeros(6), np.zeros(2)
+    kernels.wrench_from_torque(J, tau, np.full(6, w), True, cfg.manipulability_threshold,
+                               cfg.max_damping, cfg.min_force_lever, wrench,
+                               np.zeros((2, 6, 6)), info)
+    lam = kernels.damping_of(lever, cfg.min_force_lever, cfg.max_damping)
+    assert info[1] == pytest.approx(lam, abs=1e-7)
+    Jv = J[:3]
+    ref = np.linalg.solve(Jv @ Jv.T + info[1] ** 2 * np.eye(3), Jv @ tau)
+    assert np.all(np.isfinite(wrench))
+    np.testing.assert_allclose(wrench[:3], ref, rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+    if lever < cfg.min_force_lever:
+        assert info[1] > 0.0
 
 
 def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:

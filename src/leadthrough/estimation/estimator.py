@@ -17,7 +17,9 @@ Two estimators share the interface:
 The joint torque is mapped to a wrench at the TCP through a damped pseudo-inverse of Jᵀ
 (eq. 28–30): w = (J Jᵀ + λ²·1)⁻¹·J·τ_ext, λ² = λ_max²·(1 − (μ/μ₀)²) when the manipulability
 μ = √det(J Jᵀ) falls below μ₀, so the wrench shrinks toward zero near a singularity instead of
-blowing up. The frame is the base (axes of the base, at the TCP) or the tool.
+blowing up. The force-only fit (``axes="force"``) is damped instead by the TCP's shortest lever
+arm, which a wrist singularity leaves intact (``kernels.wrench_from_torque``). The frame is the
+base (axes of the base, at the TCP) or the tool.
 
 Per sample, ``update`` makes two compiled calls (:mod:`leadthrough.estimation.fused`: the
 state lives in a few packed arrays) around two or four Pinocchio calls (RNEA or
@@ -80,8 +82,12 @@ class EstimatorConfig:
             by the calibration's residual σ per joint, which is much less noisy; the torque
             components are reported as zero.
         remove_mean_noise: Add back τ̄_ω (eq. 30).
-        manipulability_threshold: μ₀ below which damping starts.
-        max_damping: λ_max.
+        manipulability_threshold: μ₀ below which the full wrench's damping starts.
+        max_damping: λ_max [m].
+        min_force_lever: ``axes="force"``: ℓ₀ [m] below which the force fit's damping starts,
+            ℓ the TCP's shortest lever arm about the joints (the smallest singular value of the
+            translational Jacobian). The force fit needs only that to be non-zero: at the wrist
+            singularity (μ → 0) a force at the TCP stays well observed. 0 disables it.
         warm_up_s: Time after reset during which the status is WARMING_UP [s].
         tare_s: After warm-up, average τ_ext over this long and subtract it from then on
             (status TARING meanwhile); 0 disables. Like taring a force sensor: the robot must
@@ -122,6 +128,7 @@ class EstimatorConfig:
     remove_mean_noise: bool = True
     manipulability_threshold: float = 0.02
     max_damping: float = 0.05
+    min_force_lever: float = 0.05
     warm_up_s: float = 0.5
     tare_s: float = 0.0
     standstill_velocity: float = 0.02
@@ -140,6 +147,7 @@ class EstimatorConfig:
             ("axes", self.axes in ("wrench", "force"), "'wrench' or 'force'"),
             ("manipulability_threshold", self.manipulability_threshold >= 0, ">= 0"),
             ("max_damping", self.max_damping >= 0, ">= 0"),
+            ("min_force_lever", 0 <= self.min_force_lever < np.inf, "a finite value >= 0 m"),
             ("warm_up_s", self.warm_up_s >= 0, ">= 0 s"),
             ("tare_s", self.tare_s >= 0, ">= 0 s"),
             ("standstill_velocity", self.standstill_velocity > 0, "> 0 rad/s"),
@@ -181,7 +189,8 @@ class EstimatorOutput:
         wrench: External wrench at the TCP [N, N·m], shape (6,) (force first), in the
             configured frame.
         manipulability: μ = √det(J Jᵀ) at the current pose.
-        damping: λ used in the pseudo-inverse.
+        damping: λ used in the pseudo-inverse [m] (``axes="force"``: from the shortest lever
+            arm, see ``EstimatorConfig.min_force_lever``).
         qd: Estimated joint velocities [rad/s], shape (n,).
         status: Status of the last update.
     """
@@ -241,6 +250,7 @@ class ExternalForceEstimator:
         st[fused.OBSERVER_GAIN] = 2.0 * np.pi * cfg.output_cutoff_hz
         st[fused.MU0] = cfg.manipulability_threshold
         st[fused.MAX_DAMPING] = cfg.max_damping
+        st[fused.MIN_LEVER] = cfg.min_force_lever
         c = self._counters = np.zeros(fused.COUNTER_SLOTS, dtype=np.int64)
         c[fused.WARM] = round(cfg.warm_up_s / cfg.dt)
         c[fused.STRIBECK] = mdl.stribeck
@@ -254,6 +264,7 @@ class ExternalForceEstimator:
                                                                  fused.ACC))
         self._unused = np.zeros((n, n))
         self._scratch = np.zeros((2, 6, 6))
+        self._info = np.zeros(2)
         self._last_wrench = np.zeros(6)
         self._tare_len = round(cfg.tare_s / cfg.dt)
         self.reset(np.zeros(n))
@@ -282,7 +293,8 @@ class ExternalForceEstimator:
 
     def update(self, inp: EstimatorInput, out: EstimatorOutput) -> Status:
         """Process one sample; fills ``out``; never raises."""
-        st, c, s, k = self._settings, self._counters, self._state, self._const
+        st, c, s, k, info = (self._settings, self._counters, self._state, self._const,
+                             self._info)
         if not fused.sample_front(inp.q, inp.current, inp.qd_cmd, inp.t, k, st, c, s):
             out.tau_ext[:] = s[fused.LAST_TAU]
             out.wrench[:] = self._last_wrench
@@ -293,16 +305,16 @@ class ExternalForceEstimator:
         J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
         if c[fused.DIRECT]:
             rnea = pin.rnea(m, d, q, self._qd, self._qdd)
-            mu = fused.sample_back(rnea, u, u, q, J, k, st, c, s, out.tau_ext, out.wrench,
-                                   out.qd, self._last_wrench, self._scratch)
+            fused.sample_back(rnea, u, u, q, J, k, st, c, s, out.tau_ext, out.wrench, out.qd,
+                              self._last_wrench, self._scratch, info)
         else:
             M = pin.crba(m, d, q)  # upper triangle only
             C = pin.computeCoriolisMatrix(m, d, q, self._qd)
             g = pin.computeGeneralizedGravity(m, d, q)
-            mu = fused.sample_back(q, M, C, g, J, k, st, c, s, out.tau_ext, out.wrench,
-                                   out.qd, self._last_wrench, self._scratch)
-        out.manipulability = mu
-        out.damping = kernels.damping_of(mu, st[fused.MU0], st[fused.MAX_DAMPING])
+            fused.sample_back(q, M, C, g, J, k, st, c, s, out.tau_ext, out.wrench, out.qd,
+                              self._last_wrench, self._scratch, info)
+        out.manipulability = info[0]
+        out.damping = info[1]
         out.status = _STATUS[c[fused.STATUS]]
         return out.status
 

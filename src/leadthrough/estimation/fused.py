@@ -73,7 +73,8 @@ ALPHA = 11                         # low-pass coefficient
 OBSERVER_GAIN = 12
 MU0 = 13
 MAX_DAMPING = 14
-SETTINGS_SLOTS = 15
+MIN_LEVER = 15
+SETTINGS_SLOTS = 16
 
 # slots of ``counters``
 SAMPLES, WARM = 0, 1
@@ -148,7 +149,7 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
 def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
                 jacobian: Array, const: Array, settings: Array, counters: IntArray,
                 state: Array, tau_ext: Array, wrench: Array, qd: Array,
-                last_wrench: Array, scratch: Array) -> float:
+                last_wrench: Array, scratch: Array, info: Array) -> None:
     """Second half of a sample: τ_ext, tare, wrench, status (after :func:`sample_front`).
 
     Args:
@@ -167,9 +168,8 @@ def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
         qd: Output: the estimated joint velocity [rad/s], shape (n,).
         last_wrench: Copy of ``wrench`` kept for a fault (in place), shape (6,).
         scratch: Work space of the wrench, shape (2, 6, 6).
-
-    Returns:
-        The manipulability μ at the filtered position.
+        info: Output: the manipulability μ at the filtered position and the damping λ of the
+            wrench map, shape (2,).
     """
     n = tau_ext.size
     if counters[DIRECT] != 0:
@@ -184,8 +184,9 @@ def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
                               const[NOISE_MEAN], tau_ext)
     for j in range(n):
         tau_ext[j] -= state[TARE, j]
-    mu = kernels.wrench_from_torque(jacobian, tau_ext, state[WEIGHT], counters[FORCE_ONLY] != 0,
-                                    settings[MU0], settings[MAX_DAMPING], wrench, scratch)
+    kernels.wrench_from_torque(jacobian, tau_ext, state[WEIGHT], counters[FORCE_ONLY] != 0,
+                               settings[MU0], settings[MAX_DAMPING], settings[MIN_LEVER], wrench,
+                               scratch, info)
     for j in range(n):
         qd[j] = state[VEL, j]
         state[LAST_TAU, j] = tau_ext[j]
@@ -203,7 +204,6 @@ def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
             counters[REZERO_LEFT] = _average_into_tare(state, REZERO_SUM, counters[REZERO_LEFT],
                                                        counters[REZERO_TAKEN], tau_ext)
         counters[STATUS] = STATUS_OK
-    return mu
 
 
 @njit(cache=True, nogil=True)

@@ -34,6 +34,7 @@ __all__ = [
     "low_pass_step",
     "momentum_step",
     "presliding_friction_step",
+    "smallest_eigenvalue_3",
     "smooth_sign",
     "svf_step",
     "wrench_from_torque",
@@ -329,35 +330,76 @@ def gram_manipulability(jacobian: Array, gram: Array, factor: Array) -> float:
 
 
 @njit(cache=True, nogil=True)
+def smallest_eigenvalue_3(a: Array) -> float:
+    """Smallest eigenvalue of the leading 3×3 block of a symmetric matrix, in closed form
+    (trigonometric solution of the characteristic cubic; no allocation). Near a repeated
+    eigenvalue the arccos limits the absolute accuracy to ~1e-8 of the matrix's scale, ample
+    for a damping threshold.
+
+    Args:
+        a: Symmetric matrix; the upper triangle of its leading 3×3 block is read.
+
+    Returns:
+        The smallest eigenvalue.
+    """
+    p1 = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+    q = (a[0, 0] + a[1, 1] + a[2, 2]) / 3.0
+    d0, d1, d2 = a[0, 0] - q, a[1, 1] - q, a[2, 2] - q
+    p2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1
+    if p2 <= 0.0:
+        return q                                     # a multiple of the identity
+    p = np.sqrt(p2 / 6.0)
+    # B = (A − q·1)/p (scaled first: no under- or overflow), r = det(B)/2, in [−1, 1] up to
+    # rounding
+    b0, b1, b2 = d0 / p, d1 / p, d2 / p
+    b01, b02, b12 = a[0, 1] / p, a[0, 2] / p, a[1, 2] / p
+    r = 0.5 * (b0 * (b1 * b2 - b12 * b12) - b01 * (b01 * b2 - b12 * b02)
+               + b02 * (b01 * b12 - b1 * b02))
+    r = min(1.0, max(-1.0, r))
+    return q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
+
+
+@njit(cache=True, nogil=True)
 def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: bool,
-                       mu0: float, max_damping: float, wrench: Array, scratch: Array) -> float:
+                       mu0: float, max_damping: float, min_lever: float, wrench: Array,
+                       scratch: Array, info: Array) -> None:
     """Joint torque → TCP wrench through a damped pseudo-inverse of Jᵀ (eq. 28–30, in place).
 
+    Full wrench: (J Jᵀ + λ²·1)⁻¹·J·τ, with λ = λ_max·√(1 − (μ/μ₀)²) when the manipulability
+    μ = √det(J Jᵀ) < μ₀, else 0.
+
     ``force_only``: the three force components are the weighted least-squares fit of Jᵥᵀf to τ
-    (weights ``weight`` per joint) and the torque components are zero; otherwise the full
-    wrench (J Jᵀ + λ²·1)⁻¹·J·τ. λ² = λ_max²·(1 − (μ/μ₀)²) when the manipulability
-    μ = √det(J Jᵀ) < μ₀, else 0. Solved by Cholesky in ``scratch``, no allocation; a system
-    that is still singular (λ_max = 0 at a singularity) gives a zero wrench.
+    (weights ``weight`` per joint), (Jᵥ W² Jᵥᵀ + s·λ²·1)⁻¹·Jᵥ W² τ, and the torque components
+    are zero. A pure force needs only Jᵥ to have full rank, so the damping follows the
+    shortest lever arm ℓ = σ_min(Jᵥ) [m] (a force along that direction makes joint torques of
+    at most ℓ per newton), not μ, which also vanishes at the wrist singularity where the force
+    stays well observed: λ = λ_max·√(1 − (ℓ/ℓ₀)²) when ℓ < ℓ₀ = ``min_lever``. The scale
+    s = tr(Jᵥ W² Jᵥᵀ)/tr(Jᵥ Jᵥᵀ) carries λ [m] into the units of the weighted system (with equal
+    weights w, s = w² and the solution is the unweighted damped one).
+
+    Solved by Cholesky in ``scratch``, no allocation; a system that is still singular
+    (λ_max = 0 at a singularity) gives a zero wrench.
 
     Args:
         jacobian: TCP Jacobian in the output frame, shape (6, n).
         tau: Joint torque [N·m], shape (n,).
         weight: Per-joint weights (``force_only``), shape (n,).
         force_only: See above.
-        mu0: Manipulability threshold μ₀.
-        max_damping: λ_max.
+        mu0: Manipulability threshold μ₀ (full wrench).
+        max_damping: λ_max [m].
+        min_lever: ℓ₀ [m] (``force_only``).
         wrench: Output [N, N·m], shape (6,).
         scratch: Work space, shape (2, 6, 6).
-
-    Returns:
-        The manipulability μ (the damping used is :func:`damping_of` of it).
+        info: Output: μ and the damping λ used, shape (2,).
     """
     n = tau.size
     a, factor = scratch[0], scratch[1]
     mu = gram_manipulability(jacobian, a, factor)
-    lam2 = damping_of(mu, mu0, max_damping) ** 2
     m = 3 if force_only else 6
     if force_only:
+        lever2 = smallest_eigenvalue_3(a)
+        lam = damping_of(np.sqrt(max(lever2, 0.0)), min_lever, max_damping)
+        trace = a[0, 0] + a[1, 1] + a[2, 2]
         for r in range(3):
             for c in range(r + 1):
                 s = 0.0
@@ -369,7 +411,10 @@ def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: b
                 s += jacobian[r, k] * weight[k] * weight[k] * tau[k]
             wrench[r] = s
             wrench[r + 3] = 0.0
+        lam2 = lam * lam * (a[0, 0] + a[1, 1] + a[2, 2]) / trace if trace > 0.0 else 0.0
     else:
+        lam = damping_of(mu, mu0, max_damping)
+        lam2 = lam * lam
         for r in range(6):
             s = 0.0
             for k in range(n):
@@ -379,4 +424,5 @@ def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: b
         cholesky_solve(factor, m, wrench)
     else:
         wrench[:] = 0.0
-    return mu
+    info[0] = mu
+    info[1] = lam
