@@ -371,8 +371,8 @@ def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: b
     ``force_only``: the three force components are the weighted least-squares fit of Jᵥᵀf to τ
     (weights ``weight`` per joint), (Jᵥ W² Jᵥᵀ + s·λ²·1)⁻¹·Jᵥ W² τ, and the torque components
     are zero. A pure force needs only Jᵥ to have full rank, so the damping follows the
-    shortest lever arm ℓ = σ_min(Jᵥ) [m] (a force along that direction makes joint torques of
-    at most ℓ per newton), not μ, which also vanishes at the wrist singularity where the force
+    shortest lever arm ℓ = σ_min(Jᵥ) [m] (a force along the weakest direction makes joint
+    torques of norm only ℓ per newton), not μ, which also vanishes at the wrist singularity where the force
     stays well observed: λ = λ_max·√(1 − (ℓ/ℓ₀)²) when ℓ < ℓ₀ = ``min_lever``. The scale
     s = tr(Jᵥ W² Jᵥᵀ)/tr(Jᵥ Jᵥᵀ) carries λ [m] into the units of the weighted system (with equal
     weights w, s = w² and the solution is the unweighted damped one).
