@@ -372,10 +372,10 @@ def wrench_from_torque(jacobian: Array, tau: Array, weight: Array, force_only: b
     (weights ``weight`` per joint), (Jᵥ W² Jᵥᵀ + s·λ²·1)⁻¹·Jᵥ W² τ, and the torque components
     are zero. A pure force needs only Jᵥ to have full rank, so the damping follows the
     shortest lever arm ℓ = σ_min(Jᵥ) [m] (a force along the weakest direction makes joint
-    torques of norm only ℓ per newton), not μ, which also vanishes at the wrist singularity where the force
-    stays well observed: λ = λ_max·√(1 − (ℓ/ℓ₀)²) when ℓ < ℓ₀ = ``min_lever``. The scale
-    s = tr(Jᵥ W² Jᵥᵀ)/tr(Jᵥ Jᵥᵀ) carries λ [m] into the units of the weighted system (with equal
-    weights w, s = w² and the solution is the unweighted damped one).
+    torques of norm only ℓ per newton), not μ, which also vanishes at the wrist singularity
+    where the force stays well observed: λ = λ_max·√(1 − (ℓ/ℓ₀)²) when ℓ < ℓ₀ = ``min_lever``.
+    The scale s = tr(Jᵥ W² Jᵥᵀ)/tr(Jᵥ Jᵥᵀ) carries λ [m] into the units of the weighted system
+    (with equal weights w, s = w² and the solution is the unweighted damped one).
 
     Solved by Cholesky in ``scratch``, no allocation; a system that is still singular
     (λ_max = 0 at a singularity) gives a zero wrench.
