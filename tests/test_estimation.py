@@ -413,3 +413,11 @@ def test_friction_weighting_needs_the_force_fit_and_commanded_friction() -> None
     with pytest.raises(DataError, match="friction_weighting"):
         EstimatorConfig(axes="force", friction_velocity="command", friction_weighting=-1.0)
     EstimatorConfig(axes="force", friction_velocity="command", friction_weighting=1.0)
+
+
+@pytest.mark.parametrize("bad", [-0.01, float("inf"), float("nan")])
+def test_min_force_lever_must_be_finite_and_not_negative(bad: float) -> None:
+    with pytest.raises(DataError, match="min_force_lever") as err:
+        EstimatorConfig(axes="force", min_force_lever=bad)
+    assert "finite value >= 0 m" in str(err.value)
+    assert EstimatorConfig(axes="force", min_force_lever=0.0).min_force_lever == 0.0
