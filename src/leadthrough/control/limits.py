@@ -90,7 +90,7 @@ class TwistLimiter:
         self.max_speed = np.array([limits.max_linear_speed, limits.max_angular_speed])
         #: Largest change of the speed per cycle, (a_max·dt, α_max·dt) [m/s, rad/s].
         self.max_step = np.array([limits.max_linear_acceleration * dt,
-                               limits.max_angular_acceleration * dt])
+                                  limits.max_angular_acceleration * dt])
 
     def limit(self, previous: Array, desired: Array, speed_scale: float, out: Array) -> bool:
         """Limit speed and acceleration.

@@ -67,13 +67,11 @@ class VelocityBaseline:
         check_period("dt", dt, ControlError)
         self.config = cfg = config if config is not None else VelocityBaselineConfig()
         self.dt = dt
-        self._alpha = 1.0 - math.exp(-dt / cfg.time_constant)
-        self._gain = np.asarray(cfg.gain, dtype=float)
         self.law_id = LAW_VELOCITY
         #: K_i per axis.
-        self.coefficients = self._gain
+        self.coefficients = np.asarray(cfg.gain, dtype=float)
         #: 1 − e^(−dt/T).
-        self.alpha = self._alpha
+        self.alpha = 1.0 - math.exp(-dt / cfg.time_constant)
 
     def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
              out: Array) -> None:
@@ -86,4 +84,4 @@ class VelocityBaseline:
             stopping_friction: Ignored.
             out: Desired twist, shape (6,), written in place; must not alias an input.
         """
-        velocity_baseline_step(twist, wrench, self._gain, self._alpha, out)
+        velocity_baseline_step(twist, wrench, self.coefficients, self.alpha, out)

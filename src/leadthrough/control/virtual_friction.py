@@ -89,10 +89,9 @@ class VirtualFriction:
         check_period("dt", dt, ControlError)
         self.config = cfg = config if config is not None else VirtualFrictionConfig()
         self.dt = dt
-        self._dt_over_m = dt / np.asarray(cfg.mass, dtype=float)
         self.law_id = LAW_VIRTUAL_FRICTION
         #: dt/M_i per axis [s/kg, s/(kg·m²)].
-        self.coefficients = self._dt_over_m
+        self.coefficients = dt / np.asarray(cfg.mass, dtype=float)
         self.alpha = 0.0
 
     def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
@@ -107,4 +106,4 @@ class VirtualFriction:
             out: Desired twist, shape (6,), written in place; must not alias an input.
         """
         kernels.virtual_friction_step(twist, wrench, friction, stopping_friction,
-                                      self._dt_over_m, out)
+                                      self.coefficients, out)
