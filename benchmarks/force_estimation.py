@@ -11,8 +11,10 @@ slip by a few mrad before the servo's integrator pulls it back, and the gear the
 friction of that return motion (a slipped joint reads up to its full Coulomb level too high; see
 sim.drivetrain). The eq. 15 friction of a measured velocity is zero at standstill and cannot
 know this; the friction with memory ("presliding": ``friction_velocity="command"``, driven by
-the measured motion while nothing is commanded, z₀ = 2e-4 rad here) follows the slip and its
-return. "tare" zeroes the estimate over 0.5–0.75 s, before the push, like a force sensor.
+the measured motion while nothing is commanded) follows the slip and its return: with one
+z₀ = 2e-4 rad for every joint, or ("+presliding test") with each joint's z₀ identified by a
+presliding test at the guiding start pose (:mod:`leadthrough.identification.presliding`).
+"tare" zeroes the estimate over 0.5–0.75 s, before the push, like a force sensor.
 
     python benchmarks/force_estimation.py [--poses 10]
 """
@@ -20,6 +22,7 @@ return. "tare" zeroes the estimate over 0.5–0.75 s, before the push, like a fo
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -27,10 +30,15 @@ import pinocchio as pin
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify, identify_with_sweep
+from leadthrough.identification.presliding import fit_presliding
 from leadthrough.robot import load_robot
 from leadthrough.session.sim_session import guide_start_pose
 from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, hold
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.calibration_set import (
+    record_calibration_set,
+    record_friction_sweep,
+    record_presliding_test,
+)
 
 DIRECTIONS = np.vstack([np.eye(3), -np.eye(3)])
 
@@ -46,22 +54,29 @@ def main() -> None:
     res = identify(cal.identification.measured, robot, "consistent")
     sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
     res_sweep = identify_with_sweep(cal.identification.measured, sweep.measured, robot).result
+    pre = fit_presliding(record_presliding_test(robot, seed=1, run=3,
+                                                q_start=guide_start_pose(robot)).measured, robot)
+    print("presliding test: z0 [1e-4 rad] " + " ".join(f"{z:.2f}" for z in 1e4 * pre.presliding)
+          + "; level [N·m] " + " ".join(f"{g:.2f}" for g in pre.level))
     rng = np.random.default_rng(0)
     poses = [rng.uniform(0.6 * robot.lower_limits, 0.6 * robot.upper_limits)
              for _ in range(args.poses)]
-    variants = {f"{m}/{a} 3 Hz": (res, EstimatorConfig(method=m, axes=a))
+    plain, swept = (res.params, res.stats), (res_sweep.params, res_sweep.stats)
+    tested = (replace(res_sweep.params, presliding=pre.presliding), res_sweep.stats)
+    variants = {f"{m}/{a} 3 Hz": (*plain, EstimatorConfig(method=m, axes=a))
                 for m in ("direct", "momentum") for a in ("wrench", "force")}
     for m in ("direct", "momentum"):
         for tare in (0.0, 0.25):
             name = f"{m}/force presliding{' tare' if tare else ''}"
-            variants[name] = (res, EstimatorConfig(method=m, axes="force",
-                                                   friction_velocity="command",
-                                                   presliding_rad=2e-4, tare_s=tare))
+            variants[name] = (*plain, EstimatorConfig(method=m, axes="force",
+                                                      friction_velocity="command",
+                                                      presliding_rad=2e-4, tare_s=tare))
         for kappa in (0.0, 1.0):
-            name = f"{m}/force presliding tare{' weighted' if kappa else ''} +sweep"
-            variants[name] = (res_sweep, EstimatorConfig(
-                method=m, axes="force", friction_velocity="command", presliding_rad=2e-4,
-                tare_s=0.25, friction_weighting=kappa))
+            for label, chosen in (("+sweep", swept), ("+sweep +presliding test", tested)):
+                name = f"{m}/force presliding tare{' weighted' if kappa else ''} {label}"
+                variants[name] = (*chosen, EstimatorConfig(
+                    method=m, axes="force", friction_velocity="command", presliding_rad=2e-4,
+                    tare_s=0.25, friction_weighting=kappa))
     stats: dict[str, dict[str, list[float]]] = {v: {"rms": [], "settle": [], "rest": []}
                                                 for v in variants}
     lever, slip = [], []                # per pose: shortest lever arm [m]; per push: slip [mrad]
@@ -80,9 +95,9 @@ def main() -> None:
             log = hold(sim, 3.5)
             slip.append(1e3 * float(np.abs(log.truth.q - q0).max()))
             t = log.time
-            for name, (r, cfg) in variants.items():
-                est = ExternalForceEstimator(robot, r.params, r.stats.mean, cfg,
-                                             noise_std=r.stats.std)
+            for name, (params, residual, cfg) in variants.items():
+                est = ExternalForceEstimator(robot, params, residual.mean, cfg,
+                                             noise_std=residual.std)
                 inp, out = est.make_input(), est.make_output()
                 est.reset(log.q[0])
                 f = np.empty((t.size, 3))
@@ -104,10 +119,10 @@ def main() -> None:
                 stats[name]["rest"].append(float(np.sqrt(np.mean(
                     np.linalg.norm(f[rest], axis=1) ** 2))))
     print(f"\n{args.poses} poses × 6 directions, 20–100 N, consistent parameters (sim seed 1)")
-    print(f"{'estimator':<46} {'RMS error [N]':>14} {'worst [N]':>10} {'settling [s]':>13} "
+    print(f"{'estimator':<56} {'RMS error [N]':>14} {'worst [N]':>10} {'settling [s]':>13} "
           f"{'no-force RMS [N]':>17}")
     for name, s in stats.items():
-        print(f"{name:<46} {np.sqrt(np.mean(np.square(s['rms']))):>14.2f} "
+        print(f"{name:<56} {np.sqrt(np.mean(np.square(s['rms']))):>14.2f} "
               f"{max(s['rms']):>10.2f} {np.median(s['settle']):>13.2f} "
               f"{np.sqrt(np.mean(np.square(s['rest']))):>17.2f}")
     print("goal: RMS <= 3 N. Settling: median time until the estimate stays within 10 % "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
+from leadthrough.excitation.presliding import PreslidingTestConfig, design_presliding_test
 from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
 from leadthrough.identification.api import (
     METHODS,
@@ -28,6 +30,7 @@ from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalue
 from leadthrough.identification.consistent import ConsistentConfig
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import load_params, save_params
+from leadthrough.identification.presliding import PreslidingFit, fit_presliding
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
@@ -50,7 +53,9 @@ def register(sub: Any) -> None:
                                    "speed, acceleration, torque and floor limits.",
                        epilog="examples:\n  leadthrough excite --robot er20 --duration 60 -o "
                               "traj.csv\n  leadthrough excite --robot er20 --sweep -o sweep.csv "
-                              " # friction sweep for identify --friction-sweep")
+                              " # friction sweep for identify --friction-sweep\n"
+                              "  leadthrough excite --robot er20 --presliding -o pre.csv "
+                              " # presliding test for identify --presliding-test")
     p.add_argument("--robot", default="er20", help="built-in name or robot TOML")
     p.add_argument("--duration", type=float, default=60.0, help="length [s], whole periods")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start")
@@ -61,8 +66,12 @@ def register(sub: Any) -> None:
     p.add_argument("--sweep", action="store_true",
                    help="instead, a friction sweep: constant-velocity passes out and back at "
                         "10 speeds, all joints at once (about 45 s)")
+    p.add_argument("--presliding", action="store_true",
+                   help="instead, a presliding test: out-and-back excursions of 0.03–1.5 mrad "
+                        "at rest, all joints at once (about 80 s)")
     p.add_argument("--start", type=float, nargs="+", default=None, metavar="Q",
-                   help="sweep start configuration [rad] (default: the guiding start pose)")
+                   help="sweep / presliding test configuration [rad] (default: the guiding "
+                        "start pose)")
     p.add_argument("-o", "--output", type=Path, required=True, help="trajectory CSV")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run_excite)
@@ -102,6 +111,10 @@ def register(sub: Any) -> None:
     p.add_argument("--friction-sweep", type=Path, default=None, metavar="REC",
                    help="recording of a friction sweep (excite --sweep, then record): the "
                         "friction curve is measured from it (consistent method only)")
+    p.add_argument("--presliding-test", type=Path, default=None, metavar="REC",
+                   help="recording of a presliding test (excite --presliding, then record): "
+                        "each joint's presliding length z0 is measured from it and written to "
+                        "the params (the estimator's friction at rest)")
     p.add_argument("-o", "--output", type=Path, required=True, help="params TOML")
     p.add_argument("--urdf-out", type=Path, default=None,
                    help="also write the URDF with the identified link inertias")
@@ -186,11 +199,34 @@ def _load(args: argparse.Namespace, robot: Robot) -> Recording:
     return rec
 
 
-def _excite_sweep(args: argparse.Namespace, robot: Robot) -> int:
+def _start(args: argparse.Namespace, robot: Robot) -> np.ndarray:
     q0 = guide_start_pose(robot) if args.start is None else np.array(args.start, dtype=float)
     if q0.shape != (robot.n,):
         raise DataError("wrong number of joint positions", field="--start", value=args.start,
                         expected=f"{robot.n} values [rad]")
+    return q0
+
+
+def _excite_presliding(args: argparse.Namespace, robot: Robot) -> int:
+    q0 = _start(args, robot)
+    test = design_presliding_test(robot, q0)
+    amplitudes = PreslidingTestConfig().amplitudes
+    save_trajectory(args.output, test.samples, robot.name,
+                    {"kind": "presliding test",
+                     "amplitudes": " ".join(f"{a:g}" for a in amplitudes)})
+    out = {"robot": robot.name, "kind": "presliding test", "duration_s": test.duration_s,
+           "amplitudes_rad": list(amplitudes), "trials": int(test.amplitude.size),
+           "q_start": q0.tolist(), "output": str(args.output)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"presliding test: {test.amplitude.size} excursions out and back at rest, "
+              f"{test.duration_s:.1f} s; written to {args.output}")
+    return 0
+
+
+def _excite_sweep(args: argparse.Namespace, robot: Robot) -> int:
+    q0 = _start(args, robot)
     sweep = design_friction_sweep(robot, q0)
     save_trajectory(args.output, sweep.samples, robot.name,
                     {"kind": "friction sweep", "speeds": " ".join(f"{v:g}" for v in
@@ -209,8 +245,13 @@ def _excite_sweep(args: argparse.Namespace, robot: Robot) -> int:
 def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
     robot = load_robot(args.robot)
+    if args.sweep and args.presliding:
+        raise DataError("choose one of the two friction experiments", field="--presliding",
+                        value=True, expected="--sweep or --presliding, not both")
     if args.sweep:
         return _excite_sweep(args, robot)
+    if args.presliding:
+        return _excite_presliding(args, robot)
     cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
                            starts=args.starts, seed=args.seed, floor_height=args.floor)
     period = 1.0 / cfg.base_frequency
@@ -288,19 +329,20 @@ def run_identify(args: argparse.Namespace) -> int:
                         expected="'consistent' with --friction-sweep")
     robot = load_robot(args.robot)
     rec = _load(args, robot)
-    bar = Progress(f"identifying ({args.method})", 1)
     sim_seed = rec.sim_seed
-    if args.friction_sweep is not None:
-        sweep = load_recording(args.friction_sweep, args.columns)
-        if sweep.sim_seed != rec.sim_seed:
-            raise DataError("recorded on another robot than the identification data",
-                            source=args.friction_sweep, field="sim_seed", value=sweep.sim_seed,
-                            expected=f"{rec.sim_seed} (that of {args.recording})")
+    sweep = _companion(args, "friction_sweep", rec)
+    presliding_test = _companion(args, "presliding_test", rec)
+    # the presliding test is fitted first: a bad file fails before the long identification
+    pre = None if presliding_test is None else fit_presliding(presliding_test, robot)
+    bar = Progress(f"identifying ({args.method})", 1)
+    if sweep is not None:
         result = identify_with_sweep(rec, sweep, robot, _identify_config(args)).result
     else:
         result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
     bar.close(f"J = {result.J:.3f}")
-    save_params(args.output, robot, args.method, result.params, result.stats, sim_seed)
+    params = result.params if pre is None else replace(result.params,
+                                                       presliding=pre.presliding)
+    save_params(args.output, robot, args.method, params, result.stats, sim_seed)
     if args.urdf_out is not None:
         write_urdf_with_inertias(robot, result.params.phi, args.urdf_out)
     eig = {jn: float(v) for jn, v in zip(robot.joint_names, result.min_pseudo_inertia_eig,
@@ -312,15 +354,44 @@ def run_identify(args: argparse.Namespace) -> int:
                "parameters": [p._asdict() for p in result.named_parameters(robot)]}
         if args.method == "consistent":
             out["min_pseudo_inertia_eig"] = eig
+        if pre is not None:
+            out["presliding"] = _presliding_json(robot, pre)
         print(json.dumps(out, indent=2))
     else:
         _print_stats(robot, result.stats, f"{args.method} on {args.recording} "
                                           f"({result.runtime_s:.1f} s, {result.iterations} it.)")
         print("  min pseudo-inertia eigenvalue per link [kg·m²]: "
               + ", ".join(f"{v:.3g}" for v in eig.values()))
+        if pre is not None:
+            print(f"  presliding test ({pre.pairs.first.size} rest pairs): z0 [1e-4 rad] "
+                  + ", ".join(f"{1e4 * z:.2f}" for z in pre.presliding)
+                  + "; level at rest [N·m] " + ", ".join(f"{g:.3g}" for g in pre.level))
         print(f"parameters written to {args.output}"
               + (f", URDF to {args.urdf_out}" if args.urdf_out is not None else ""))
     return 0
+
+
+def _companion(args: argparse.Namespace, name: str, rec: Recording) -> Recording | None:
+    """The recording of option ``--name`` (a friction experiment), checked to come from the
+    same robot as the identification recording ``rec``."""
+    path = getattr(args, name)
+    if path is None:
+        return None
+    other = load_recording(path, args.columns)
+    if other.sim_seed != rec.sim_seed:
+        raise DataError("recorded on another robot than the identification data", source=path,
+                        field="sim_seed", value=other.sim_seed,
+                        expected=f"{rec.sim_seed} (that of {args.recording})")
+    return other
+
+
+def _presliding_json(robot: Robot, fit: PreslidingFit) -> dict[str, Any]:
+    """The presliding fit per joint, for --json."""
+    joints = {jn: {"z0_rad": float(fit.presliding[k]),
+                   "z0_std_rad": float(fit.presliding_std[k]),
+                   "level_Nm": float(fit.level[k]), "rms_Nm": float(fit.rms[k])}
+              for k, jn in enumerate(robot.joint_names)}
+    return {"pairs": int(fit.pairs.first.size), "joints": joints}
 
 
 def run_validate(args: argparse.Namespace) -> int:

@@ -113,6 +113,21 @@ class Recording:
         """``"current"`` or ``"torque"``: what the log holds."""
         return "current" if self.current is not None else "torque"
 
+    def uniform_rate(self, what: str) -> float:
+        """The sample rate [Hz] of a uniformly sampled recording.
+
+        Args:
+            what: What the recording is for, in the error message (e.g. ``"the sweep"``).
+
+        Raises:
+            DataError: Fewer than 10 samples, or time steps varying by more than 10 %.
+        """
+        dt = np.diff(self.time)
+        if self.time.size < 10 or np.ptp(dt) > 0.1 * float(np.median(dt)):
+            raise DataError(f"{what} must be uniformly sampled", source=self.source,
+                            field="time", expected="at least 10 uniform time stamps")
+        return 1.0 / float(np.median(dt))
+
     def check_robot(self, robot: Robot) -> None:
         """Raise a DataError unless the recording fits ``robot`` (joint count, name)."""
         if self.n != robot.n:

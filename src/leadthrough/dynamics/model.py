@@ -52,6 +52,11 @@ class DriveModelParameters:
         rotor_inertia: Joint-side rotor inertia M_j [kg·m²], shape (n,).
         offset: Constant joint-torque offset τ_0 [N·m], shape (n,), or empty for none. Not in
             eq. 21; the ``consistent`` method identifies it (current-sensor offsets).
+        presliding: Presliding length z₀ of each drive's Coulomb + Stribeck friction [rad],
+            shape (n,), or empty if not identified. Not in eq. 21 (eq. 15 is its steady state):
+            the displacement over which the friction of a joint at rest turns over
+            (:mod:`leadthrough.identification.presliding`); the estimator's friction at rest
+            uses it.
     """
 
     phi: Array
@@ -62,11 +67,17 @@ class DriveModelParameters:
     viscous: Array = field(default_factory=lambda: np.zeros(0))
     cbrt: Array = field(default_factory=lambda: np.zeros(0))
     offset: Array = field(default_factory=lambda: np.zeros(0))
+    presliding: Array = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if self.friction_model is FrictionModel.STRIBECK and self.stribeck is None:
             raise DataError("Stribeck friction model without Stribeck parameters",
                             field="stribeck", expected="StribeckParameters")
+        z0 = np.asarray(self.presliding, dtype=float)
+        n = np.size(self.rotor_inertia)
+        if z0.size and (z0.shape != (n,) or not np.all((z0 > 0) & (z0 <= 0.1))):
+            raise DataError("presliding lengths out of range", field="presliding",
+                            value=z0.tolist(), expected=f"{n} values in (0, 0.1] rad, or none")
 
     def friction(self, qd: Array, gear_ratio: Array) -> Array:
         """Friction torque [N·m] for joint velocities ``qd`` [rad/s], shape (N, n)."""

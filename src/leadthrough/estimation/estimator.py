@@ -105,12 +105,18 @@ class EstimatorConfig:
             friction then has memory (eq. 15 as the steady state of a LuGre/Dahl model, see
             ``kernels.presliding_friction_step``): after a stop, the drives keep the friction
             they had while moving, and so does the model.
-        presliding_rad: z₀ of the ``"command"`` friction [rad]: the friction turns over a
-            commanded displacement of a few z₀. Gear presliding is of the order of the lost
-            motion (RV and harmonic reducers: ≲ 1 arcmin ≈ 3e-4 rad). A smaller z₀ turns the
-            model's friction ahead of the gear's, a larger one behind it: on the simulated er20
-            (gear presliding 1.5–2.5e-4 rad plus the servo's lag) 1e-3 stalls a 40 N start and
-            2e-4 over-reads starts and reversals by up to 2×; 4e-4 follows both.
+        presliding_rad: z₀ of the ``"command"`` friction while a joint is commanded to move
+            [rad]: the friction turns over a commanded displacement of a few z₀, which is the
+            gear's presliding plus the servo's lag. A smaller z₀ turns the model's friction
+            ahead of the gear's, a larger one behind it: on the simulated er20 (gear presliding
+            1.5–2.5e-4 rad plus the servo's lag) 1e-3 stalls a 40 N start and 2e-4 over-reads
+            starts and reversals by up to 2×; 4e-4 follows both. A joint commanded to stand
+            still is driven by its measured displacement instead, with the params' identified
+            z₀ per joint (``DriveModelParameters.presliding``, from a presliding test), or
+            this value where none was identified.
+        presliding_play_counts: Width of the play operator on the encoder that drives the
+            friction at rest [encoder counts] (``kernels.play_step``): chatter within it moves
+            nothing. 0 passes every count.
         friction_weighting: κ of the ``axes="force"`` fit with ``"command"`` friction: each
             joint's weight 1/σ_j becomes 1/√(σ_j² + (κ·u_j)²), u_j the friction's uncertainty
             (see ``kernels.friction_weights``), held over two time constants of the output
@@ -134,6 +140,7 @@ class EstimatorConfig:
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
     presliding_rad: float = 4e-4
+    presliding_play_counts: float = 2.5
     friction_weighting: float = 0.0
 
     def __post_init__(self) -> None:
@@ -154,6 +161,8 @@ class EstimatorConfig:
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
             ("presliding_rad", 0 < self.presliding_rad <= 0.1, "0 < z0 <= 0.1 rad"),
+            ("presliding_play_counts", 0 <= self.presliding_play_counts < 1e6,
+             "0 <= width < 1e6 counts"),
             ("friction_weighting",
              0 <= self.friction_weighting < np.inf
              and (self.friction_weighting == 0
@@ -239,6 +248,9 @@ class ExternalForceEstimator:
         const[fused.ROTOR] = mdl.rotor
         const[fused.OFFSET] = mdl.offset
         const[fused.NOISE_MEAN] = noise_mean if cfg.remove_mean_noise else 0.0
+        const[fused.REST_PRESLIDING] = (params.presliding if params.presliding.size
+                                        else cfg.presliding_rad)
+        const[fused.HALF_PLAY] = 0.5 * cfg.presliding_play_counts * robot.encoder_resolution
         st = self._settings = np.zeros(fused.SETTINGS_SLOTS)
         st[fused.SVF:fused.SVF + 7] = StateVariableDifferentiator(
             n, cfg.velocity_cutoff_hz, cfg.dt).coef

@@ -14,7 +14,8 @@ Packed arrays (row and slot names below):
 
 * ``state`` (:data:`STATE_ROWS`, n): per-joint state and scratch of one estimator;
 * ``const`` (:data:`CONST_ROWS`, n): per-joint constants: the friction rows of
-  :mod:`~leadthrough.estimation.kernels` (0–7) then torque per amp, σ, M_j, τ_0, τ̄_ω;
+  :mod:`~leadthrough.estimation.kernels` (0–7) then torque per amp, σ, M_j, τ_0, τ̄_ω, z₀ at
+  rest and the play operator's half width;
 * ``settings`` (:data:`SETTINGS_SLOTS`,): float settings;
 * ``counters`` (:data:`COUNTER_SLOTS`,): int64 counters, flags and the last status.
 """
@@ -45,7 +46,7 @@ TAU_J = 3                          # torque from current
 FRICTION = 4                       # friction torque τ_f
 PRESLIDING = 5                     # F of the friction with memory
 LEVEL = 6                          # eq. 15 level g(q̇)
-DRIVE = 7                          # velocity driving the friction (scratch)
+INCREMENT = 7                      # measured displacement after the play operator (scratch)
 SIGN = 8                           # smoothed sign (scratch)
 ENVELOPE = 9                       # envelope of the friction's uncertainty
 WEIGHT = 10                        # weights of the force fit
@@ -53,7 +54,8 @@ FILTERED = 11                      # low-pass state of τ̂_d − τ̂_j
 TARE, TARE_SUM, REZERO_SUM = 12, 13, 14
 LAST_TAU = 15                      # last valid τ_ext
 P0, INTEGRAL, RESIDUAL, WORK = 16, 17, 18, 19   # momentum observer
-STATE_ROWS = 20
+PLAY = 20                          # play operator on the encoder
+STATE_ROWS = 21
 
 # rows of ``const`` after the friction rows
 TORQUE_PER_AMP = kernels.FRICTION_ROWS
@@ -61,7 +63,9 @@ STD = TORQUE_PER_AMP + 1
 ROTOR = TORQUE_PER_AMP + 2
 OFFSET = TORQUE_PER_AMP + 3
 NOISE_MEAN = TORQUE_PER_AMP + 4
-CONST_ROWS = TORQUE_PER_AMP + 5
+REST_PRESLIDING = TORQUE_PER_AMP + 5   # z₀ per joint at rest [rad]
+HALF_PLAY = TORQUE_PER_AMP + 6         # half width of the play operator [rad]
+CONST_ROWS = TORQUE_PER_AMP + 7
 
 # slots of ``settings``: the differentiator's 7 coefficients (kernels.svf_step) then
 SVF = 0
@@ -120,6 +124,7 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
     if counters[FIRST] != 0:
         for j in range(n):
             state[POS, j] = q[j]
+            state[PLAY, j] = q[j]
             state[VEL, j] = 0.0
             state[ACC, j] = 0.0
         counters[FIRST] = 0
@@ -130,11 +135,10 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
     stribeck = counters[STRIBECK] != 0
     if counters[FRICTION_COMMAND] != 0:
         # driven by the command while it moves, by the measured motion when it is at rest
-        for j in range(n):
-            state[DRIVE, j] = qd_cmd[j] if qd_cmd[j] != 0.0 else state[VEL, j]
-        kernels.presliding_friction_step(state[DRIVE], fp, stribeck, settings[DT],
-                                         settings[PRESLIDING_RAD], state[PRESLIDING],
-                                         state[FRICTION], state[LEVEL])
+        kernels.play_step(q, const[HALF_PLAY], state[PLAY], state[INCREMENT])
+        kernels.presliding_friction_step(qd_cmd, state[INCREMENT], fp, stribeck, settings[DT],
+                                         settings[PRESLIDING_RAD], const[REST_PRESLIDING],
+                                         state[PRESLIDING], state[FRICTION], state[LEVEL])
         if counters[WEIGH] != 0:
             kernels.friction_weights(state[LEVEL], state[PRESLIDING], settings[ENVELOPE_DECAY],
                                      settings[KAPPA], const[STD], state[ENVELOPE],

@@ -33,6 +33,7 @@ __all__ = [
     "gram_manipulability",
     "low_pass_step",
     "momentum_step",
+    "play_step",
     "presliding_friction_step",
     "smallest_eigenvalue_3",
     "smooth_sign",
@@ -84,24 +85,57 @@ def smooth_sign(qd: Array, fp: Array, sign: Array) -> None:
 
 
 @njit(cache=True, nogil=True)
-def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
-                             presliding: float, state: Array, out: Array,
-                             level: Array) -> None:
-    """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
+def play_step(q: Array, half_width: Array, play: Array, increment: Array) -> None:
+    """The play (backlash) operator on the encoder, one step (in place on ``play``).
 
-    The Coulomb + Stribeck part F follows dF/dt = k·(q̇ − |q̇|·F/g(q̇)), with g(q̇) the
-    eq. 15 level f1 + f2·e^{−(R q̇/q̇sm)²} + f3·e^{−(q̇/q̇sg)²} and the presliding stiffness
-    k = g(0)/z₀, solved exactly for q̇ constant over the step. In steady sliding F = g·sgn(q̇),
-    eq. 15 itself. F changes only with motion: it turns over a displacement of a few z₀, and at
-    standstill it keeps its last value (a stopped gear still carries the friction it had when
-    it stopped, not the static peak). The viscous (and cube-root) terms are added as usual.
+    The output follows the input only once it leaves a band of ±``half_width`` around it, so
+    quantisation chatter of one or two counts at rest moves nothing. A friction state driven by
+    the raw encoder would otherwise be worn down by thousands of tiny reversals.
 
     Args:
-        qd: Joint velocities driving the friction (the commanded ones) [rad/s], shape (n,).
+        q: Measured joint positions [rad], shape (n,).
+        half_width: Half the band per joint [rad], shape (n,), ≥ 0.
+        play: The operator's output (state) [rad], shape (n,).
+        increment: Output: this step's change of ``play`` [rad], shape (n,).
+    """
+    for j in range(q.size):
+        new = min(max(play[j], q[j] - half_width[j]), q[j] + half_width[j])
+        increment[j] = new - play[j]
+        play[j] = new
+
+
+@njit(cache=True, nogil=True)
+def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: bool,
+                             dt: float, command_presliding: float, rest_presliding: Array,
+                             state: Array, out: Array, level: Array) -> None:
+    """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
+
+    The Coulomb + Stribeck part F follows dF = k·(dq − |dq|·F/g(q̇)), with g(q̇) the eq. 15
+    level f1 + f2·e^{−(R q̇/q̇sm)²} + f3·e^{−(q̇/q̇sg)²} and the presliding stiffness
+    k = g(0)/z₀: F turns over a displacement of a few z₀ toward ±g, and keeps its value at
+    standstill (a stopped gear still carries the friction it had when it stopped, not the static
+    peak). In steady sliding F = g·sgn(q̇), eq. 15 itself. Two drives:
+
+    * a joint commanded to move (q̇ ≠ 0): dq = q̇·dt with ``command_presliding`` (z₀ plus the
+      servo's lag behind the command), the level at the commanded speed;
+    * a joint commanded to stand still (q̇ = 0): the measured displacement ``increment`` (play
+      operator on the encoder, :func:`play_step`) with the joint's own z₀ (identified by a
+      presliding test, :mod:`leadthrough.identification.presliding`), the static level g(0).
+      A push at rest deflects the drive by a fraction of z₀, and how much of the push the
+      current then carries follows from that displacement.
+
+    Each step is the exact solution for a constant rate. The viscous (and cube-root) terms of
+    the commanded velocity are added as usual.
+
+    Args:
+        qd: Joint velocities commanded to the servo [rad/s], shape (n,) (0: at rest).
+        increment: Measured displacement of this step, after the play operator [rad], shape
+            (n,) (used where ``qd`` is 0).
         fp: Friction parameter rows, shape (8, n).
         stribeck: Use the Stribeck rows (eq. 15) instead of the cube-root row.
         dt: Step [s].
-        presliding: z₀ [rad].
+        command_presliding: z₀ of the commanded motion [rad].
+        rest_presliding: z₀ per joint at rest [rad], shape (n,).
         state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
         out: Friction torque [N·m], shape (n,).
         level: The eq. 15 level g(q̇) [N·m] (written), shape (n,).
@@ -116,10 +150,15 @@ def presliding_friction_step(qd: Array, fp: Array, stribeck: bool, dt: float,
             g += fp[4, j] * np.exp(-a * a) + fp[6, j] * np.exp(-b * b)
             g0 += fp[4, j] + fp[6, j]
         level[j] = g
-        if v != 0.0 and g > 0.0:
-            target = g if v > 0.0 else -g
-            state[j] = target + (state[j] - target) * np.exp(-g0 * abs(v) * dt
-                                                            / (presliding * g))
+        if v != 0.0:
+            if g > 0.0:
+                target = g if v > 0.0 else -g
+                state[j] = target + (state[j] - target) * np.exp(
+                    -g0 * abs(v) * dt / (command_presliding * g))
+        elif increment[j] != 0.0 and g0 > 0.0:
+            d = increment[j]
+            target = g0 if d > 0.0 else -g0
+            state[j] = target + (state[j] - target) * np.exp(-abs(d) / rest_presliding[j])
         f = state[j] + v * fp[2, j]
         if not stribeck:
             f += fp[7, j] * np.cbrt(v)

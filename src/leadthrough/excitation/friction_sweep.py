@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import DataError, check_fields
 from leadthrough.excitation.fourier import TrajectorySamples
+from leadthrough.excitation.start_pose import checked_start
 from leadthrough.robot.description import Robot
 
 __all__ = ["FrictionSweep", "FrictionSweepConfig", "design_friction_sweep"]
@@ -138,17 +139,9 @@ def design_friction_sweep(robot: Robot, q_start: Array | None = None,
     """
     cfg = config if config is not None else FrictionSweepConfig()
     n = robot.n
-    q0 = robot.neutral() if q_start is None else np.asarray(q_start, dtype=float)
+    q0 = checked_start(robot, q_start, cfg.limit_margin)
     lo = robot.lower_limits + cfg.limit_margin
     hi = robot.upper_limits - cfg.limit_margin
-    if q0.shape != (n,) or not np.all(np.isfinite(q0)):
-        raise DataError("wrong start configuration", field="q_start", value=q0.tolist(),
-                        expected=f"{n} finite joint positions [rad]")
-    if np.any(q0 < lo) or np.any(q0 > hi):
-        j = int(np.argmax((q0 < lo) | (q0 > hi)))
-        raise DataError("start outside the joint limits (with margin)",
-                        field=f"q_start[{robot.joint_names[j]}]", value=float(q0[j]),
-                        expected=f"within [{lo[j]:.3f}, {hi[j]:.3f}] rad")
     room_pos, room_neg = hi - q0, q0 - lo
     direction = np.where(room_pos >= room_neg, 1.0, -1.0)
     room = np.maximum(room_pos, room_neg)

@@ -167,11 +167,7 @@ def sweep_points(recording: Recording, robot: Robot,
     cfg = config if config is not None else SweepAnalysisConfig()
     tau = recording.joint_torque(robot)
     q, t = recording.q, recording.time
-    dt = np.diff(t)
-    if t.size < 10 or np.any(dt <= 0) or np.ptp(dt) > 0.1 * float(np.median(dt)):
-        raise DataError("the sweep must be uniformly sampled", source=recording.source,
-                        field="time", expected="strictly increasing, uniform time stamps")
-    rate = 1.0 / float(np.median(dt))
+    rate = recording.uniform_rate("the sweep")
     win = max(5, round(cfg.smoothing_s * rate) | 1)
     if win >= t.size:
         raise DataError("the sweep is shorter than the smoothing window", source=recording.source,

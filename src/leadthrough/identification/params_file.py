@@ -17,6 +17,7 @@ Layout::
     [joints.joint_1]                 # drive parameters
     rotor_inertia = 8.6              # M_j [kg·m²]
     offset = 0.4                     # τ_0 [N·m] (optional, consistent method)
+    presliding = 2.2e-4              # z₀ [rad] (optional, from a presliding test)
     f1 = 40.0                        # ... per friction model
 
     [links.joint_1]                  # standard link parameters (regressor order) [kg, kg·m, kg·m²]
@@ -135,6 +136,8 @@ def save_params(
         lines += ["", f"[joints.{jn}]", f"rotor_inertia = {_fmt(params.rotor_inertia[k])}"]
         if params.offset.size:
             lines.append(f"offset = {_fmt(params.offset[k])}")
+        if params.presliding.size:
+            lines.append(f"presliding = {_fmt(params.presliding[k])}")
         for key in keys:
             if params.friction_model is FrictionModel.STRIBECK:
                 assert params.stribeck is not None
@@ -193,7 +196,9 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     keys = _FRICTION_KEYS[model]
     fr = {key: np.zeros(n) for key in (*keys, "rotor_inertia")}
     offset = np.zeros(n)
+    presliding = np.zeros(n)
     has_offset = False
+    has_presliding = 0
     phi = np.zeros(10 * n)
     for k, jn in enumerate(robot.joint_names):
         jt = joints.get(jn)
@@ -204,6 +209,12 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         if "offset" in jt:
             offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
             has_offset = True
+        if "presliding" in jt:
+            presliding[k] = _number(path, f"joints.{jn}.presliding", jt["presliding"])
+            if not 0 < presliding[k] <= 0.1:
+                raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
+                                value=presliding[k], expected="0 < z0 <= 0.1 rad")
+            has_presliding += 1
         for key in fr:
             if key not in jt:
                 raise DataError("missing", source=path, field=f"joints.{jn}.{key}",
@@ -214,6 +225,10 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
                 raise DataError("missing", source=path, field=f"links.{jn}.{p}",
                                 expected="the field to be present")
             phi[10 * k + i] = _number(path, f"links.{jn}.{p}", lt[p])
+    if has_presliding not in (0, n):
+        raise DataError("presliding given for some joints only", source=path,
+                        field="joints.*.presliding", value=has_presliding,
+                        expected=f"all {n} joints or none")
     noise = _table(path, doc, "noise")
     arrays = {}
     for key in ("mean", "std"):
@@ -226,12 +241,14 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         params = DriveModelParameters(
             phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
             stribeck=StribeckParameters(**{key: fr[key] for key in keys}),
-            offset=offset if has_offset else np.zeros(0))
+            offset=offset if has_offset else np.zeros(0),
+            presliding=presliding if has_presliding else np.zeros(0))
     else:
         params = DriveModelParameters(
             phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
             coulomb=fr["coulomb"], viscous=fr["viscous"],
-            cbrt=fr.get("cbrt", np.zeros(n)), offset=offset if has_offset else np.zeros(0))
+            cbrt=fr.get("cbrt", np.zeros(n)), offset=offset if has_offset else np.zeros(0),
+            presliding=presliding if has_presliding else np.zeros(0))
     seed = meta.get("sim_seed")
     if seed is not None and not is_sim_seed(seed):
         raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,

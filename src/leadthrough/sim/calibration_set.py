@@ -14,6 +14,7 @@ from leadthrough.data.recording import Recording
 from leadthrough.excitation.design import ExcitationConfig, ExcitationResult, design_excitation
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
+from leadthrough.excitation.presliding import PreslidingTestConfig, design_presliding_test
 from leadthrough.identification.api import IdentifyConfig
 from leadthrough.identification.comparison import MethodComparison, compare_methods, noise_floor
 from leadthrough.identification.metrics import ResidualStats
@@ -32,6 +33,7 @@ __all__ = [
     "record_calibration_set",
     "record_excitation",
     "record_friction_sweep",
+    "record_presliding_test",
 ]
 
 
@@ -130,6 +132,33 @@ def record_friction_sweep(
     layout = sweep_config if sweep_config is not None else FrictionSweepConfig()
     sweep = design_friction_sweep(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
     return _run(robot, sweep.samples, config, None, progress, " friction sweep")
+
+
+def record_presliding_test(
+    robot: Robot,
+    seed: int = 1,
+    run: int = 3,
+    q_start: Array | None = None,
+    test_config: PreslidingTestConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> SimRecording:
+    """Run a presliding test (:func:`design_presliding_test`) on simulated robot ``seed``.
+
+    Args:
+        robot: The robot.
+        seed: Simulated robot instance.
+        run: Recording number (independent sensor noise).
+        q_start: Test configuration [rad], shape (n,); default: the neutral pose.
+        test_config: Test layout.
+        progress: Progress callback.
+
+    Returns:
+        Measured and true recordings.
+    """
+    config = SimConfig(seed=seed, run=run)
+    layout = test_config if test_config is not None else PreslidingTestConfig()
+    test = design_presliding_test(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
+    return _run(robot, test.samples, config, None, progress, " presliding test")
 
 
 def record_calibration_set(
