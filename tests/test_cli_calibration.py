@@ -174,3 +174,36 @@ def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
     bad.write_text(params.read_text().replace("sim_seed = 1", 'sim_seed = "one"'))
     assert main(["guide", "--params", str(bad), "--operator", "rest", "-o", str(other)]) == 2
     assert "meta.sim_seed" in capsys.readouterr().err
+
+
+def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """excite --presliding → record → identify --presliding-test writes each joint's z₀ into
+    the params; the fit is done before the identification, so a bad test file fails first
+    and writes nothing."""
+    from leadthrough.identification.params_file import load_params
+    from leadthrough.robot import load_robot
+
+    pre, rec = tmp_path / "pre.csv", tmp_path / "pre.parquet"
+    assert main(["excite", "--robot", "er20", "--presliding", "-o", str(pre), "--json"]) == 0
+    assert _json(capsys)["trials"] == 20
+    assert main(["record", "--robot", "er20", "--trajectory", str(pre), "--seed", "1",
+                 "--run", "3", "-o", str(rec)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "p.toml"
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "ols-cv", "--presliding-test", str(rec), "-o", str(out), "--json"]) == 0
+    fit = _json(capsys)["presliding"]
+    assert fit["pairs"] >= 30
+    z0 = [fit["joints"][f"joint_{k}"]["z0_rad"] for k in range(1, 7)]
+    np.testing.assert_array_equal(load_params(out, load_robot("er20")).params.presliding, z0)
+    assert all(1e-4 < z < 3e-4 for z in z0)
+    # the identification recording is no presliding test: exit 2, nothing written
+    bad = tmp_path / "bad.toml"
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "ols-cv", "--presliding-test", str(workdir / "rec1.parquet"),
+                 "-o", str(bad)]) == 2
+    assert "too few out-and-back moves" in _err(capsys)
+    assert not bad.exists()
+    assert main(["excite", "--sweep", "--presliding", "-o", str(tmp_path / "x.csv")]) == 2
+    assert "--sweep or --presliding" in _err(capsys)
