@@ -11,13 +11,12 @@ from typing import Any
 
 import numpy as np
 
+from leadthrough.cli.friction_experiments import excite_friction_experiment
 from leadthrough.data.io import load_recording, save_recording
 from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
-from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
-from leadthrough.excitation.presliding import PreslidingTestConfig, design_presliding_test
 from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
 from leadthrough.identification.api import (
     METHODS,
@@ -35,7 +34,6 @@ from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.robot.urdf_export import write_urdf_with_inertias
-from leadthrough.session.sim_session import guide_start_pose
 from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import run_trajectory
@@ -199,59 +197,11 @@ def _load(args: argparse.Namespace, robot: Robot) -> Recording:
     return rec
 
 
-def _start(args: argparse.Namespace, robot: Robot) -> np.ndarray:
-    q0 = guide_start_pose(robot) if args.start is None else np.array(args.start, dtype=float)
-    if q0.shape != (robot.n,):
-        raise DataError("wrong number of joint positions", field="--start", value=args.start,
-                        expected=f"{robot.n} values [rad]")
-    return q0
-
-
-def _excite_presliding(args: argparse.Namespace, robot: Robot) -> int:
-    q0 = _start(args, robot)
-    test = design_presliding_test(robot, q0)
-    amplitudes = PreslidingTestConfig().amplitudes
-    save_trajectory(args.output, test.samples, robot.name,
-                    {"kind": "presliding test",
-                     "amplitudes": " ".join(f"{a:g}" for a in amplitudes)})
-    out = {"robot": robot.name, "kind": "presliding test", "duration_s": test.duration_s,
-           "amplitudes_rad": list(amplitudes), "trials": int(test.amplitude.size),
-           "q_start": q0.tolist(), "output": str(args.output)}
-    if args.json:
-        print(json.dumps(out, indent=2))
-    else:
-        print(f"presliding test: {test.amplitude.size} excursions out and back at rest, "
-              f"{test.duration_s:.1f} s; written to {args.output}")
-    return 0
-
-
-def _excite_sweep(args: argparse.Namespace, robot: Robot) -> int:
-    q0 = _start(args, robot)
-    sweep = design_friction_sweep(robot, q0)
-    save_trajectory(args.output, sweep.samples, robot.name,
-                    {"kind": "friction sweep", "speeds": " ".join(f"{v:g}" for v in
-                                                                  FrictionSweepConfig().speeds)})
-    out = {"robot": robot.name, "kind": "friction sweep", "duration_s": sweep.duration_s,
-           "speeds_rad_s": sweep.speeds.tolist(), "q_start": q0.tolist(),
-           "output": str(args.output)}
-    if args.json:
-        print(json.dumps(out, indent=2))
-    else:
-        print(f"friction sweep: {sweep.speeds.shape[0]} speeds out and back, "
-              f"{sweep.duration_s:.1f} s; written to {args.output}")
-    return 0
-
-
 def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
     robot = load_robot(args.robot)
-    if args.sweep and args.presliding:
-        raise DataError("choose one of the two friction experiments", field="--presliding",
-                        value=True, expected="--sweep or --presliding, not both")
-    if args.sweep:
-        return _excite_sweep(args, robot)
-    if args.presliding:
-        return _excite_presliding(args, robot)
+    if args.sweep or args.presliding:
+        return excite_friction_experiment(args, robot)
     cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
                            starts=args.starts, seed=args.seed, floor_height=args.floor)
     period = 1.0 / cfg.base_frequency

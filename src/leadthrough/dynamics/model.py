@@ -25,9 +25,13 @@ from leadthrough.dynamics.regressor import link_torque, standard_parameters
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
-__all__ = ["DriveModelParameters", "FrictionModel", "model_torque", "nominal_drive_parameters"]
+__all__ = ["MAX_PRESLIDING_RAD", "DriveModelParameters", "FrictionModel", "model_torque",
+           "nominal_drive_parameters"]
 
 Array = NDArray[np.float64]
+
+#: Largest presliding length z₀ accepted anywhere [rad] (gear presliding is ≲ 1e-3)
+MAX_PRESLIDING_RAD = 0.1
 
 
 class FrictionModel(StrEnum):
@@ -75,9 +79,11 @@ class DriveModelParameters:
                             field="stribeck", expected="StribeckParameters")
         z0 = np.asarray(self.presliding, dtype=float)
         n = np.size(self.rotor_inertia)
-        if z0.size and (z0.shape != (n,) or not np.all((z0 > 0) & (z0 <= 0.1))):
+        if z0.size and (z0.shape != (n,)
+                        or not np.all((z0 > 0) & (z0 <= MAX_PRESLIDING_RAD))):
             raise DataError("presliding lengths out of range", field="presliding",
-                            value=z0.tolist(), expected=f"{n} values in (0, 0.1] rad, or none")
+                            value=z0.tolist(),
+                            expected=f"{n} values in (0, {MAX_PRESLIDING_RAD:g}] rad, or none")
 
     def friction(self, qd: Array, gear_ratio: Array) -> Array:
         """Friction torque [N·m] for joint velocities ``qd`` [rad/s], shape (N, n)."""

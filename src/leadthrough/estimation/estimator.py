@@ -39,7 +39,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.model import DriveModelParameters
+from leadthrough.dynamics.model import MAX_PRESLIDING_RAD, DriveModelParameters
 from leadthrough.errors import DataError, check_fields
 from leadthrough.estimation import fused, kernels
 from leadthrough.estimation.filters import FirstOrderLowPass, StateVariableDifferentiator
@@ -160,7 +160,8 @@ class EstimatorConfig:
             ("standstill_velocity", self.standstill_velocity > 0, "> 0 rad/s"),
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
-            ("presliding_rad", 0 < self.presliding_rad <= 0.1, "0 < z0 <= 0.1 rad"),
+            ("presliding_rad", 0 < self.presliding_rad <= MAX_PRESLIDING_RAD,
+             f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad"),
             ("presliding_play_counts", 0 <= self.presliding_play_counts < 1e6,
              "0 <= width < 1e6 counts"),
             ("friction_weighting",

@@ -26,6 +26,7 @@ __all__ = [
     "FRICTION_ROWS",
     "cholesky_factor",
     "cholesky_solve",
+    "dahl_step",
     "damping_of",
     "direct_residual",
     "friction_torque",
@@ -105,6 +106,26 @@ def play_step(q: Array, half_width: Array, play: Array, increment: Array) -> Non
 
 
 @njit(cache=True, nogil=True)
+def dahl_step(state: float, displacement: float, level: float, presliding: float) -> float:
+    """One exact step of a Dahl friction state driven by a displacement.
+
+    F turns toward ±``level`` (the sign of the displacement) by the factor
+    e^{−|displacement|/z₀}: dF = (g·sgn(dq) − F)·|dq|/z₀, exact for one monotone step.
+
+    Args:
+        state: F before the step [N·m] (or normalised, with ``level`` 1).
+        displacement: dq of the step [rad], non-zero.
+        level: g [N·m], > 0.
+        presliding: z₀ [rad], > 0.
+
+    Returns:
+        F after the step.
+    """
+    target = level if displacement > 0.0 else -level
+    return target + (state - target) * np.exp(-abs(displacement) / presliding)
+
+
+@njit(cache=True, nogil=True)
 def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: bool,
                              dt: float, command_presliding: float, rest_presliding: Array,
                              state: Array, out: Array, level: Array) -> None:
@@ -156,9 +177,7 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: b
                 state[j] = target + (state[j] - target) * np.exp(
                     -g0 * abs(v) * dt / (command_presliding * g))
         elif increment[j] != 0.0 and g0 > 0.0:
-            d = increment[j]
-            target = g0 if d > 0.0 else -g0
-            state[j] = target + (state[j] - target) * np.exp(-abs(d) / rest_presliding[j])
+            state[j] = dahl_step(state[j], increment[j], g0, rest_presliding[j])
         f = state[j] + v * fp[2, j]
         if not stribeck:
             f += fp[7, j] * np.cbrt(v)

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from leadthrough import __version__
 from leadthrough.data.recording import is_sim_seed
 from leadthrough.dynamics.friction import StribeckParameters
-from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
+from leadthrough.dynamics.model import MAX_PRESLIDING_RAD, DriveModelParameters, FrictionModel
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
 from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write_text
@@ -211,9 +211,10 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
             has_offset = True
         if "presliding" in jt:
             presliding[k] = _number(path, f"joints.{jn}.presliding", jt["presliding"])
-            if not 0 < presliding[k] <= 0.1:
+            if not 0 < presliding[k] <= MAX_PRESLIDING_RAD:
                 raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
-                                value=presliding[k], expected="0 < z0 <= 0.1 rad")
+                                value=presliding[k],
+                                expected=f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad")
             has_presliding += 1
         for key in fr:
             if key not in jt:

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError, check_fields
+from leadthrough.estimation import kernels
 from leadthrough.robot.description import Robot
 
 __all__ = ["PreslidingAnalysisConfig", "PreslidingFit", "RestPairs", "dahl_states",
@@ -133,6 +134,10 @@ class PreslidingFit:
 def dahl_states(q: Array, half_width: Array, presliding: Array) -> Array:
     """The normalised Dahl friction state s of every sample (F = g·s), from rest at s = 0.
 
+    The estimator's friction at rest, replayed: the same play operator
+    (:func:`~leadthrough.estimation.kernels.play_step`) and step
+    (:func:`~leadthrough.estimation.kernels.dahl_step`).
+
     Args:
         q: Joint positions [rad], shape (N, n).
         half_width: Half width of the play operator per joint [rad], shape (n,).
@@ -143,18 +148,15 @@ def dahl_states(q: Array, half_width: Array, presliding: Array) -> Array:
     """
     N, n = q.shape
     out = np.zeros((N, n))
-    for j in range(n):
-        play = q[0, j]
-        s = 0.0
-        h = half_width[j]
-        for i in range(N):
-            new = min(max(play, q[i, j] - h), q[i, j] + h)
-            d = new - play
-            play = new
-            if d != 0.0:
-                target = 1.0 if d > 0.0 else -1.0
-                s = target + (s - target) * np.exp(-abs(d) / presliding[j])
-            out[i, j] = s
+    play = q[0].copy()
+    increment = np.zeros(n)
+    s = np.zeros(n)
+    for i in range(N):
+        kernels.play_step(q[i], half_width, play, increment)
+        for j in range(n):
+            if increment[j] != 0.0:
+                s[j] = kernels.dahl_step(s[j], increment[j], 1.0, presliding[j])
+        out[i] = s
     return out
 
 
@@ -265,11 +267,12 @@ def fit_presliding(recording: Recording, robot: Robot,
     z0 = np.exp(grid[best])
     step = grid[1] - grid[0]
     for j in range(n):
-        def joint_cost(lz: float, j: int = j) -> float:
-            z = z0.copy()
-            z[j] = math.exp(lz)
-            ds = _state_changes(q, half, z, pairs)[:, j:j + 1]
-            return float(np.sum((df[:, j:j + 1] - _level(ds, df[:, j:j + 1]) * ds) ** 2))
+        # the joints are independent: replay this joint's column only
+        qj, hj, dfj = np.ascontiguousarray(q[:, j:j + 1]), half[j:j + 1], df[:, j:j + 1]
+
+        def joint_cost(lz: float, qj: Array = qj, hj: Array = hj, dfj: Array = dfj) -> float:
+            ds = _state_changes(qj, hj, np.array([math.exp(lz)]), pairs)
+            return float(np.sum((dfj - _level(ds, dfj) * ds) ** 2))
         bracket = (max(lo, grid[best[j]] - step), min(hi, grid[best[j]] + step))
         sol = scipy.optimize.minimize_scalar(joint_cost, bounds=bracket, method="bounded",
                                              options={"xatol": 1e-4})
