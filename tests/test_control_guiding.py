@@ -418,3 +418,46 @@ def test_after_a_release_at_rest_breaking_away_takes_the_stopping_friction(er20:
     vx = tr.twist_base[:, 0]
     first = 100 + int(np.argmax(w[100:, 0] <= -15.0))
     assert np.all(vx[:first] == 0.0) and vx[first] < 0.0
+
+
+def test_rest_cycles_reuse_the_kinematics_bit_for_bit(er20: Robot) -> None:
+    """A cycle at rest reuses the kinematics and the IK residual of the unchanged setpoint; a
+    controller made to recompute them every cycle gives the same outputs, bit for bit, through
+    pushes, stops, rests, a deadman release, a fault and its clearing."""
+    cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6))
+    k_n = 700
+    w = np.zeros((k_n, 6))
+    w[10:120, 0] = 40.0                     # push +x, release, stop and rest
+    w[250:330, 4] = 30.0                    # turn about y, release
+    w[400:480, 1] = -70.0                   # push −y, deadman released while moving (cycle 450)
+    w[520, 2] = np.nan                      # a fault at rest, cleared at cycle 560
+    w[600:680, 2] = 70.0                    # push +z after the clearing and a new press
+    k = np.arange(k_n)
+    # released at cycle 0, from 450 to 470 and (a new press after the reset) 570 to 580
+    deadman = (k > 0) & ((k < 450) | (k > 470)) & ((k < 570) | (k > 580))
+    cached, fresh = GuidingController(er20, cfg), GuidingController(er20, cfg)
+    outs = []
+    for ctl, recompute in ((cached, False), (fresh, True)):
+        ctl.reset(Q_WORK)
+        inp, out = ctl.make_input(), ctl.make_output()
+        inp.q[:] = Q_WORK
+        rows = []
+        for k in range(k_n):
+            inp.t, inp.sequence, inp.deadman = k * DT, k, bool(deadman[k])
+            inp.wrench_base[:] = w[k]
+            if recompute:
+                ctl._kinematics_fresh = ctl._residual_fresh = False
+            ctl.update(inp, out)
+            if k == 560:
+                assert ctl.clear_fault(k * DT)
+            rows.append(np.concatenate([out.q, out.qd, out.transform_tool_to_base.ravel(),
+                                        out.twist_base, [out.manipulability, out.ik_residual,
+                                                         out.state, out.fault]]))
+            inp.q[:] = out.q                # perfect servo
+        outs.append(np.array(rows))
+    states = outs[0][:, -2]
+    assert {State.GUIDING, State.STOPPING, State.FAULT, State.IDLE} <= set(states.tolist())
+    np.testing.assert_array_equal(outs[0], outs[1])
+    # the session moved in every push, and rested (cached cycles) in between
+    moving = np.any(outs[0][:, 6:12] != np.roll(outs[0][:, 6:12], 1, axis=0), axis=1)
+    assert moving[20:120].all() and not moving[200:240].any() and moving[610:680].any()

@@ -37,7 +37,9 @@ One cycle:
 4. differential IK (:mod:`~leadthrough.control.ik`) to the joint setpoint. A twist of exactly
    zero, once every joint is slow enough to halt within its acceleration limit, skips the IK:
    the joint setpoint is held bit for bit and q̇ = 0.0 exactly (until then the IK tracks the
-   held pose and brakes the joints).
+   held pose and brakes the joints). While the setpoint and the commanded pose are unchanged,
+   the cycle reuses their kinematics (FK, Jacobian, μ) and IK residual instead of recomputing
+   the same numbers (a cycle at rest: 16 instead of 22 µs, ``benchmarks/guiding.py``).
 
 ``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio and
 ``numpy.linalg`` allocate their results; a state transition appends one event to the log).
@@ -157,6 +159,11 @@ class GuidingController:
         self._T_new = pin.SE3.Identity()
         self._R_new, self._p_new = self._T_new.rotation, self._T_new.translation
         self._resync = False
+        # the kinematics (FK, Jacobian, μ) of the IK are those of _q_cmd, and _residual is the
+        # IK residual of _T_cmd from there: at rest neither changes, and the cycle reuses them
+        self._kinematics_fresh = False
+        self._residual_fresh = False
+        self._residual = 0.0
         self._started = False
         self._rest_s = math.inf
         self._release_s = math.inf  # time since the force was removed at rest [s]
@@ -214,6 +221,7 @@ class GuidingController:
                                expected=f"TCP within {sc.workspace_min} .. {sc.workspace_max} m, "
                                         f"{sc.workspace_margin} m inside")
         self._q_cmd[:] = q
+        self._kinematics_fresh = True
         self._qd_cmd[:] = 0.0
         self._ik_result.qd_dls[:] = 0.0
         self._stop_plan = math.inf if not self._safety.has_box else 0.0
@@ -277,13 +285,17 @@ class GuidingController:
                 out.q[:] = inp.q
             return out.status
         sup.check_feedback(t, inp.sequence, inp.q, inp.current, inp.wrench_base, self._q_cmd)
-        ik.compute_kinematics(self._q_cmd)
-        T_fk = ik.transform_tool_to_base
+        if not self._kinematics_fresh:
+            ik.compute_kinematics(self._q_cmd)
+            self._kinematics_fresh = True
         if self._resync:
             self._hold_fk()
             self._resync = False
-        err = pin.log6(T_fk.actInv(self._T_cmd)).vector
-        residual = kernels.norm(err)
+        if not self._residual_fresh:
+            err = pin.log6(ik.transform_tool_to_base.actInv(self._T_cmd)).vector
+            self._residual = kernels.norm(err)
+            self._residual_fresh = True
+        residual = self._residual
         mu = ik.manipulability
         twist, new = self._twist, self._twist_new
         # cycles a stop gives the joints (IKConfig.stop_acceleration_fraction) from the setpoint;
@@ -356,6 +368,7 @@ class GuidingController:
             self._take_new_pose()
             ik.solve(self._q_cmd, self._qd_cmd, self._T_cmd, res)
             self._q_cmd[:] = res.q
+            self._kinematics_fresh = self._residual_fresh = False
             self._qd_cmd[:] = res.qd
             self._resync = res.limited
         out.manipulability = mu
@@ -380,10 +393,12 @@ class GuidingController:
         ik = self._ik
         gk.copy_pose(ik.rotation_tool_to_base, ik.translation_tool_to_base, self._R_cmd,
                      self._p_cmd)
+        self._residual_fresh = False
 
     def _take_new_pose(self) -> None:
         """The next pose becomes the commanded one (the two poses swap)."""
         self._T_cmd, self._T_new = self._T_new, self._T_cmd
+        self._residual_fresh = False
         self._R_cmd, self._R_new = self._R_new, self._R_cmd
         self._p_cmd, self._p_new = self._p_new, self._p_cmd
 
