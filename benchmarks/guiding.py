@@ -17,7 +17,10 @@
    and seam sessions, where the simulator's work between cycles evicts the loop from the caches,
    and for the loop alone, replaying the sessions' recorded feedback (same computation, bit for
    bit; :mod:`leadthrough.drivers.replay`) five times: each replay, and each cycle's fastest
-   of the five (the computation's own spread, without the machine's random interruptions).
+   of the five (the computation's own spread, without the machine's random interruptions),
+   split into moving cycles and cycles at rest; and how often the machine interrupts a loop that
+   does nothing else (on a VM: a few hundred times a second, by tens of µs: a cycle is hit with
+   a probability of its length times that rate, which sets the p99 once it passes 1 %).
 """
 
 from __future__ import annotations
@@ -48,6 +51,9 @@ from leadthrough.sim.calibration_set import record_calibration_set, record_frict
 CONTROLLERS = ("virtual-friction", "velocity")
 #: Replays of each session's loop for the cycle time.
 REPLAYS = 5
+#: Length of the probe of the machine's interruptions [s], and the shortest gap counted [µs].
+INTERRUPTION_PROBE_S = 2.0
+INTERRUPTION_GAP_US = 10.0
 
 
 def rnea_time_us(robot_name: str = "er20", repeats: int = 20000) -> float:
@@ -123,7 +129,7 @@ def main() -> None:
 
     print("\n3. Diagonal and seam sessions (virtual friction)")
     paths, targets, cycle = {}, {}, []
-    alone = []
+    alone, moving = [], []
     for op in ("diagonal", "seam"):
         cfg = SimSessionConfig(operator=op)
         s = run_sim_session(robot, pf, cfg, record_feedback=True)
@@ -134,6 +140,12 @@ def main() -> None:
         # REPLAYS times (the same computation each time, bit for bit)
         alone.append(np.array([replay_session(robot, pf, cfg, s.feedback).cycle_us
                                for _ in range(REPLAYS)]))
+        # a cycle moves when it commands a twist (else it holds its setpoint and reuses the
+        # setpoint's kinematics)
+        log = s.result.log
+        every = round(cfg.guiding.dt / float(log.time[1] - log.time[0]))
+        twist = log.twist_cmd_base[::every][:alone[-1].shape[1]]
+        moving.append(np.any(twist != 0.0, axis=1))
         if s.p1_base is not None and s.p2_base is not None:
             targets.update({"P1": s.p1_base, "P2": s.p2_base})
         print(f"  {op:<9} max speed {s.summary.max_linear_speed:.3f} m/s, faults "
@@ -164,8 +176,36 @@ def main() -> None:
     for k in range(REPLAYS):
         _report(f"loop alone, replay {k + 1}", runs[k], r)
     # each cycle's fastest replay: what the computation itself costs, without the machine's
-    # interruptions (they hit 1-3 % of the cycles of a run at random, by 20-40 µs, on a VM)
-    _report(f"loop alone, each cycle's fastest of {REPLAYS}", runs.min(axis=0), r)
+    # interruptions (they hit a cycle at random, see below)
+    fastest = runs.min(axis=0)
+    _report(f"loop alone, each cycle's fastest of {REPLAYS}", fastest, r)
+    mov = np.concatenate(moving)
+    _report(f"  of which moving ({mov.sum()} cycles)", fastest[mov], r)
+    _report(f"  of which at rest ({(~mov).sum()} cycles)", fastest[~mov], r)
+    gaps = interruptions()
+    rate = gaps.size / INTERRUPTION_PROBE_S
+    print(f"  the machine: an empty loop is interrupted {rate:.0f} times/s, by median "
+          f"{np.median(gaps):.0f} µs (p90 {np.percentile(gaps, 90):.0f} µs); a cycle of "
+          f"{np.median(fastest[mov]):.0f} µs is hit with probability "
+          f"{100 * rate * np.median(fastest[mov]) * 1e-6:.1f} %")
+
+
+def interruptions(seconds: float = 0.0) -> np.ndarray:
+    """The machine's interruptions of a running thread: gaps [µs] longer than
+    :data:`INTERRUPTION_GAP_US` between consecutive clock reads of a loop that does nothing
+    else, over ``seconds`` (default :data:`INTERRUPTION_PROBE_S`)."""
+    seconds = seconds or INTERRUPTION_PROBE_S
+    reads = np.ones(round(seconds * 1.2e7))             # touched: no page faults while timing
+    clock = time.perf_counter
+    end = clock() + seconds
+    k = 0
+    while k < reads.size:
+        reads[k] = t = clock()
+        k += 1
+        if t > end:
+            break
+    gaps = 1e6 * np.diff(reads[:k])
+    return gaps[gaps > INTERRUPTION_GAP_US]
 
 
 def _report(label: str, us: np.ndarray, rnea_us: float) -> None:
