@@ -201,6 +201,41 @@ def test_update_before_reset_holds_the_measured_position(er20: Robot) -> None:
     assert out.fault == Fault.NOT_STARTED and np.all(out.q == Q_WORK) and np.all(out.qd == 0.0)
 
 
+def test_update_before_reset_never_commands_a_position_it_was_not_given(er20: Robot) -> None:
+    """Before the first reset a non-finite measurement keeps the last finite one as the
+    output; with none seen yet the output is NaN (no position to command), never zeros."""
+    ctl = GuidingController(er20)
+    inp, out = ctl.make_input(), ctl.make_output()
+    inp.q[:] = math.nan
+    assert ctl.update(inp, out) == Status.FAULT and np.all(np.isnan(out.q))
+    inp.q[:] = Q_WORK
+    ctl.update(inp, out)
+    inp.q[3] = math.nan
+    assert ctl.update(inp, out) == Status.FAULT
+    assert out.fault == Fault.NOT_STARTED and np.all(out.q == Q_WORK)
+
+
+@pytest.mark.parametrize("field,size", [("q", 5), ("current", 7), ("wrench_base", 3)])
+def test_input_arrays_of_the_wrong_size_fault(er20: Robot, field: str, size: int) -> None:
+    ctl = GuidingController(er20)
+    ctl.reset(Q_WORK)
+    inp, out = ctl.make_input(), ctl.make_output()
+    inp.q[:] = Q_WORK
+    assert ctl.update(inp, out) == Status.OK
+    setattr(inp, field, np.zeros(size))
+    inp.sequence = 1
+    assert ctl.update(inp, out) == Status.FAULT and out.fault == Fault.NONFINITE_INPUT
+    assert np.all(out.q == Q_WORK) and np.all(out.qd == 0.0)
+
+
+def test_an_estimator_fault_trips_the_controller(er20: Robot) -> None:
+    tr = run(GuidingController(er20, GuidingConfig(virtual_friction=LIGHT)), Q_WORK,
+             np.tile([0.0, 60.0, 0, 0, 0, 0], (300, 1)),
+             inject=_once(K, lambda k, inp: setattr(inp, "estimator_status", -1)))
+    f = _check_stop_and_latch(er20, tr, Fault.ESTIMATOR)
+    assert f == K
+
+
 _finite = st.floats(-10.0, 10.0)
 _any = st.one_of(_finite, st.sampled_from([math.nan, math.inf, -math.inf, 1e300]))
 

@@ -108,6 +108,94 @@ def test_nonfinite_input_latches_a_fault(er20: Robot) -> None:
     assert est.update(inp, out) is Status.WARMING_UP
 
 
+@pytest.mark.parametrize("method", ["direct", "momentum"])
+@pytest.mark.parametrize("bad", ["qd_cmd nan", "qd_cmd inf", "q 1e155", "current 1.7e308"])
+def test_bad_command_or_overflow_latches_a_fault_and_keeps_the_output(
+        er20: Robot, method: str, bad: str) -> None:
+    """A non-finite commanded velocity (the friction follows it), or a finite input so large
+    that the filters overflow: FAULT_NONFINITE, the last valid output kept and finite, latched
+    until reset (never an OK status over NaN)."""
+    est = _estimator(er20, method=method, axes="force", friction_velocity="command")
+    inp, out = est.make_input(), est.make_output()
+    est.reset(Q0)
+    inp.q[:] = Q0
+    for k in range(600):
+        inp.t = k * 1e-3
+        est.update(inp, out)
+    last_wrench, last_tau = out.wrench.copy(), out.tau_ext.copy()
+    name, value = bad.split()
+    getattr(inp, name)[2] = float(value)
+    inp.t += 1e-3
+    assert est.update(inp, out) is Status.FAULT_NONFINITE
+    getattr(inp, name)[2] = Q0[2] if name == "q" else 0.0
+    for _ in range(100):
+        inp.t += 1e-3
+        assert est.update(inp, out) is Status.FAULT_NONFINITE
+    np.testing.assert_array_equal(out.wrench, last_wrench)
+    np.testing.assert_array_equal(out.tau_ext, last_tau)
+    est.reset(Q0)
+    for _ in range(600):
+        inp.t += 1e-3
+        status = est.update(inp, out)
+    assert status is Status.OK and np.all(np.isfinite(out.wrench))
+
+
+def test_input_arrays_of_the_wrong_size_latch_a_fault(er20: Robot) -> None:
+    from leadthrough.estimation.estimator import EstimatorInput
+
+    est = _estimator(er20, friction_velocity="command")
+    out = est.make_output()
+    for inp in (EstimatorInput(0.0, Q0[:5].copy(), np.zeros(6), np.zeros(6)),
+                EstimatorInput(0.0, Q0.copy(), np.zeros(7), np.zeros(6)),
+                EstimatorInput(0.0, Q0.copy(), np.zeros(6))):    # qd_cmd left empty
+        est.reset(Q0)
+        assert est.update(inp, out) is Status.FAULT_INPUT_SIZE
+        assert est.update(est.make_input(), out) is Status.FAULT_INPUT_SIZE   # latched
+        assert np.all(out.wrench == 0.0)
+    # without the command friction, qd_cmd is not used and may be left empty
+    est = _estimator(er20)
+    est.reset(Q0)
+    assert est.update(EstimatorInput(0.0, Q0.copy(), np.zeros(6)), out) is Status.WARMING_UP
+
+
+@pytest.mark.parametrize("missed", [1, 5, 25])
+def test_missed_samples_are_bridged_not_differentiated_as_one_period(er20: Robot,
+                                                                     missed: int) -> None:
+    """A joint moving at a constant 0.1 rad/s, with ``missed`` samples that never arrive: the
+    velocity estimate after the gap is that of the run that missed nothing (q is linear, so the
+    interpolation is exact), where it would jump by the gap's motion over one period."""
+    velocity, runs = 0.1, []
+    for gap in (0, missed):
+        est = _estimator(er20)
+        inp, out = est.make_input(), est.make_output()
+        est.reset(Q0)
+        qd = np.full(1500, np.nan)
+        for k in range(1500):
+            if 1000 <= k < 1000 + gap:
+                continue
+            inp.t = k * 1e-3
+            inp.q[:] = Q0
+            inp.q[1] += velocity * inp.t
+            est.update(inp, out)
+            qd[k] = out.qd[1]
+        runs.append(qd)
+    after = slice(1000 + missed, None)
+    assert abs(runs[0][999] - velocity) < 5e-3 * velocity      # settled before the gap
+    np.testing.assert_allclose(runs[1][after], runs[0][after], rtol=1e-9)
+
+
+def test_rezero_takes_any_window_without_raising(er20: Robot) -> None:
+    est = _estimator(er20)
+    inp, out = est.make_input(), est.make_output()
+    est.reset(Q0)
+    inp.q[:] = Q0
+    for samples in (float("inf"), float("nan"), 2**70, -3, 0):
+        est.rezero(samples)  # type: ignore[arg-type]
+        assert est.rezeroing
+        est.update(inp, out)
+    assert np.all(np.isfinite(out.wrench))
+
+
 @settings(max_examples=50, deadline=None)
 @given(st.floats(-0.2, 0.2), st.floats(0.0, 1.0))
 def test_wrench_stays_bounded_near_the_wrist_singularity(er20: Robot, q5: float, scale: float

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from leadthrough.cli import main
+from leadthrough.control.safety import Fault as ControlFault
 from leadthrough.control.safety import State
 from leadthrough.drivers.replay import ReplayDriver
 from leadthrough.drivers.sim_driver import Fault, FaultKind
@@ -77,6 +78,34 @@ def test_injected_feedback_fault_stops_the_push_and_latches(er20: Robot,
     acc = np.linalg.norm(np.diff(cycles, axis=0), axis=1) / 0.01
     assert acc.max() <= LIMIT_ACC + 1e-9
     assert np.all(np.abs(np.diff(log.q_cmd, axis=0)) < 1e-3)  # no position jump at 1 ms
+
+
+@pytest.mark.parametrize("kind", [FaultKind.NAN_CURRENT, FaultKind.NAN_Q])
+def test_a_bad_sample_between_controller_cycles_faults_the_controller(
+        er20: Robot, nominal_params: ParamsFile, kind: FaultKind) -> None:
+    """A non-finite sample lasting one servo period between two controller cycles: the
+    controller never sees it, the estimator does and latches; the controller then faults
+    (ESTIMATOR), stops at the limit and latches, instead of taking the estimator's fault for
+    a released deadman."""
+    fault = Fault(kind, t_start=3.0035, t_end=3.0045, joint=2)
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(
+        operator="push-x", duration_s=5.0, guiding=light_guiding(), faults=(fault,)))
+    log = s.result.log
+    first = int(np.argmax(log.state == int(State.FAULT)))
+    assert first > 0 and 3.004 <= log.time[first] <= 3.02
+    assert np.all(log.state[first:] == int(State.FAULT))
+    assert np.all(log.fault[first:] == int(ControlFault.ESTIMATOR))
+    assert s.summary.faults and "ESTIMATOR" in s.summary.faults[0]
+    assert log.state[first - 1] == int(State.GUIDING)          # not taken for a release
+    assert np.all(log.twist_cmd_base[-1] == 0.0)
+    cycles = log.twist_cmd_base[::10, :3]
+    assert (np.linalg.norm(np.diff(cycles, axis=0), axis=1) / 0.01).max() <= LIMIT_ACC + 1e-9
+
+
+def test_the_first_read_must_bring_feedback(er20: Robot, nominal_params: ParamsFile) -> None:
+    with pytest.raises(ControlError, match="no feedback on the first read"):
+        run_sim_session(er20, nominal_params, SimSessionConfig(
+            operator="rest", duration_s=1.0, faults=(Fault(FaultKind.STALE, 0.0, 0.01),)))
 
 
 def test_replayed_feedback_repeats_the_session_bit_for_bit(er20: Robot,

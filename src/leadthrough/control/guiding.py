@@ -151,6 +151,7 @@ class GuidingController:
         self._Jc = np.zeros((6, n))
         self._q_cmd = np.zeros(n)
         self._qd_cmd = np.zeros(n)
+        self._measured_q = np.full(n, math.nan)   # the last finite q before the first reset
         # the commanded TCP pose and the next cycle's, two poses swapped when the step is taken;
         # the kernels write them through views of their rotation and translation (no SE3 is
         # built in the cycle)
@@ -193,8 +194,10 @@ class GuidingController:
     def reset(self, q: Array, t: float = 0.0) -> None:
         """(Re)start at rest at joint position ``q``, IDLE, any fault cleared.
 
-        Pass the last commanded position (``out.q``) to continue without a step, or the measured
-        one when the robot is away from the command (e.g. after a following-error fault).
+        Pass the last commanded position (``out.q``) to continue without a position step, or
+        the measured one when the robot is away from the command (e.g. after a following-error
+        fault). The commanded velocity restarts from zero: reset a robot at rest (a moving
+        one would be stopped within one cycle, beyond its acceleration limits).
 
         Args:
             q: Joint position [rad], shape (n,), within the joint limits.
@@ -278,13 +281,17 @@ class GuidingController:
         """
         sup, ik, t = self._safety, self._ik, inp.t
         if not self._started:
-            # no setpoint yet: hold wherever the robot is
+            # no setpoint yet: hold wherever the robot was last measured (NaN before any
+            # finite measurement: there is no position to command)
             sup.trip(t, Fault.NOT_STARTED)
+            if inp.q.shape == self._measured_q.shape and np.isfinite(inp.q).all():
+                self._measured_q[:] = inp.q
             self._write(out, 1.0)
-            if np.isfinite(inp.q).all():
-                out.q[:] = inp.q
+            out.q[:] = self._measured_q
             return out.status
         sup.check_feedback(t, inp.sequence, inp.q, inp.current, inp.wrench_base, self._q_cmd)
+        if inp.estimator_status < 0:
+            sup.trip(t, Fault.ESTIMATOR, float(inp.estimator_status))
         if not self._kinematics_fresh:
             ik.compute_kinematics(self._q_cmd)
             self._kinematics_fresh = True

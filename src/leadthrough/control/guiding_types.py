@@ -119,6 +119,10 @@ class GuidingInput:
             rotated into tool axes with the commanded TCP orientation (which the measured one
             follows within the following-error limit).
         deadman: Enabling input held.
+        estimator_status: The estimator's status of the last sample
+            (:class:`~leadthrough.estimation.estimator.Status`); a negative value (a latched
+            fault: it ran every servo period, and may have seen a bad sample the controller did
+            not) trips ``Fault.ESTIMATOR``.
     """
 
     t: float
@@ -127,6 +131,7 @@ class GuidingInput:
     current: Array
     wrench_base: Array
     deadman: bool = False
+    estimator_status: int = 0
 
 
 @dataclass

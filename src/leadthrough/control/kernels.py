@@ -87,11 +87,13 @@ def feedback_fault(q: Array, current: Array, wrench: Array, q_commanded: Array,
     Returns:
         ``FEEDBACK_OK`` or the code of the first failed check (value and index in ``info``:
         the joint with the largest excess, or the wrench norm and 0/1; not set for
-        ``FEEDBACK_NONFINITE``).
+        ``FEEDBACK_NONFINITE``, which also stands for arrays of the wrong size).
     """
+    n = q_commanded.size
+    if q.size != n or current.size != n or wrench.size != 6:
+        return FEEDBACK_NONFINITE
     if not all_finite(q, current, wrench):
         return FEEDBACK_NONFINITE
-    n = q.size
     mid, half_tolerance, max_current = joint_bounds[0], joint_bounds[1], joint_bounds[2]
     following_limit, max_force, max_torque = limits[0], limits[1], limits[2]
     for code in range(FEEDBACK_POSITION, FEEDBACK_FOLLOWING + 1):

@@ -59,7 +59,8 @@ class Fault(IntEnum):
     """Why the controller is in FAULT (``NONE`` otherwise)."""
 
     NONE = 0
-    #: t, q, current or wrench not finite (value: NaN, index: -1).
+    #: t, q, current or wrench not finite, or an input array of the wrong size (value: NaN,
+    #: index: -1).
     NONFINITE_INPUT = 1
     #: Measured joint position outside its limits by more than the tolerance (value: q [rad]).
     POSITION_RANGE = 2
@@ -82,6 +83,9 @@ class Fault(IntEnum):
     TRACKING = 10
     #: ``update`` called before the first ``reset`` (no commanded position yet).
     NOT_STARTED = 11
+    #: The force estimator latched a fault since the last cycle (a non-finite or wrong-size
+    #: sample between the controller's cycles, or an overflow; value: the estimator's status).
+    ESTIMATOR = 12
 
 
 #: The fault of each failed check of ``kernels.feedback_fault``.

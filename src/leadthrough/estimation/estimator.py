@@ -25,9 +25,13 @@ Per sample, ``update`` makes two compiled calls (:mod:`leadthrough.estimation.fu
 state lives in a few packed arrays) around two or four Pinocchio calls (RNEA or
 CRBA/Coriolis/gravity, and the TCP Jacobian); ``benchmarks/estimator_speed.py`` measures it.
 
-``update`` validates nothing but finiteness (configuration is checked once at construction),
-never raises, never reads the clock: a non-finite sample sets ``Status.FAULT_NONFINITE`` and
-keeps the last valid output; the fault latches until ``reset``.
+``update`` validates nothing but the input's sizes and finiteness (configuration is checked once
+at construction), never raises, never reads the clock: a non-finite sample (q, current, t, and
+``qd_cmd`` when the friction follows the command), or a result that is not finite (an input
+too large for the filters), sets ``Status.FAULT_NONFINITE``; input arrays of the wrong size set
+``Status.FAULT_INPUT_SIZE``. Either keeps the last valid output and latches until ``reset``.
+Missed samples (t advanced by k ≥ 2 periods) are bridged: the differentiator steps through q
+interpolated over the gap, so the jump of q is not read as one period's velocity.
 """
 
 from __future__ import annotations
@@ -63,7 +67,10 @@ class Status(IntEnum):
     OK = 0
     WARMING_UP = 1
     TARING = 2
+    #: A non-finite input, or a result that overflowed (latched until ``reset``).
     FAULT_NONFINITE = -1
+    #: ``q``, ``current`` (or ``qd_cmd``, when used) not of shape (n,) (latched until ``reset``).
+    FAULT_INPUT_SIZE = -2
 
 
 @dataclass(frozen=True)
@@ -311,7 +318,7 @@ class ExternalForceEstimator:
         if not fused.sample_front(inp.q, inp.current, inp.qd_cmd, inp.t, k, st, c, s):
             out.tau_ext[:] = s[fused.LAST_TAU]
             out.wrench[:] = self._last_wrench
-            out.status = Status.FAULT_NONFINITE
+            out.status = _STATUS[c[fused.STATUS]]
             return out.status
         mdl = self.model
         m, d, q, u = mdl.model, mdl.data, self._q, self._unused
@@ -340,11 +347,13 @@ class ExternalForceEstimator:
         must be untouched meanwhile; :meth:`cancel_rezero` if it moves again.
 
         Args:
-            samples: Window length [samples], >= 1.
+            samples: Window length [samples], >= 1 (NaN or less: 1; capped at 2³¹).
         """
         self._state[fused.REZERO_SUM] = 0.0
         c = self._counters
-        c[fused.REZERO_LEFT] = c[fused.REZERO_TAKEN] = max(1, samples)
+        # no exception for any argument: NaN or < 1 is one sample, a huge window is capped
+        c[fused.REZERO_LEFT] = c[fused.REZERO_TAKEN] = (
+            int(min(samples, _MAX_WINDOW)) if samples >= 1 else 1)
 
     def cancel_rezero(self) -> None:
         """Abandon a :meth:`rezero` in progress (the tare is kept as it was)."""
@@ -378,5 +387,9 @@ class ExternalForceEstimator:
 
 
 #: Status by the compiled sample's code (index -1: the fault)
+#: Longest re-zero window [samples] (about 25 days at 1 kHz).
+_MAX_WINDOW = 2**31
+
 _STATUS = {fused.STATUS_OK: Status.OK, fused.STATUS_WARMING_UP: Status.WARMING_UP,
-           fused.STATUS_TARING: Status.TARING, fused.STATUS_FAULT: Status.FAULT_NONFINITE}
+           fused.STATUS_TARING: Status.TARING, fused.STATUS_FAULT: Status.FAULT_NONFINITE,
+           fused.STATUS_FAULT_SIZE: Status.FAULT_INPUT_SIZE}

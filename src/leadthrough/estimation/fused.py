@@ -55,7 +55,13 @@ TARE, TARE_SUM, REZERO_SUM = 12, 13, 14
 LAST_TAU = 15                      # last valid τ_ext
 P0, INTEGRAL, RESIDUAL, WORK = 16, 17, 18, 19   # momentum observer
 PLAY = 20                          # play operator on the encoder
-STATE_ROWS = 21
+LAST_Q = 21                        # q of the last sample
+GAP_Q = 22                         # q interpolated over missed samples (scratch)
+LAST_T = 23                        # column 0: t of the last sample
+STATE_ROWS = 24
+
+#: Missed samples bridged by interpolation; a longer gap restarts the differentiator at rest.
+MAX_GAP_SAMPLES = 100
 
 # rows of ``const`` after the friction rows
 TORQUE_PER_AMP = kernels.FRICTION_ROWS
@@ -89,7 +95,7 @@ STATUS = 13
 COUNTER_SLOTS = 14
 
 # values of counters[STATUS] (the estimator's Status)
-STATUS_OK, STATUS_WARMING_UP, STATUS_TARING, STATUS_FAULT = 0, 1, 2, -1
+STATUS_OK, STATUS_WARMING_UP, STATUS_TARING, STATUS_FAULT, STATUS_FAULT_SIZE = 0, 1, 2, -1, -2
 
 
 @njit(cache=True, nogil=True)
@@ -109,31 +115,45 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
         state: Per-joint state (in place), shape (STATE_ROWS, n).
 
     Returns:
-        False if the sample is not finite or a fault is latched (``counters[FAULT]`` set,
-        ``counters[STATUS]`` the fault; nothing else changes), else True.
+        False if an input has the wrong size (``STATUS_FAULT_SIZE``) or is not finite
+        (``STATUS_FAULT``; ``qd_cmd`` only when the friction follows the command), or a fault
+        is latched (``counters[FAULT]`` set, ``counters[STATUS]`` the fault; nothing else
+        changes), else True.
     """
-    n = q.size
-    ok = counters[FAULT] == 0 and np.isfinite(t)
+    if counters[FAULT] != 0:
+        return False
+    n = const.shape[1]
+    command = counters[FRICTION_COMMAND] != 0
+    if q.size != n or current.size != n or (command and qd_cmd.size != n):
+        counters[FAULT] = 1
+        counters[STATUS] = STATUS_FAULT_SIZE
+        return False
+    ok = np.isfinite(t)
     for j in range(n):
         if not (np.isfinite(q[j]) and np.isfinite(current[j])):
+            ok = False
+        if command and not np.isfinite(qd_cmd[j]):
             ok = False
     if not ok:
         counters[FAULT] = 1
         counters[STATUS] = STATUS_FAULT
         return False
     if counters[FIRST] != 0:
+        _restart_differentiator(q, state)
         for j in range(n):
-            state[POS, j] = q[j]
             state[PLAY, j] = q[j]
-            state[VEL, j] = 0.0
-            state[ACC, j] = 0.0
         counters[FIRST] = 0
+    else:
+        _bridge_gap(q, t, settings, state)
     kernels.svf_step(settings[SVF:SVF + 7], q, state[POS], state[VEL], state[ACC])
+    for j in range(n):
+        state[LAST_Q, j] = q[j]
+    state[LAST_T, 0] = t
     for j in range(n):
         state[TAU_J, j] = current[j] * const[TORQUE_PER_AMP, j]
     fp = const[:kernels.FRICTION_ROWS]
     stribeck = counters[STRIBECK] != 0
-    if counters[FRICTION_COMMAND] != 0:
+    if command:
         # driven by the command while it moves, by the measured motion when it is at rest
         kernels.play_step(q, const[HALF_PLAY], state[PLAY], state[INCREMENT])
         kernels.presliding_friction_step(qd_cmd, state[INCREMENT], fp, stribeck, settings[DT],
@@ -147,6 +167,36 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
         kernels.smooth_sign(state[VEL], fp, state[SIGN])
         kernels.friction_torque(state[VEL], state[SIGN], fp, stribeck, state[FRICTION])
     return True
+
+
+@njit(cache=True, nogil=True)
+def _restart_differentiator(q: Array, state: Array) -> None:
+    """The differentiator at rest at ``q``."""
+    for j in range(q.size):
+        state[POS, j] = q[j]
+        state[VEL, j] = 0.0
+        state[ACC, j] = 0.0
+
+
+@njit(cache=True, nogil=True)
+def _bridge_gap(q: Array, t: float, settings: Array, state: Array) -> None:
+    """Samples missed since the last one (t advanced by k ≥ 2 periods): step the
+    differentiator through q interpolated linearly between the two samples, so that the jump
+    of q over the gap is not differentiated as one period's motion; after more than
+    :data:`MAX_GAP_SAMPLES`, restart it at rest at ``q``. A t that repeats or goes back is
+    treated as one period."""
+    periods = (t - state[LAST_T, 0]) / settings[DT]
+    if periods < 1.5:
+        return
+    if periods > MAX_GAP_SAMPLES + 1.5:
+        _restart_differentiator(q, state)
+        return
+    missed = int(periods + 0.5) - 1
+    for m in range(1, missed + 1):
+        w = m / (missed + 1.0)
+        for j in range(q.size):
+            state[GAP_Q, j] = state[LAST_Q, j] + w * (q[j] - state[LAST_Q, j])
+        kernels.svf_step(settings[SVF:SVF + 7], state[GAP_Q], state[POS], state[VEL], state[ACC])
 
 
 @njit(cache=True, nogil=True)
@@ -191,6 +241,20 @@ def sample_back(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
     kernels.wrench_from_torque(jacobian, tau_ext, state[WEIGHT], counters[FORCE_ONLY] != 0,
                                settings[MU0], settings[MAX_DAMPING], settings[MIN_LEVER], wrench,
                                scratch, info)
+    finite = True
+    for j in range(n):
+        finite = finite and np.isfinite(tau_ext[j])
+    for r in range(6):
+        finite = finite and np.isfinite(wrench[r])
+    if not finite:
+        # an input too large for the filters overflowed: a fault, the last valid output kept
+        for j in range(n):
+            tau_ext[j] = state[LAST_TAU, j]
+        for r in range(6):
+            wrench[r] = last_wrench[r]
+        counters[FAULT] = 1
+        counters[STATUS] = STATUS_FAULT
+        return
     for j in range(n):
         qd[j] = state[VEL, j]
         state[LAST_TAU, j] = tau_ext[j]

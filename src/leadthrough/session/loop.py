@@ -16,7 +16,9 @@ guiding with an estimate that has not settled would start the robot on filter tr
 
 The loop itself reads the clock, to pace (``paced=True``) and to measure; the algorithms it
 drives never do. It never raises once running: a driver or controller problem shows as a
-fault state in the record.
+fault state in the record. The estimator sees every sample and the controller every tenth:
+an estimator fault (a bad sample between two cycles) reaches the controller as
+``Fault.ESTIMATOR``.
 
 Python's cyclic garbage collector is paused while the loop runs (and restored after): a
 collection stalls whichever cycle it falls in by tens of µs, and the loop creates no reference
@@ -98,7 +100,8 @@ def run_session(
         The recording and the compute times.
 
     Raises:
-        ControlError: Mismatched periods or frames (checked before anything runs).
+        ControlError: Mismatched periods or frames (checked before anything runs), or no
+            feedback on the first read.
     """
     dt = driver.dt
     every = round(controller.config.dt / dt)
@@ -125,7 +128,10 @@ def run_session(
     e_in = EstimatorInput(t=0.0, q=fb.q, current=fb.current, qd_cmd=cmd.qd)
     c_in = GuidingInput(t=0.0, sequence=0, q=fb.q, current=fb.current, wrench_base=e_out.wrench)
     driver.step()
-    driver.read(fb)
+    if not driver.read(fb):
+        raise ControlError("no feedback on the first read (the robot must report a position "
+                           "to start from)", field="driver", value=type(driver).__name__,
+                           expected="a fresh sample on the first read")
     q0 = fb.q.copy()
     estimator.reset(q0)
     controller.reset(q0, fb.t)
@@ -157,6 +163,7 @@ def run_session(
                 c_in.sequence = fb.sequence
                 held = True if deadman is None else deadman(t_loop)
                 c_in.deadman = held and e_out.status == Status.OK
+                c_in.estimator_status = int(e_out.status)
                 controller.update(c_in, c_out)
                 if rezero_samples:
                     _zero_velocity_update(estimator, c_out.rest_s, settle_s, cycle_s,
