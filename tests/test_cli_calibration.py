@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from leadthrough.cli import main
@@ -117,6 +118,83 @@ def test_bad_inputs_exit_2(workdir: Path, tmp_path: Path,
     assert not (tmp_path / "t.csv").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.toml", "short.parquet",
                                                           "still.parquet"]
+
+
+def test_more_bad_inputs_exit_2_and_write_nothing(workdir: Path, tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """The CLI audit's cases: each exits 2 with one line naming the field and leaves no file."""
+    rec, traj = workdir / "rec0.parquet", workdir / "traj.csv"
+    good = tmp_path / "good.toml"
+    assert main(["identify", str(rec), "--robot", "er20", "--method", "consistent",
+                 "-o", str(good)]) == 0
+    capsys.readouterr()
+    text = good.read_text()
+
+    def params_with(old: str, new: str, name: str) -> Path:
+        assert old in text
+        path = tmp_path / name
+        path.write_text(text.replace(old, new, 1))
+        return path
+
+    line = {key: next(x for x in text.splitlines() if x.startswith(key))
+            for key in ("qd_sg ", "f1 ", "std = [")}
+    std0 = "std = [0.0, " + line["std = ["].split(", ", 1)[1]
+    cases = {
+        "qd_sg": params_with(line["qd_sg "], "qd_sg = 0.0", "sg0.toml"),
+        "f1": params_with(line["f1 "], "f1 = -1.0", "f1neg.toml"),
+        "noise.std[0]": params_with(line["std = ["], std0, "std0.toml"),
+        "joint_1.frobnicate": params_with("[joints.joint_1]", "[joints.joint_1]\nfrobnicate = 1",
+                                          "unknown.toml"),
+        "joints.joint_7": params_with("[joints.joint_1]", "[joints.joint_7]\nf1 = 1\n\n"
+                                      "[joints.joint_1]", "extra.toml"),
+    }
+    for field, path in cases.items():
+        assert main(["validate", str(path), str(rec), "--robot", "er20"]) == 2, field
+        assert field in _err(capsys), field
+    # recorded positions far outside the joint limits (a corrupt file)
+    r = load_recording(rec)
+    q = r.q.copy()
+    q[100, 3] = 2.26e6
+    bad_rec = tmp_path / "corrupt.parquet"
+    save_recording(Recording(time=r.time, q=q, current=r.current, robot="er20"), bad_rec)
+    out = tmp_path / "p.toml"
+    assert main(["identify", str(bad_rec), "--robot", "er20", "--method", "ols-cv",
+                 "-o", str(out)]) == 2
+    assert "'q4'" in (e := _err(capsys)) and "row 100" in e
+    assert main(["payload", str(bad_rec), "--robot", "er20", "--params", str(good)]) == 2
+    _err(capsys)
+    # no rows at all
+    table = pq.read_table(rec)
+    pq.write_table(table.slice(0, 0), tmp_path / "empty.parquet")
+    assert main(["identify", str(tmp_path / "empty.parquet"), "--robot", "er20",
+                 "--method", "ols-cv", "-o", str(out)]) == 2
+    assert "no rows" in _err(capsys)
+    # a trajectory too fast for the robot (time squeezed by hand)
+    t = traj.read_text().splitlines()
+    fast = tmp_path / "fast.csv"
+    head = [x for x in t if x.startswith("#") or x.startswith("time")]
+    body = [x.split(",") for x in t if not (x.startswith("#") or x.startswith("time"))]
+    fast.write_text("\n".join(head + [",".join([str(float(b[0]) / 10.0), *b[1:]])
+                                      for b in body]) + "\n")
+    assert main(["record", "--robot", "er20", "--trajectory", str(fast), "-o",
+                 str(tmp_path / "fast.parquet")]) == 2
+    assert "(from q and time)" in _err(capsys)
+    # options out of range
+    for argv, field in ((["excite", "--seed", "-1"], "excitation.seed"),
+                        (["excite", "--duration", "inf"], "--duration"),
+                        (["excite", "--floor", "nan"], "excitation.floor_height")):
+        assert main([*argv, "-o", str(tmp_path / "x.csv")]) == 2, argv
+        assert field in _err(capsys), argv
+    # outputs that cannot be written: a folder as the file, a URDF path that fails or
+    # would overwrite the params; nothing is written, not even the params
+    assert main(["excite", "--duration", "20", "--starts", "1", "-o", str(tmp_path)]) == 2
+    assert "is a folder" in _err(capsys)
+    for urdf in (tmp_path / "missing" / "x.urdf", out):
+        assert main(["identify", str(rec), "--robot", "er20", "--method", "ols-cv",
+                     "-o", str(out), "--urdf-out", str(urdf)]) == 2
+        _err(capsys)
+        assert not out.exists()
+    assert not list(tmp_path.glob("x.csv")) and not list(tmp_path.glob(".*"))
 
 
 def test_identify_consistent_json_adds_pseudo_inertia(workdir: Path, tmp_path: Path,

@@ -30,12 +30,21 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     """
     path = Path(path)
     folder = require_folder(path)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=folder)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix,
+                                        dir=folder)
+    except OSError as e:
+        raise DataError(f"cannot write into the folder ({e.strerror})", source=path,
+                        expected="an existing, writable folder") from e
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         write(tmp)
         os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise DataError(f"cannot write the file ({e.strerror})", source=path,
+                        expected="a writable file path") from e
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -49,12 +58,17 @@ def require_folder(path: str | Path) -> Path:
         The folder.
 
     Raises:
-        DataError: The folder does not exist.
+        DataError: The folder does not exist or is not writable, or the path is a folder.
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise DataError("output folder does not exist", source=path,
+                        expected="an existing, writable folder")
+    if path.is_dir():
+        raise DataError("is a folder, not a file", source=path, expected="an output file path")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise DataError("output folder is not writable", source=path,
                         expected="an existing, writable folder")
     return folder
 

@@ -17,7 +17,9 @@ from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
+from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
+from leadthrough.fileio import require_folder
 from leadthrough.identification.api import (
     METHODS,
     IdentifyConfig,
@@ -193,8 +195,12 @@ def _print_stats(robot: Robot, stats: ResidualStats, title: str) -> None:
 
 def _load(args: argparse.Namespace, robot: Robot) -> Recording:
     rec = load_recording(args.recording, args.columns)
-    rec.check_robot(robot)
+    rec.check_joint_range(robot)
     return rec
+
+
+#: Longest excitation recording ``excite`` writes [s] (an hour at 1 kHz: 3.6 M rows).
+MAX_EXCITATION_S = 3600.0
 
 
 def run_excite(args: argparse.Namespace) -> int:
@@ -205,8 +211,11 @@ def run_excite(args: argparse.Namespace) -> int:
     cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
                            starts=args.starts, seed=args.seed, floor_height=args.floor)
     period = 1.0 / cfg.base_frequency
+    if not 0 < args.duration <= MAX_EXCITATION_S:
+        raise DataError("out of range", field="--duration", value=args.duration,
+                        expected=f"0 < duration <= {MAX_EXCITATION_S:g} s")
     periods = args.duration / period
-    if not (args.duration > 0 and math.isclose(periods, round(periods), abs_tol=1e-9)):
+    if not math.isclose(periods, round(periods), abs_tol=1e-9):
         raise DataError("duration must be a whole number of periods", field="--duration",
                         value=args.duration,
                         expected=f"a positive multiple of 1/f0 = {period:g} s")
@@ -234,6 +243,25 @@ def run_excite(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_trajectory_limits(path: Path, traj: TrajectorySamples, robot: Robot) -> None:
+    """Positions within the joint limits, and the velocity both as written and as the
+    positions' own rate of change (a time column squeezed by hand) within the speed limits."""
+    dt = np.diff(traj.time)
+    moved = np.abs(np.diff(traj.q, axis=0)) / dt[:, None] if dt.size else np.zeros((0, robot.n))
+    for name, values, lo, hi, unit in (
+            ("q", traj.q, robot.lower_limits, robot.upper_limits, "rad"),
+            ("qd", traj.qd, -robot.velocity_limit, robot.velocity_limit, "rad/s"),
+            ("qd (from q and time)", moved, -1.01 * robot.velocity_limit,
+             1.01 * robot.velocity_limit, "rad/s")):
+        bad = (values < lo) | (values > hi)
+        if bad.any():
+            row, j = (int(x) for x in np.argwhere(bad)[0])
+            raise DataError(f"trajectory leaves the robot's limits in row {row}", source=path,
+                            field=f"{name.split()[0]}{j + 1}{name[2:]}",
+                            value=float(values[row, j]),
+                            expected=f"{lo[j]:.4g} .. {hi[j]:.4g} {unit}")
+
+
 def run_record(args: argparse.Namespace) -> int:
     """Execute ``leadthrough record``."""
     robot = load_robot(args.robot)
@@ -244,9 +272,7 @@ def run_record(args: argparse.Namespace) -> int:
     if traj.q.shape[1] != robot.n:
         raise DataError("joint count does not match the robot", source=args.trajectory,
                         field="q", value=traj.q.shape[1], expected=f"{robot.n}")
-    if np.any(traj.q < robot.lower_limits) or np.any(traj.q > robot.upper_limits):
-        raise DataError("trajectory leaves the joint limits", source=args.trajectory,
-                        field="q", expected="positions within the robot's limits")
+    _check_trajectory_limits(args.trajectory, traj, robot)
     config = SimConfig(seed=args.seed, run=args.run)
     t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
     q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
@@ -277,11 +303,17 @@ def run_identify(args: argparse.Namespace) -> int:
         raise DataError("a friction sweep is used by the consistent method only",
                         field="--method", value=args.method,
                         expected="'consistent' with --friction-sweep")
+    if args.urdf_out is not None:
+        # checked before the identification, so that nothing is written if it cannot be
+        require_folder(args.urdf_out)
+        if Path(args.urdf_out).resolve() == Path(args.output).resolve():
+            raise DataError("the URDF would overwrite the params file", field="--urdf-out",
+                            value=str(args.urdf_out), expected="a path other than -o")
     robot = load_robot(args.robot)
     rec = _load(args, robot)
     sim_seed = rec.sim_seed
-    sweep = _companion(args, "friction_sweep", rec)
-    presliding_test = _companion(args, "presliding_test", rec)
+    sweep = _companion(args, "friction_sweep", rec, robot)
+    presliding_test = _companion(args, "presliding_test", rec, robot)
     # the presliding test is fitted first: a bad file fails before the long identification
     pre = None if presliding_test is None else fit_presliding(presliding_test, robot)
     bar = Progress(f"identifying ({args.method})", 1)
@@ -321,13 +353,15 @@ def run_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _companion(args: argparse.Namespace, name: str, rec: Recording) -> Recording | None:
+def _companion(args: argparse.Namespace, name: str, rec: Recording, robot: Robot
+               ) -> Recording | None:
     """The recording of option ``--name`` (a friction experiment), checked to come from the
     same robot as the identification recording ``rec``."""
     path = getattr(args, name)
     if path is None:
         return None
     other = load_recording(path, args.columns)
+    other.check_joint_range(robot)
     if other.sim_seed != rec.sim_seed:
         raise DataError("recorded on another robot than the identification data", source=path,
                         field="sim_seed", value=other.sim_seed,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +54,17 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise DataError("not a folder", source=out, field="--out", expected="a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    if not out.parent.is_dir():
+        raise DataError("parent folder does not exist", source=out, field="--out",
+                        expected="a folder whose parent exists")
+    try:
+        out.mkdir(exist_ok=True)
+    except OSError as e:
+        raise DataError(f"cannot create the report folder ({e.strerror})", source=out,
+                        field="--out", expected="a writable location") from e
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise DataError("report folder is not writable", source=out, field="--out",
+                        expected="a writable folder")
     say = (lambda s: None) if args.json else (lambda s: print(s, flush=True))
     say(f"leadthrough demo on '{robot.name}' (seed {args.seed}{', quick' if args.quick else ''})")
     res = run_demo(robot, args.seed, out, bool(args.quick), say)

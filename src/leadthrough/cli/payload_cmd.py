@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot)
     pf = load_params(args.params, robot)
     rec = load_recording(args.recording, args.columns)
-    rec.check_robot(robot)
+    rec.check_joint_range(robot)
     if None not in (rec.sim_seed, pf.sim_seed) and rec.sim_seed != pf.sim_seed:
         raise DataError("recorded on another simulated robot than the params were identified "
                         "on", source=args.recording, field="sim_seed", value=rec.sim_seed,

@@ -137,6 +137,9 @@ def _clean_rows(arrays: dict[str, Array], source: str,
                 extra_bad: NDArray[np.bool_] | None = None, why: str = "") -> dict[str, Array]:
     """Drop rows with non-finite values or marked bad, with a DataWarning counting them."""
     rows = arrays["time"].shape[0]
+    if rows == 0:
+        raise DataError("the recording has no rows", source=source, field="time", value=0,
+                        expected="at least one sample")
     good = np.ones(rows, dtype=bool)
     for v in arrays.values():
         good &= np.isfinite(v.reshape(rows, -1)).all(axis=1)

@@ -20,6 +20,10 @@ __all__ = ["Recording", "is_sim_seed"]
 
 Array = NDArray[np.float64]
 
+#: How far a recorded joint position may lie outside the robot's limits [rad] (encoder offsets;
+#: a URDF's limits a little inside the mechanical ones).
+JOINT_RANGE_TOLERANCE = 0.1
+
 
 def is_sim_seed(value: object) -> bool:
     """Whether ``value`` names a simulated robot instance: an integer >= 0 (not a bool). The
@@ -137,6 +141,20 @@ class Recording:
         if self.robot is not None and self.robot != robot.name:
             raise DataError("recorded on another robot", source=self.source, field="robot",
                             value=self.robot, expected=f"'{robot.name}'")
+
+    def check_joint_range(self, robot: Robot, tolerance: float = JOINT_RANGE_TOLERANCE) -> None:
+        """Raise a DataError unless every position lies within ``robot``'s joint limits ±
+        ``tolerance`` [rad] (a corrupt or foreign file would otherwise be identified as a robot
+        that is not this one); names the joint's column, the row and the value."""
+        self.check_robot(robot)
+        lo, hi = robot.lower_limits - tolerance, robot.upper_limits + tolerance
+        bad = (self.q < lo) | (self.q > hi)
+        if bad.any():
+            row, j = (int(x) for x in np.argwhere(bad)[0])
+            raise DataError(f"joint position outside the limits of '{robot.name}' in row {row}",
+                            source=self.source, field=f"q{j + 1}", value=float(self.q[row, j]),
+                            expected=f"{lo[j]:.4g} .. {hi[j]:.4g} rad (the limits ± "
+                                     f"{tolerance:g})")
 
     def joint_torque(self, robot: Robot) -> Array:
         """Joint torque [N·m], shape (N, n): logged torque, or R·Kt·current."""

@@ -84,6 +84,9 @@ class ExcitationConfig:
             ("torque_fraction", 0 < self.torque_fraction <= 1, "in (0, 1]"),
             ("starts", self.starts >= 1, ">= 1"),
             ("max_iterations", self.max_iterations >= 1, ">= 1"),
+            # below the base, or above any industrial arm's reach: no trajectory to search for
+            ("floor_height", -5.0 <= self.floor_height <= 5.0, "-5 <= floor <= 5 m"),
+            ("seed", self.seed >= 0, ">= 0"),
         ]
         check_fields("excitation", self, checks)
 

@@ -200,12 +200,24 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     has_offset = False
     has_presliding = 0
     phi = np.zeros(10 * n)
+    for table, name in ((joints, "joints"), (links, "links")):
+        extra = sorted(set(table) - set(robot.joint_names))
+        if extra:
+            raise DataError("not a joint of the robot", source=path, field=f"{name}.{extra[0]}",
+                            expected=f"tables for the joints {list(robot.joint_names)} only")
+    joint_keys = {*fr, "offset", "presliding"}
     for k, jn in enumerate(robot.joint_names):
         jt = joints.get(jn)
         lt = links.get(jn)
         if not isinstance(jt, dict) or not isinstance(lt, dict):
             raise DataError("missing joint", source=path, field=f"joints.{jn} / links.{jn}",
                             expected="a table per joint of the robot")
+        for table, name, allowed in ((jt, "joints", joint_keys),
+                                     (lt, "links", set(LINK_PARAMETER_NAMES))):
+            unknown = sorted(set(table) - allowed)
+            if unknown:
+                raise DataError("unknown field", source=path, field=f"{name}.{jn}.{unknown[0]}",
+                                expected=f"one of {sorted(allowed)}")
         if "offset" in jt:
             offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
             has_offset = True
@@ -221,6 +233,13 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
                 raise DataError("missing", source=path, field=f"joints.{jn}.{key}",
                                 expected="the field to be present")
             fr[key][k] = _number(path, f"joints.{jn}.{key}", jt[key])
+            if model is FrictionModel.STRIBECK and key != "rotor_inertia":
+                # the paper's bounds (friction > 0); the velocities divide
+                strict = key in ("qd_sm", "qd_sg")
+                if fr[key][k] < 0 or (strict and fr[key][k] == 0):
+                    raise DataError("out of range", source=path, field=f"joints.{jn}.{key}",
+                                    value=fr[key][k],
+                                    expected="> 0 [rad/s]" if strict else ">= 0 [N·m, N·m·s]")
         for i, p in enumerate(LINK_PARAMETER_NAMES):
             if p not in lt:
                 raise DataError("missing", source=path, field=f"links.{jn}.{p}",
@@ -238,6 +257,10 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
             raise DataError("malformed", source=path, field=f"noise.{key}", value=v,
                             expected=f"a list of {n} numbers")
         arrays[key] = np.array([_number(path, f"noise.{key}", x) for x in v])
+    if np.any(arrays["std"] <= 0):
+        j = int(np.argmax(arrays["std"] <= 0))
+        raise DataError("out of range", source=path, field=f"noise.std[{j}]",
+                        value=float(arrays["std"][j]), expected="> 0 N·m (the residual's σ)")
     if model is FrictionModel.STRIBECK:
         params = DriveModelParameters(
             phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
@@ -256,4 +279,12 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
                         expected="an integer >= 0 (the simulated robot instance)")
     return ParamsFile(robot=robot.name, method=str(meta.get("method", "")), params=params,
                       noise_mean=arrays["mean"], noise_std=arrays["std"],
-                      J=_number(path, "meta.J", meta.get("J")), path=path, sim_seed=seed)
+                      J=_nonnegative(path, "meta.J", meta.get("J")), path=path,
+                      sim_seed=seed)
+
+
+def _nonnegative(path: Path, field: str, value: object) -> float:
+    x = _number(path, field, value)
+    if x < 0:
+        raise DataError("out of range", source=path, field=field, value=x, expected=">= 0")
+    return x

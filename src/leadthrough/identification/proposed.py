@@ -74,6 +74,7 @@ class ProposedConfig:
             ("generations", self.generations >= 1, ">= 1"),
             ("polish_iterations", self.polish_iterations >= 0, ">= 0"),
             ("max_friction", 0 < self.max_friction <= 1, "in (0, 1]"),
+            ("seed", self.seed >= 0, ">= 0"),
         ]
         check_fields("proposed", self, checks)
 
