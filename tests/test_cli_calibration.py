@@ -179,7 +179,21 @@ def test_more_bad_inputs_exit_2_and_write_nothing(workdir: Path, tmp_path: Path,
     assert main(["record", "--robot", "er20", "--trajectory", str(fast), "-o",
                  str(tmp_path / "fast.parquet")]) == 2
     assert "(from q and time)" in _err(capsys)
-    # options out of range
+    # a CoM without a mass, or far from the tool; a mass the simulator cannot carry
+    for extra, text in ((["--payload-com", "0", "0", "0.1"], "a CoM without a mass"),
+                        (["--payload-mass", "5", "--payload-com", "0", "0", "100"],
+                         "--payload-com")):
+        assert main(["record", "--robot", "er20", "--trajectory", str(traj), *extra,
+                     "-o", str(tmp_path / "r.parquet")]) == 2
+        assert text in _err(capsys)
+    # options out of range, irrelevant, or an output of the wrong type
+    assert main(["excite", "--start", "0", "0", "0", "0", "0", "0", "-o",
+                 str(tmp_path / "x.csv")]) == 2
+    assert "--start" in _err(capsys)
+    assert main(["excite", "-o", str(tmp_path / "x.parquet")]) == 2
+    assert "unsupported output file type" in _err(capsys)
+    assert main(["identify", str(rec), "--robot", "er20", "-o", str(tmp_path / "p.json")]) == 2
+    assert ".toml" in _err(capsys)
     for argv, field in ((["excite", "--seed", "-1"], "excitation.seed"),
                         (["excite", "--duration", "inf"], "--duration"),
                         (["excite", "--floor", "nan"], "excitation.floor_height")):
@@ -187,7 +201,9 @@ def test_more_bad_inputs_exit_2_and_write_nothing(workdir: Path, tmp_path: Path,
         assert field in _err(capsys), argv
     # outputs that cannot be written: a folder as the file, a URDF path that fails or
     # would overwrite the params; nothing is written, not even the params
-    assert main(["excite", "--duration", "20", "--starts", "1", "-o", str(tmp_path)]) == 2
+    (tmp_path / "folder.csv").mkdir()
+    assert main(["excite", "--duration", "20", "--starts", "1", "-o",
+                 str(tmp_path / "folder.csv")]) == 2
     assert "is a folder" in _err(capsys)
     for urdf in (tmp_path / "missing" / "x.urdf", out):
         assert main(["identify", str(rec), "--robot", "er20", "--method", "ols-cv",

@@ -11,13 +11,17 @@ from typing import Any
 
 import numpy as np
 
+from leadthrough.cli.arg_checks import (
+    MAX_PAYLOAD_COM_M,
+    check_trajectory_limits,
+    require_suffix,
+)
 from leadthrough.cli.friction_experiments import excite_friction_experiment
 from leadthrough.data.io import load_recording, save_recording
 from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
-from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.trajectory_file import load_trajectory, save_trajectory
 from leadthrough.fileio import require_folder
 from leadthrough.identification.api import (
@@ -87,8 +91,9 @@ def register(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="robot instance (true parameters)")
     p.add_argument("--run", type=int, default=0, help="recording number (sensor noise)")
     p.add_argument("--payload-mass", type=float, default=None, help="payload at the TCP [kg]")
-    p.add_argument("--payload-com", type=float, nargs=3, default=(0.0, 0.0, 0.05),
-                   metavar=("X", "Y", "Z"), help="payload CoM in the TCP frame [m]")
+    p.add_argument("--payload-com", type=float, nargs=3, default=None,
+                   metavar=("X", "Y", "Z"),
+                   help="payload CoM in the TCP frame [m] (with --payload-mass; default 0 0 0.05)")
     p.add_argument("-o", "--output", type=Path, required=True, help="recording .parquet/.csv")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_record)
@@ -205,9 +210,14 @@ MAX_EXCITATION_S = 3600.0
 
 def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
+    require_suffix(args.output, (".csv",))
+    require_folder(args.output)
     robot = load_robot(args.robot)
     if args.sweep or args.presliding:
         return excite_friction_experiment(args, robot)
+    if args.start is not None:
+        raise DataError("a start pose is for the friction experiments only", field="--start",
+                        value=args.start, expected="--start with --sweep or --presliding")
     cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
                            starts=args.starts, seed=args.seed, floor_height=args.floor)
     period = 1.0 / cfg.base_frequency
@@ -243,27 +253,9 @@ def run_excite(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_trajectory_limits(path: Path, traj: TrajectorySamples, robot: Robot) -> None:
-    """Positions within the joint limits, and the velocity both as written and as the
-    positions' own rate of change (a time column squeezed by hand) within the speed limits."""
-    dt = np.diff(traj.time)
-    moved = np.abs(np.diff(traj.q, axis=0)) / dt[:, None] if dt.size else np.zeros((0, robot.n))
-    for name, values, lo, hi, unit in (
-            ("q", traj.q, robot.lower_limits, robot.upper_limits, "rad"),
-            ("qd", traj.qd, -robot.velocity_limit, robot.velocity_limit, "rad/s"),
-            ("qd (from q and time)", moved, -1.01 * robot.velocity_limit,
-             1.01 * robot.velocity_limit, "rad/s")):
-        bad = (values < lo) | (values > hi)
-        if bad.any():
-            row, j = (int(x) for x in np.argwhere(bad)[0])
-            raise DataError(f"trajectory leaves the robot's limits in row {row}", source=path,
-                            field=f"{name.split()[0]}{j + 1}{name[2:]}",
-                            value=float(values[row, j]),
-                            expected=f"{lo[j]:.4g} .. {hi[j]:.4g} {unit}")
-
-
 def run_record(args: argparse.Namespace) -> int:
     """Execute ``leadthrough record``."""
+    require_folder(args.output)
     robot = load_robot(args.robot)
     traj, traj_robot = load_trajectory(args.trajectory)
     if traj_robot is not None and traj_robot != robot.name:
@@ -272,13 +264,19 @@ def run_record(args: argparse.Namespace) -> int:
     if traj.q.shape[1] != robot.n:
         raise DataError("joint count does not match the robot", source=args.trajectory,
                         field="q", value=traj.q.shape[1], expected=f"{robot.n}")
-    _check_trajectory_limits(args.trajectory, traj, robot)
+    check_trajectory_limits(args.trajectory, traj, robot)
     config = SimConfig(seed=args.seed, run=args.run)
     t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
     q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
     qd_cmd = np.column_stack([np.interp(t, traj.time, traj.qd[:, j]) for j in range(robot.n)])
-    payload = None if args.payload_mass is None else Payload(args.payload_mass,
-                                                             tuple(args.payload_com))
+    if args.payload_mass is None and args.payload_com is not None:
+        raise DataError("a CoM without a mass", field="--payload-com", value=args.payload_com,
+                        expected="--payload-com with --payload-mass")
+    com = (0.0, 0.0, 0.05) if args.payload_com is None else tuple(args.payload_com)
+    if args.payload_com is not None and not np.linalg.norm(com) <= MAX_PAYLOAD_COM_M:
+        raise DataError("out of range", field="--payload-com", value=list(com),
+                        expected=f"a CoM within {MAX_PAYLOAD_COM_M:g} m of the TCP")
+    payload = None if args.payload_mass is None else Payload(args.payload_mass, com)
     sim = SimRobot(robot, config, payload=payload, q0=q_cmd[0])
     bar = Progress("recording", t.size)
     log = run_trajectory(sim, q_cmd, qd_cmd, progress=bar)
@@ -303,6 +301,8 @@ def run_identify(args: argparse.Namespace) -> int:
         raise DataError("a friction sweep is used by the consistent method only",
                         field="--method", value=args.method,
                         expected="'consistent' with --friction-sweep")
+    require_suffix(args.output, (".toml",))
+    require_folder(args.output)
     if args.urdf_out is not None:
         # checked before the identification, so that nothing is written if it cannot be
         require_folder(args.urdf_out)

@@ -37,13 +37,20 @@ def register(sub: Any) -> None:
         epilog="examples:\n  leadthrough demo\n  leadthrough demo --quick --out /tmp/report",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--robot", default="er20", help="robot (default: er20)")
+    p.add_argument("--robot", default="er20", choices=DEMO_ROBOTS,
+                   help="robot (default: er20; the demo's excitation, poses and guiding "
+                        "scripts are laid out for the paper's robot)")
     p.add_argument("--seed", type=int, default=1, help="simulated robot instance (default: 1)")
     p.add_argument("--out", type=Path, default=Path("leadthrough-report"),
                    help="report folder (default: ./leadthrough-report)")
     p.add_argument("--quick", action="store_true", help="shorter recordings and searches")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
+
+
+#: Robots the demo is laid out for (start poses, the excitation's floor, the guiding scripts'
+#: workspace); another robot goes through the pipeline one command at a time.
+DEMO_ROBOTS = ("er20",)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, SimulationError
 from leadthrough.sim.robot import SimRobot
 
 __all__ = ["SimLog", "SimTruthLog", "hold", "run_trajectory"]
@@ -77,6 +77,7 @@ def run_trajectory(
 
     Raises:
         DataError: Shapes do not match the robot, or values are not finite.
+        SimulationError: The simulation became unstable (MuJoCo reset it).
     """
     q_cmd = np.asarray(q_cmd, dtype=float)
     n = sim.robot.n
@@ -115,6 +116,11 @@ def run_trajectory(
         wr[k] = sim.applied_wrench
         if progress is not None and (k + 1) % 1000 == 0:
             progress(k + 1, N)
+        if k and t[k] <= t[k - 1]:
+            # MuJoCo resets a simulation whose accelerations blow up (mjWARN_BADQACC)
+            raise SimulationError("the simulation became unstable and was reset by MuJoCo",
+                                  field="step", value=f"t = {t[k - 1]:.3f} s",
+                                  expected="a payload, force and motion the robot can carry")
     return SimLog(time=t, q=q, current=cur, q_cmd=q_cmd.copy(),
                   truth=SimTruthLog(q=tq, qd=tqd, current=tcur, external_torque=text,
                                     wrench_base=wr))

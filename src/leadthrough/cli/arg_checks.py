@@ -1,0 +1,43 @@
+"""Checks of the CLI's arguments that the library cannot make (file types, limits of a
+trajectory file), done before any work so that a bad argument exits 2 with nothing written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from leadthrough.errors import DataError
+from leadthrough.excitation.fourier import TrajectorySamples
+from leadthrough.robot.description import Robot
+
+__all__ = ["MAX_PAYLOAD_COM_M", "check_trajectory_limits", "require_suffix"]
+
+#: Farthest payload CoM from the TCP ``record`` simulates [m].
+MAX_PAYLOAD_COM_M = 1.0
+
+
+def require_suffix(path: Path, suffixes: tuple[str, ...]) -> None:
+    """An output's file type, checked before any work (the writer would not convert)."""
+    if Path(path).suffix.lower() not in suffixes:
+        raise DataError("unsupported output file type", source=path, field="-o",
+                        value=Path(path).suffix or "(none)", expected=" or ".join(suffixes))
+
+
+def check_trajectory_limits(path: Path, traj: TrajectorySamples, robot: Robot) -> None:
+    """Positions within the joint limits, and the velocity both as written and as the
+    positions' own rate of change (a time column squeezed by hand) within the speed limits."""
+    dt = np.diff(traj.time)
+    moved = np.abs(np.diff(traj.q, axis=0)) / dt[:, None] if dt.size else np.zeros((0, robot.n))
+    for name, values, lo, hi, unit in (
+            ("q", traj.q, robot.lower_limits, robot.upper_limits, "rad"),
+            ("qd", traj.qd, -robot.velocity_limit, robot.velocity_limit, "rad/s"),
+            ("qd (from q and time)", moved, -1.01 * robot.velocity_limit,
+             1.01 * robot.velocity_limit, "rad/s")):
+        bad = (values < lo) | (values > hi)
+        if bad.any():
+            row, j = (int(x) for x in np.argwhere(bad)[0])
+            raise DataError(f"trajectory leaves the robot's limits in row {row}", source=path,
+                            field=f"{name.split()[0]}{j + 1}{name[2:]}",
+                            value=float(values[row, j]),
+                            expected=f"{lo[j]:.4g} .. {hi[j]:.4g} {unit}")
