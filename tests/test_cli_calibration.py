@@ -151,6 +151,11 @@ def test_more_bad_inputs_exit_2_and_write_nothing(workdir: Path, tmp_path: Path,
     for field, path in cases.items():
         assert main(["validate", str(path), str(rec), "--robot", "er20"]) == 2, field
         assert field in _err(capsys), field
+    # a folder where a file is expected
+    assert main(["validate", str(tmp_path), str(rec), "--robot", "er20"]) == 2
+    assert "params file is a folder" in _err(capsys)
+    assert main(["identify", str(tmp_path), "--robot", "er20", "-o", str(good)]) == 2
+    assert "recording is a folder" in _err(capsys)
     # recorded positions far outside the joint limits (a corrupt file)
     r = load_recording(rec)
     q = r.q.copy()

@@ -10,9 +10,10 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, LeadthroughError
 
-__all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "require_folder"]
+__all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "require_file",
+           "require_folder"]
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
@@ -71,6 +72,32 @@ def require_folder(path: str | Path) -> Path:
         raise DataError("output folder is not writable", source=path,
                         expected="an existing, writable folder")
     return folder
+
+
+def require_file(path: str | Path, what: str, expected: str,
+                 error: type[LeadthroughError] = DataError, *, source: str | Path | None = None,
+                 field: str | None = None, value: object = None) -> Path:
+    """An input file; check it exists and is a file.
+
+    Args:
+        path: The file.
+        what: What it is, for the message (``"params file"``).
+        expected: The expected input, for the message (``"an existing TOML file"``).
+        error: Exception class to raise.
+        source: The file that named ``path`` (default: ``path`` itself).
+        field: Field of ``source`` that named it.
+        value: Its value there.
+
+    Raises:
+        LeadthroughError: ``error``: not found, or a folder.
+    """
+    path = Path(path)
+    problem = ("is a folder, not a file" if path.is_dir()
+               else "not found" if not path.is_file() else "")
+    if problem:
+        raise error(f"{what} {problem}", source=source if source is not None else path,
+                    field=field, value=value, expected=expected)
+    return path
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

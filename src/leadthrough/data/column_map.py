@@ -70,6 +70,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
+from leadthrough.fileio import require_file
 
 __all__ = ["ColumnMap", "Signal", "parse_column_map"]
 
@@ -209,8 +210,7 @@ def parse_column_map(path: str | Path) -> ColumnMap:
         DataError: The file is missing or malformed; the message names the field.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError("column map not found", source=path, expected="an existing TOML file")
+    require_file(path, "column map", "an existing TOML file")
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from leadthrough.data.column_map import ColumnMap, parse_column_map
 from leadthrough.data.recording import Recording, is_sim_seed
 from leadthrough.errors import DataError, DataWarning
-from leadthrough.fileio import atomic_write, read_comment_header
+from leadthrough.fileio import atomic_write, read_comment_header, require_file
 
 __all__ = ["load_recording", "save_recording"]
 
@@ -370,11 +370,9 @@ def load_recording(path: str | Path, columns: str | Path | None = None) -> Recor
                                 source=path, expected=f"the folder holding "
                                                       f"{', '.join(cmap.files)}")
             return _load_split(path, cmap)
-        if not path.is_file():
-            raise DataError("recording not found", source=path, expected="an existing file")
+        require_file(path, "recording", "an existing file")
         return _load_mapped(path, cmap)
-    if not path.is_file():
-        raise DataError("recording not found", source=path, expected="an existing file")
+    require_file(path, "recording", "an existing file")
     suffix = path.suffix.lower()
     if suffix == ".csv":
         return _load_native_csv(path)

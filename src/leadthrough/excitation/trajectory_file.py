@@ -16,7 +16,7 @@ import numpy as np
 
 from leadthrough.errors import DataError
 from leadthrough.excitation.fourier import TrajectorySamples
-from leadthrough.fileio import atomic_write, read_comment_header
+from leadthrough.fileio import atomic_write, read_comment_header, require_file
 
 __all__ = ["load_trajectory", "save_trajectory"]
 
@@ -58,8 +58,7 @@ def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
         DataError: Missing file or malformed content.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError("trajectory not found", source=path, expected="an existing CSV file")
+    require_file(path, "trajectory", "an existing CSV file")
     skip, meta = read_comment_header(path)
     robot = meta.get("robot") or None
     try:

@@ -44,7 +44,7 @@ from leadthrough.dynamics.friction import StribeckParameters
 from leadthrough.dynamics.model import MAX_PRESLIDING_RAD, DriveModelParameters, FrictionModel
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
 from leadthrough.errors import DataError
-from leadthrough.fileio import atomic_write_text
+from leadthrough.fileio import atomic_write_text, require_file
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.robot.description import Robot
 
@@ -173,8 +173,7 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         DataError: Missing, malformed, or written for another robot.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError("params file not found", source=path, expected="an existing TOML file")
+    require_file(path, "params file", "an existing TOML file")
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from leadthrough.errors import RobotFileError
+from leadthrough.fileio import require_file
 
 __all__ = ["DriveFile", "JointDrive", "parse_drive_file"]
 
@@ -134,9 +135,8 @@ def _resolve_urdf(path: Path, robot: dict[str, Any]) -> Path:
     urdf_path = Path(urdf)
     if not urdf_path.is_absolute():
         urdf_path = path.parent / urdf_path
-    if not urdf_path.is_file():
-        raise RobotFileError("URDF file not found", source=path, field="robot.urdf",
-                             value=str(urdf_path), expected="an existing URDF file")
+    require_file(urdf_path, "URDF file", "an existing URDF file", RobotFileError, source=path,
+                 field="robot.urdf", value=str(urdf_path))
     return urdf_path
 
 
@@ -217,9 +217,7 @@ def parse_drive_file(path: Path) -> DriveFile:
         RobotFileError: The file is missing, is not TOML, or a field is missing or out of range.
     """
     path = Path(path)
-    if not path.is_file():
-        raise RobotFileError("robot file not found", source=path,
-                             expected="an existing robot TOML file")
+    require_file(path, "robot file", "an existing robot TOML file", RobotFileError)
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:

@@ -25,7 +25,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
-from leadthrough.fileio import atomic_write
+from leadthrough.fileio import atomic_write, require_file
 
 __all__ = ["SessionEvent", "SessionLog", "load_session", "save_session"]
 
@@ -167,8 +167,7 @@ def load_session(path: str | Path) -> SessionLog:
         DataError: Missing or unreadable file, not a leadthrough session, or missing columns.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError("file not found", source=path, expected="an existing session .parquet")
+    require_file(path, "session file", "an existing session .parquet")
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException) as e:
