@@ -94,7 +94,7 @@ class Recording:
         if np.any(dt <= 0):
             k = int(np.argmax(dt <= 0)) + 1
             raise DataError("time is not strictly increasing", source=src, field="time",
-                            value=f"row {k}: {t[k - 1]!r} -> {t[k]!r}",
+                            value=f"row {k}: {float(t[k - 1])!r} -> {float(t[k])!r} s",
                             expected="strictly increasing sample times [s]")
 
     @property
