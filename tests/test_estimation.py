@@ -140,6 +140,59 @@ def test_bad_command_or_overflow_latches_a_fault_and_keeps_the_output(
     assert status is Status.OK and np.all(np.isfinite(out.wrench))
 
 
+_BAD_SAMPLES = [("q", np.nan), ("q", np.inf), ("q", 1e155), ("current", -np.inf),
+                ("current", 1.7e308), ("qd_cmd", np.nan), ("t", np.nan)]
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.sampled_from(["direct", "momentum"]), st.sampled_from(["wrench", "force"]),
+       st.integers(0, 2**32 - 1), st.sampled_from(_BAD_SAMPLES), st.integers(0, 5),
+       st.integers(60, 250))
+def test_never_raises_never_ok_over_nan_and_latches(er20: Robot, method: str, axes: str,
+                                                    seed: int, bad: tuple[str, float],
+                                                    joint: int, k_bad: int) -> None:
+    """Random motion (jumps, missed samples), then one bad sample: before it, no fault and
+    finite outputs; from it on, FAULT_NONFINITE with the last output held; after a reset, the
+    same outputs as a fresh estimator (no state left over)."""
+    rng = np.random.default_rng(seed)
+    n_samples = 300
+    q = Q0 + np.cumsum(rng.normal(0.0, 2e-4, (n_samples, 6)), axis=0)
+    q[rng.integers(n_samples):, rng.integers(6)] += rng.choice([0.05, -0.5])
+    current = rng.normal(0.0, 0.3, (n_samples, 6))
+    qd_cmd = np.where(rng.random((n_samples, 6)) < 0.5, 0.0, rng.normal(0, 0.3, (n_samples, 6)))
+    t = np.cumsum(rng.choice([1e-3, 1e-3, 1e-3, 4e-3], n_samples))      # some samples missed
+    cfg = dict(method=method, axes=axes, friction_velocity="command", warm_up_s=0.02,
+               tare_s=0.02)
+    est, fresh = _estimator(er20, **cfg), _estimator(er20, **cfg)
+
+    def feed(e: ExternalForceEstimator, rows: range) -> list[tuple[Status, np.ndarray]]:
+        inp, out = e.make_input(), e.make_output()
+        res = []
+        for k in rows:
+            inp.t, inp.q[:], inp.current[:], inp.qd_cmd[:] = t[k], q[k], current[k], qd_cmd[k]
+            if k == k_bad:
+                field, value = bad
+                if field == "t":
+                    inp.t = value
+                else:
+                    getattr(inp, field)[joint] = value
+            res.append((e.update(inp, out), np.concatenate([out.tau_ext, out.wrench])))
+        return res
+
+    est.reset(q[0])
+    rows = feed(est, range(n_samples))
+    before, after = rows[:k_bad], rows[k_bad:]
+    assert all(s >= 0 and np.all(np.isfinite(v)) for s, v in before)
+    held = before[-1][1]
+    assert all(s is Status.FAULT_NONFINITE and np.array_equal(v, held) for s, v in after)
+    est.reset(q[0])
+    fresh.reset(q[0])
+    k_bad = -1                                  # no bad sample this time
+    for (s1, v1), (s2, v2) in zip(feed(est, range(n_samples)), feed(fresh, range(n_samples)),
+                                  strict=True):
+        assert s1 == s2 and np.array_equal(v1, v2)
+
+
 def test_input_arrays_of_the_wrong_size_latch_a_fault(er20: Robot) -> None:
     from leadthrough.estimation.estimator import EstimatorInput
 
