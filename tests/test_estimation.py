@@ -370,6 +370,33 @@ def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
     assert build_mujoco_model(er20) is not None
 
 
+def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
+    """Without a payload the mass is ~0 and no CoM is reported (a first moment over a mass
+    of zero); a model whose last link is 1 kg too heavy reads about −1 kg, with a warning."""
+    from leadthrough.data.recording import Recording
+    from leadthrough.errors import DataWarning
+    from leadthrough.sim.run import run_trajectory
+
+    s = _trajectory(er20, 3, seconds=10.0, rate=1000.0, amplitude=0.04)
+    sim = SimRobot(er20, _quiet_config(), q0=s.q[0])
+    log = run_trajectory(sim, s.q, s.qd)
+    rec = Recording(time=log.time, q=log.q, current=log.current, robot="er20")
+    nominal = nominal_drive_parameters(er20)
+    params = type(nominal)(phi=nominal.phi, friction_model=nominal.friction_model,
+                           rotor_inertia=sim.truth.drive.armature, coulomb=np.zeros(6),
+                           viscous=np.zeros(6))
+    est = estimate_payload(rec, er20, params, "motion", refit_friction=False)
+    assert abs(est.mass_kg) < 0.02 and est.com_tcp is None
+    phi = params.phi.copy()
+    phi[10 * 5] += 1.0                              # m of the last link
+    heavy = type(params)(phi=phi, friction_model=params.friction_model,
+                         rotor_inertia=params.rotor_inertia, coulomb=np.zeros(6),
+                         viscous=np.zeros(6))
+    with pytest.warns(DataWarning, match="payload mass is negative"):
+        est = estimate_payload(rec, er20, heavy, "motion", refit_friction=False)
+    assert est.mass_kg == pytest.approx(-1.0, abs=0.05) and est.com_tcp is None
+
+
 @pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt"])
 def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: str) -> None:
     """The compiled per-sample model (smoothed sign) equals the offline eq. 21 for |q̇| > v_ε."""

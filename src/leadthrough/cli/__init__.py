@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Sequence
+from typing import TextIO
 
 from leadthrough import __version__
 from leadthrough.cli import (
@@ -19,7 +21,7 @@ from leadthrough.cli import (
     robots_cmd,
     teach_cmd,
 )
-from leadthrough.errors import LeadthroughError
+from leadthrough.errors import DataWarning, LeadthroughError
 
 __all__ = ["build_parser", "main"]
 
@@ -73,6 +75,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
+    shown = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+             file: TextIO | None = None, line: str | None = None) -> None:
+        # warnings about the user's data as one line, without Python's source line
+        if issubclass(category, DataWarning):
+            print(f"leadthrough: warning: {message}", file=file if file is not None else sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
     try:
         return int(args.func(args))
     except LeadthroughError as e:
@@ -81,3 +94,5 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("leadthrough: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown

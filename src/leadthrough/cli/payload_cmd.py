@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
                         expected=f"{pf.sim_seed} (the params' [meta] sim_seed)")
     est = estimate_payload(rec, robot, pf.params, args.method)
     out: dict[str, Any] = {"robot": robot.name, "method": est.method, "mass_kg": est.mass_kg,
-                           "weight_N": est.weight_n, "samples": est.samples}
+                           "mass_std_kg": est.mass_std_kg, "weight_N": est.weight_n,
+                           "samples": est.samples}
     if est.com_tcp is not None:
         out["com_m"] = [float(v) for v in est.com_tcp]
     if args.json:
@@ -55,5 +56,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         com = "" if est.com_tcp is None else \
             " at CoM (" + ", ".join(f"{v:.3f}" for v in est.com_tcp) + ") m in the TCP frame"
-        print(f"payload {est.mass_kg:.3f} kg ({est.weight_n:.2f} N){com}")
+        print(f"payload {est.mass_kg:.3f} ± {est.mass_std_kg:.3f} kg ({est.weight_n:.2f} N)"
+              f"{com}")
     return 0

@@ -18,6 +18,7 @@ The mass gives the weight m·|g|; the CoM is reported in the TCP frame where it 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,12 +28,17 @@ from leadthrough.data.preprocess import PreprocessConfig, ProcessedData, preproc
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.model import DriveModelParameters, model_torque
 from leadthrough.dynamics.regressor import link_regressor_batch
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, DataWarning
 from leadthrough.robot.description import Robot
 
 __all__ = ["PayloadEstimate", "estimate_payload"]
 
 Array = NDArray[np.float64]
+
+
+#: A mass this many standard errors from zero is significant: only then is the CoM reported
+#: (for a positive mass) or a negative mass warned about.
+SIGNIFICANT_SIGMAS = 5.0
 
 
 @dataclass(frozen=True)
@@ -42,14 +48,19 @@ class PayloadEstimate:
     Attributes:
         method: ``"motion"`` or ``"static"``.
         mass_kg: Mass [kg].
+        mass_std_kg: Its standard error from the fit's residual [kg] (the noise's share only,
+            not the model's bias).
         weight_n: Weight m·|g| [N].
-        com_tcp: Centre of mass in the TCP frame [m], shape (3,), or None where not identifiable.
+        com_tcp: Centre of mass in the TCP frame [m], shape (3,), or None where not identifiable
+            (the motion does not excite it, or the mass is within
+            :data:`SIGNIFICANT_SIGMAS` standard errors of zero).
         samples: Joint equations used.
         residual_rms: RMS of the fit residual per joint [N·m], shape (n,).
     """
 
     method: str
     mass_kg: float
+    mass_std_kg: float
     weight_n: float
     com_tcp: Array | None
     samples: int
@@ -85,6 +96,10 @@ def estimate_payload(
 
     Raises:
         DataError: Unknown method, too little motion or too few static samples.
+
+    Warns:
+        DataWarning: A mass significantly below zero (no payload, or a model that does not
+            fit).
     """
     if method not in ("motion", "static"):
         raise DataError("unknown method", field="method", value=method,
@@ -131,13 +146,24 @@ def estimate_payload(
                         source=data.source, field="q", expected="motion or poses under gravity")
     keep = norms > 1e-9 * norms.max()
     sol = np.zeros(cols.size)
-    fit, *_ = np.linalg.lstsq(A[:, keep] / norms[keep], b, rcond=None)
+    An = A[:, keep] / norms[keep]
+    fit, *_ = np.linalg.lstsq(An, b, rcond=None)
     sol[keep] = fit / norms[keep]
+    # standard error of the mass (column 0 is always kept: norms[0] > 0)
+    dof = max(b.size - An.shape[1], 1)
+    sigma2 = float(np.sum((b - An @ fit) ** 2)) / dof
+    mass_std = float(np.sqrt(sigma2 * np.linalg.pinv(An.T @ An)[0, 0])) / norms[0]
     # identifiability of the CoM: the three first-moment columns must be well conditioned
     sv = np.linalg.svd(A[:, 1:4] / np.maximum(norms[1:4], 1e-300), compute_uv=False)
     mass = float(sol[0])
+    if mass < -SIGNIFICANT_SIGMAS * mass_std:
+        where = f"{data.source}: " if data.source else ""
+        warnings.warn(f"{where}the estimated payload mass is negative ({mass:.3f} ± "
+                      f"{mass_std:.3f} kg): no payload is attached, or the unloaded model does "
+                      "not fit this recording", DataWarning, stacklevel=2)
     com = None
-    if mass > 0 and sv[-1] > 1e-3 * sv[0] and np.all(keep[1:4]):
+    # the CoM is a first moment divided by the mass: only where the mass is clearly nonzero
+    if mass > SIGNIFICANT_SIGMAS * mass_std and sv[-1] > 1e-3 * sv[0] and np.all(keep[1:4]):
         c_joint = sol[1:4] / mass
         frame = model.frames[robot.tcp_frame_id]
         com = np.asarray(frame.placement.actInv(c_joint))
@@ -146,7 +172,8 @@ def estimate_payload(
     err = np.where(used, residual - fitted, 0.0)
     rms = np.sqrt((err**2).sum(axis=0) / np.maximum(used.sum(axis=0), 1))
     g = float(np.linalg.norm(model.gravity.linear))
-    return PayloadEstimate(method=method, mass_kg=mass, weight_n=mass * g, com_tcp=com,
+    return PayloadEstimate(method=method, mass_kg=mass, mass_std_kg=mass_std,
+                           weight_n=mass * g, com_tcp=com,
                            samples=int(used.sum()), residual_rms=rms)
 
 
