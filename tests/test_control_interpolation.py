@@ -101,6 +101,32 @@ def test_hermite_starved_holds_at_rest() -> None:
         HermiteInterpolator(2, T, 0)
 
 
+@pytest.mark.parametrize("bad", ["nan q", "inf qd", "short q"])
+def test_hermite_ignores_a_bad_setpoint_like_a_missed_one(bad: str) -> None:
+    """A non-finite or wrong-size setpoint never reaches the commands: the running segment
+    ends at its own setpoint, then the end is held (STARVED), and a valid setpoint resumes."""
+    interp = HermiteInterpolator(2, T, SUB)
+    interp.reset(np.zeros(2))
+    cmd = interp.make_command()
+    interp.set_target(np.array([0.001, 0.0]), np.array([0.1, 0.0]))
+    for _ in range(SUB // 2):
+        interp.update(cmd)
+    q, qd = np.array([0.002, 0.0]), np.array([0.1, 0.0])
+    if bad == "nan q":
+        q[1] = np.nan
+    elif bad == "inf qd":
+        qd[0] = np.inf
+    else:
+        q = q[:1]
+    interp.set_target(q, qd)
+    statuses = [interp.update(cmd) for _ in range(SUB)]
+    assert statuses[SUB // 2 - 1] == InterpolatorStatus.FINISHED
+    assert statuses[-1] == InterpolatorStatus.STARVED
+    assert np.array_equal(cmd.q, [0.001, 0.0]) and np.all(cmd.qd == 0.0)
+    interp.set_target(np.array([0.0015, 0.0]), np.zeros(2))
+    assert interp.update(cmd) == InterpolatorStatus.WORKING and np.all(np.isfinite(cmd.q))
+
+
 def test_jerk_limited_needs_ruckig_with_a_clear_error(er20: Robot,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "ruckig", None)

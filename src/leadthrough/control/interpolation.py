@@ -136,9 +136,13 @@ class HermiteInterpolator:
         self._k = self.substeps
 
     def set_target(self, q: Array, qd: Array) -> None:
-        """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each."""
-        joint_kernels.hermite_start(self._segment, q, qd)
-        self._k = 0
+        """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each.
+
+        A setpoint of the wrong size or not finite is ignored, like a missed one: the current
+        segment runs to its end, then the end is held (``STARVED``); no command is ever NaN.
+        """
+        if joint_kernels.hermite_start(self._segment, q, qd):
+            self._k = 0
 
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
         """Advance one servo period and write the command into ``out.q``, ``out.qd``."""

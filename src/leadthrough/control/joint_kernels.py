@@ -176,7 +176,7 @@ HERMITE_WORKING, HERMITE_FINISHED, HERMITE_STARVED = 0, 1, -1
 
 
 @njit(cache=True, nogil=True)
-def hermite_start(segment: Array, q: Array, qd: Array) -> None:
+def hermite_start(segment: Array, q: Array, qd: Array) -> bool:
     """A new segment from the last command to the setpoint (q, q̇) (see
     :mod:`leadthrough.control.interpolation`).
 
@@ -184,13 +184,23 @@ def hermite_start(segment: Array, q: Array, qd: Array) -> None:
         segment: Segment state, shape (7, n), rows ``HERMITE_*`` (in place).
         q: Setpoint [rad], shape (n,).
         qd: Velocity at the setpoint [rad/s], shape (n,).
+
+    Returns:
+        False, with nothing changed, for a setpoint of the wrong size or not finite.
     """
-    for j in range(q.size):
+    n = segment.shape[1]
+    if q.size != n or qd.size != n:
+        return False
+    for j in range(n):
+        if not (np.isfinite(q[j]) and np.isfinite(qd[j])):
+            return False
+    for j in range(n):
         segment[HERMITE_P0, j] = segment[HERMITE_Q, j]
         segment[HERMITE_V0, j] = segment[HERMITE_QD, j]
         segment[HERMITE_P1, j] = q[j]
         segment[HERMITE_V1, j] = qd[j]
         segment[HERMITE_DP, j] = q[j] - segment[HERMITE_Q, j]
+    return True
 
 
 @njit(cache=True, nogil=True)
