@@ -423,8 +423,13 @@ def test_after_a_release_at_rest_breaking_away_takes_the_stopping_friction(er20:
 def test_rest_cycles_reuse_the_kinematics_bit_for_bit(er20: Robot) -> None:
     """A cycle at rest reuses the kinematics and the IK residual of the unchanged setpoint; a
     controller made to recompute them every cycle gives the same outputs, bit for bit, through
-    pushes, stops, rests, a deadman release, a fault and its clearing."""
-    cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6))
+    pushes, stops, rests, a deadman release, a refused reset, a fault and its clearing; and the
+    cache is used (fewer kinematics than cycles)."""
+    cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6),
+                        safety=SafetyConfig(workspace_min=(-0.2, -1.5, -0.5),
+                                            workspace_max=(1.8, 1.5, 2.0)))
+    q_outside = Q_WORK.copy()
+    q_outside[0] = 2.5                      # TCP at x = -0.58 m: outside the box, refused
     k_n = 700
     w = np.zeros((k_n, 6))
     w[10:120, 0] = 40.0                     # push +x, release, stop and rest
@@ -437,6 +442,14 @@ def test_rest_cycles_reuse_the_kinematics_bit_for_bit(er20: Robot) -> None:
     deadman = (k > 0) & ((k < 450) | (k > 470)) & ((k < 570) | (k > 580))
     cached, fresh = GuidingController(er20, cfg), GuidingController(er20, cfg)
     outs = []
+    kinematics = [0]
+    compute = cached._ik.compute_kinematics
+
+    def counted(q: np.ndarray) -> None:
+        kinematics[0] += 1
+        compute(q)
+
+    cached._ik.compute_kinematics = counted  # type: ignore[method-assign]
     for ctl, recompute in ((cached, False), (fresh, True)):
         ctl.reset(Q_WORK)
         inp, out = ctl.make_input(), ctl.make_output()
@@ -448,6 +461,9 @@ def test_rest_cycles_reuse_the_kinematics_bit_for_bit(er20: Robot) -> None:
             if recompute:
                 ctl._kinematics_fresh = ctl._residual_fresh = False
             ctl.update(inp, out)
+            if k in (200, 540):             # at rest, and in FAULT before its clearing
+                with pytest.raises(ControlError, match="workspace"):
+                    ctl.reset(q_outside)
             if k == 560:
                 assert ctl.clear_fault(k * DT)
             rows.append(np.concatenate([out.q, out.qd, out.transform_tool_to_base.ravel(),
@@ -458,6 +474,7 @@ def test_rest_cycles_reuse_the_kinematics_bit_for_bit(er20: Robot) -> None:
     states = outs[0][:, -2]
     assert {State.GUIDING, State.STOPPING, State.FAULT, State.IDLE} <= set(states.tolist())
     np.testing.assert_array_equal(outs[0], outs[1])
+    assert kinematics[0] < 0.8 * k_n                          # rest cycles reused them
     # the session moved in every push, and rested (cached cycles) in between
     moving = np.any(outs[0][:, 6:12] != np.roll(outs[0][:, 6:12], 1, axis=0), axis=1)
     assert moving[20:120].all() and not moving[200:240].any() and moving[610:680].any()

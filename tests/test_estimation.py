@@ -237,6 +237,25 @@ def test_missed_samples_are_bridged_not_differentiated_as_one_period(er20: Robot
     np.testing.assert_allclose(runs[1][after], runs[0][after], rtol=1e-9)
 
 
+def test_a_gap_too_long_to_bridge_restarts_at_the_gaps_mean_velocity(er20: Robot) -> None:
+    """150 samples missed (beyond MAX_GAP_SAMPLES): the differentiator restarts with the
+    gap's mean velocity, so the velocity estimate stays near the joint's 0.1 rad/s (a restart
+    at rest would read 0, and differentiating the jump 15 rad/s)."""
+    est = _estimator(er20)
+    inp, out = est.make_input(), est.make_output()
+    est.reset(Q0)
+    qd = []
+    for k in range(1500):
+        if 1000 <= k < 1150:
+            continue
+        inp.t = k * 1e-3
+        inp.q[:] = Q0
+        inp.q[1] += 0.1 * inp.t
+        est.update(inp, out)
+        qd.append(out.qd[1])
+    np.testing.assert_allclose(qd[1000:], 0.1, rtol=0.02)
+
+
 def test_rezero_takes_any_window_without_raising(er20: Robot) -> None:
     est = _estimator(er20)
     inp, out = est.make_input(), est.make_output()

@@ -11,6 +11,7 @@ import pytest
 from leadthrough.data.io import load_recording, save_recording
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError, DataWarning
+from leadthrough.robot import Robot
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
@@ -155,3 +156,32 @@ def test_real_ur10e_logs_load_as_they_are() -> None:
                              cmap)
     assert any("dropped" in str(w.message) for w in caught)  # garbage rows counted
     assert np.all(np.diff(bad.time) > 0) and np.abs(bad.q).max() < 10
+
+
+def test_joint_range_errs_on_corrupt_positions_and_warns_on_a_convention_mismatch(
+        er20: Robot) -> None:
+    """A position half a turn or more outside the limits is an error naming column and row; a
+    smaller excess only warns (the column map's offsets may use another convention than the
+    robot file's limits)."""
+    t = np.arange(50) * 1e-3
+    q = np.tile(0.5 * (er20.lower_limits + er20.upper_limits), (50, 1))
+    rec = Recording(time=t, q=q, current=np.zeros_like(q), robot="er20")
+    rec.check_joint_range(er20)                                   # inside: silent
+    q_over = q.copy()
+    q_over[7, 2] = er20.upper_limits[2] + 0.4
+    with pytest.warns(DataWarning, match=r"q3 = .* row 7 lies 0.4 rad outside"):
+        Recording(time=t, q=q_over, current=np.zeros_like(q), robot="er20").check_joint_range(er20)
+    q_over[9, 3] = 2.26e6
+    with pytest.raises(DataError, match=r"field 'q4' = 2260000.0: joint position far outside"):
+        Recording(time=t, q=q_over, current=np.zeros_like(q), robot="er20").check_joint_range(er20)
+
+
+@pytest.mark.skipif(not (SHARED / "kr300").is_dir(), reason="../shared/data not available")
+def test_real_kr300_logs_pass_the_joint_range_check_with_a_warning() -> None:
+    from leadthrough.robot import load_robot
+
+    kr300 = load_robot(str(ROOT / "examples" / "real" / "kr300" / "robot.toml"))
+    cmap = ROOT / "examples" / "real" / "kr300" / "columns.toml"
+    rec = load_recording(SHARED / "kr300" / "FF_A_identification.mat", cmap)
+    with pytest.warns(DataWarning, match="check the column map's offsets"):
+        rec.check_joint_range(kr300)

@@ -255,6 +255,7 @@ def run_excite(args: argparse.Namespace) -> int:
 
 def run_record(args: argparse.Namespace) -> int:
     """Execute ``leadthrough record``."""
+    require_suffix(args.output, (".csv", ".parquet", ".pq"))
     require_folder(args.output)
     robot = load_robot(args.robot)
     traj, traj_robot = load_trajectory(args.trajectory)

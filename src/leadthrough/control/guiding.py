@@ -39,7 +39,7 @@ One cycle:
    the joint setpoint is held bit for bit and q̇ = 0.0 exactly (until then the IK tracks the
    held pose and brakes the joints). While the setpoint and the commanded pose are unchanged,
    the cycle reuses their kinematics (FK, Jacobian, μ) and IK residual instead of recomputing
-   the same numbers (a cycle at rest: 16 instead of 22 µs, ``benchmarks/guiding.py``).
+   the same numbers (a cycle at rest: 14 instead of 22 µs, ``benchmarks/guiding.py``).
 
 ``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio and
 ``numpy.linalg`` allocate their results; a state transition appends one event to the log).
@@ -216,6 +216,8 @@ class GuidingController:
             raise ControlError("outside the joint limits", field="q", value=q.tolist(),
                                expected=f"within {r.lower_limits.tolist()} .. "
                                         f"{r.upper_limits.tolist()} rad")
+        # the IK's kinematics are those of q from here, not of the setpoint (if refused below)
+        self._kinematics_fresh = False
         self._ik.compute_kinematics(q)
         p = self._ik.transform_tool_to_base.translation
         if self._safety.workspace_clearance(p, 0.0) < 0.0:

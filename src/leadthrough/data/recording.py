@@ -8,20 +8,22 @@ naming the field and what was expected.
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, DataWarning
 from leadthrough.robot.description import Robot
 
 __all__ = ["Recording", "is_sim_seed"]
 
 Array = NDArray[np.float64]
 
-#: How far a recorded joint position may lie outside the robot's limits [rad] (encoder offsets;
-#: a URDF's limits a little inside the mechanical ones).
+#: How far a recorded joint position may lie outside the robot's limits without a warning [rad]
+#: (encoder offsets; a URDF's limits a little inside the mechanical ones).
 JOINT_RANGE_TOLERANCE = 0.1
 
 
@@ -143,18 +145,41 @@ class Recording:
                             value=self.robot, expected=f"'{robot.name}'")
 
     def check_joint_range(self, robot: Robot, tolerance: float = JOINT_RANGE_TOLERANCE) -> None:
-        """Raise a DataError unless every position lies within ``robot``'s joint limits ±
-        ``tolerance`` [rad] (a corrupt or foreign file would otherwise be identified as a robot
-        that is not this one); names the joint's column, the row and the value."""
+        """Check the positions against ``robot``'s joint limits.
+
+        A position more than half a turn outside them is corrupt (or the file is another
+        robot's): an error. One more than ``tolerance`` [rad] outside them is a warning: the
+        column map's offsets and the robot file's limits may use different angle conventions.
+
+        Raises:
+            DataError: A position more than π outside the limits, naming the joint's column, the
+                row and the value.
+
+        Warns:
+            DataWarning: A position more than ``tolerance`` outside the limits.
+        """
         self.check_robot(robot)
-        lo, hi = robot.lower_limits - tolerance, robot.upper_limits + tolerance
-        bad = (self.q < lo) | (self.q > hi)
-        if bad.any():
+        lo, hi = robot.lower_limits, robot.upper_limits
+        excess = np.maximum(lo - self.q, self.q - hi)
+        for limit, report in ((math.pi, "error"), (tolerance, "warning")):
+            bad = excess > limit
+            if not bad.any():
+                continue
             row, j = (int(x) for x in np.argwhere(bad)[0])
-            raise DataError(f"joint position outside the limits of '{robot.name}' in row {row}",
-                            source=self.source, field=f"q{j + 1}", value=float(self.q[row, j]),
-                            expected=f"{lo[j]:.4g} .. {hi[j]:.4g} rad (the limits ± "
-                                     f"{tolerance:g})")
+            value = float(self.q[row, j])
+            if report == "error":
+                raise DataError(f"joint position far outside the limits of '{robot.name}' in "
+                                f"row {row} (a corrupt file, or another robot's)",
+                                source=self.source, field=f"q{j + 1}", value=value,
+                                expected=f"{lo[j] - limit:.4g} .. {hi[j] + limit:.4g} rad (the "
+                                         "limits ± π)")
+            where = f"{self.source}: " if self.source else ""
+            warnings.warn(f"{where}q{j + 1} = {value:.4g} rad in row {row} lies "
+                          f"{float(excess[row, j]):.3g} rad outside the joint limits of "
+                          f"'{robot.name}' ({lo[j]:.4g} .. {hi[j]:.4g} rad): check the column "
+                          "map's offsets against the robot file's limits", DataWarning,
+                          stacklevel=2)
+            return
 
     def joint_torque(self, robot: Robot) -> Array:
         """Joint torque [N·m], shape (N, n): logged torque, or R·Kt·current."""

@@ -184,7 +184,8 @@ class EstimatorInput:
     """One sample (write into the arrays in place).
 
     Attributes:
-        t: Time [s].
+        t: Time [s] (an advance of k ≥ 2 periods since the last sample: k − 1 samples were
+            missed, and the differentiator bridges them).
         q: Joint positions [rad], shape (n,).
         current: Motor currents [A], shape (n,).
         qd_cmd: Joint velocity commanded to the servo for this period [rad/s], shape (n,)
@@ -386,10 +387,10 @@ class ExternalForceEstimator:
         return self._state[fused.TARE].copy()
 
 
-#: Status by the compiled sample's code (index -1: the fault)
 #: Longest re-zero window [samples] (about 25 days at 1 kHz).
 _MAX_WINDOW = 2**31
 
+#: Status by the compiled sample's code.
 _STATUS = {fused.STATUS_OK: Status.OK, fused.STATUS_WARMING_UP: Status.WARMING_UP,
            fused.STATUS_TARING: Status.TARING, fused.STATUS_FAULT: Status.FAULT_NONFINITE,
            fused.STATUS_FAULT_SIZE: Status.FAULT_INPUT_SIZE}

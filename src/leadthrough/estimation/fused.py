@@ -60,7 +60,8 @@ GAP_Q = 22                         # q interpolated over missed samples (scratch
 LAST_T = 23                        # column 0: t of the last sample
 STATE_ROWS = 24
 
-#: Missed samples bridged by interpolation; a longer gap restarts the differentiator at rest.
+#: Most missed samples the differentiator steps through (a longer gap: its last ones, from a
+#: restart with the gap's mean velocity).
 MAX_GAP_SAMPLES = 100
 
 # rows of ``const`` after the friction rows
@@ -108,7 +109,8 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
         current: Motor currents [A], shape (n,).
         qd_cmd: Joint velocity commanded to the servo [rad/s], shape (n,) (friction driven by
             the command; else unused).
-        t: Time [s] (checked for finiteness only).
+        t: Time [s]: finite; an advance of k ≥ 2 periods since the last sample bridges k − 1
+            missed samples (see ``_bridge_gap``).
         const: Per-joint constants, shape (CONST_ROWS, n).
         settings: Float settings, shape (SETTINGS_SLOTS,).
         counters: Counters and flags (in place), shape (COUNTER_SLOTS,).
@@ -182,17 +184,23 @@ def _restart_differentiator(q: Array, state: Array) -> None:
 def _bridge_gap(q: Array, t: float, settings: Array, state: Array) -> None:
     """Samples missed since the last one (t advanced by k ≥ 2 periods): step the
     differentiator through q interpolated linearly between the two samples, so that the jump
-    of q over the gap is not differentiated as one period's motion; after more than
-    :data:`MAX_GAP_SAMPLES`, restart it at rest at ``q``. A t that repeats or goes back is
-    treated as one period."""
-    periods = (t - state[LAST_T, 0]) / settings[DT]
+    of q over the gap is not differentiated as one period's motion. Of a gap longer than
+    :data:`MAX_GAP_SAMPLES` only the last that many are stepped, from a restart at the
+    interpolated position with the gap's mean velocity (the work per sample stays bounded). A
+    t that repeats or goes back is treated as one period."""
+    elapsed = t - state[LAST_T, 0]
+    periods = elapsed / settings[DT]
     if periods < 1.5:
         return
-    if periods > MAX_GAP_SAMPLES + 1.5:
-        _restart_differentiator(q, state)
-        return
-    missed = int(periods + 0.5) - 1
-    for m in range(1, missed + 1):
+    missed = int(min(periods, 1e9) + 0.5) - 1
+    first = max(1, missed - MAX_GAP_SAMPLES + 1)
+    if first > 1:
+        w = (first - 1) / (missed + 1.0)
+        for j in range(q.size):
+            state[POS, j] = state[LAST_Q, j] + w * (q[j] - state[LAST_Q, j])
+            state[VEL, j] = (q[j] - state[LAST_Q, j]) / elapsed
+            state[ACC, j] = 0.0
+    for m in range(first, missed + 1):
         w = m / (missed + 1.0)
         for j in range(q.size):
             state[GAP_Q, j] = state[LAST_Q, j] + w * (q[j] - state[LAST_Q, j])

@@ -48,8 +48,10 @@ class PayloadEstimate:
     Attributes:
         method: ``"motion"`` or ``"static"``.
         mass_kg: Mass [kg].
-        mass_std_kg: Its standard error from the fit's residual [kg] (the noise's share only,
-            not the model's bias).
+        mass_std_kg: Its standard error from the fit's residual [kg], allowing for the
+            residual's correlation in time (the noise's share only, not the model's bias;
+            conservative for densely sampled, smooth residuals: measured ±0.03 kg on the real
+            UR10e's 2.8 kg, ±0.6 kg on the simulator's 10 kg at 1 kHz for an error of 0.05 kg).
         weight_n: Weight m·|g| [N].
         com_tcp: Centre of mass in the TCP frame [m], shape (3,), or None where not identifiable
             (the motion does not excite it, or the mass is within
@@ -149,9 +151,12 @@ def estimate_payload(
     An = A[:, keep] / norms[keep]
     fit, *_ = np.linalg.lstsq(An, b, rcond=None)
     sol[keep] = fit / norms[keep]
-    # standard error of the mass (column 0 is always kept: norms[0] > 0)
+    # standard error of the mass (column 0 is always kept: norms[0] > 0), for residuals that
+    # are correlated in time: the variance of independent samples, times the largest
+    # (1 + ρ)/(1 − ρ) over the joints (ρ the lag-1 autocorrelation of a joint's residual)
+    r = b - An @ fit
     dof = max(b.size - An.shape[1], 1)
-    sigma2 = float(np.sum((b - An @ fit) ** 2)) / dof
+    sigma2 = float(np.sum(r**2)) / dof * _correlation_factor(r, used)
     mass_std = float(np.sqrt(sigma2 * np.linalg.pinv(An.T @ An)[0, 0])) / norms[0]
     # identifiability of the CoM: the three first-moment columns must be well conditioned
     sv = np.linalg.svd(A[:, 1:4] / np.maximum(norms[1:4], 1e-300), compute_uv=False)
@@ -175,6 +180,22 @@ def estimate_payload(
     return PayloadEstimate(method=method, mass_kg=mass, mass_std_kg=mass_std,
                            weight_n=mass * g, com_tcp=com,
                            samples=int(used.sum()), residual_rms=rms)
+
+
+def _correlation_factor(residual: Array, used: NDArray[np.bool_]) -> float:
+    """max over the joints of (1 + ρ)/(1 − ρ), ρ the lag-1 autocorrelation of the joint's
+    residual (``residual`` stacked sample-major as ``used``'s True entries), in [1, samples]."""
+    full = np.zeros(used.shape)
+    full[used] = residual
+    worst = 1.0
+    for j in range(used.shape[1]):
+        e = full[used[:, j], j]
+        if e.size < 3 or not np.any(e):
+            continue
+        rho = float(np.dot(e[:-1], e[1:]) / np.dot(e, e))
+        rho = min(max(rho, 0.0), 1.0 - 1.0 / e.size)
+        worst = max(worst, (1.0 + rho) / (1.0 - rho))
+    return worst
 
 
 def _without_friction(params: DriveModelParameters) -> DriveModelParameters:

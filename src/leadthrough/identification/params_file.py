@@ -54,6 +54,10 @@ if TYPE_CHECKING:
 __all__ = ["ParamsFile", "load_params", "save_params"]
 
 Array = NDArray[np.float64]
+#: How far below zero a Stribeck friction coefficient may be (a convex solver's tolerance on
+#: its bound) [N·m or N·m·s].
+FRICTION_TOLERANCE = 1e-6
+
 _FRICTION_KEYS = {
     FrictionModel.STRIBECK: ("f1", "f2", "qd_sm", "f3", "qd_sg", "f4"),
     FrictionModel.COULOMB_VISCOUS: ("coulomb", "viscous"),
@@ -233,9 +237,10 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
                                 expected="the field to be present")
             fr[key][k] = _number(path, f"joints.{jn}.{key}", jt[key])
             if model is FrictionModel.STRIBECK and key != "rotor_inertia":
-                # the paper's bounds (friction > 0); the velocities divide
+                # the paper's bounds (friction > 0, met by the solvers to their tolerance);
+                # the velocities divide
                 strict = key in ("qd_sm", "qd_sg")
-                if fr[key][k] < 0 or (strict and fr[key][k] == 0):
+                if fr[key][k] < -FRICTION_TOLERANCE or (strict and fr[key][k] <= 0):
                     raise DataError("out of range", source=path, field=f"joints.{jn}.{key}",
                                     value=fr[key][k],
                                     expected="> 0 [rad/s]" if strict else ">= 0 [N·m, N·m·s]")
