@@ -8,7 +8,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from leadthrough.data.recording import Recording
 from leadthrough.dynamics import nominal_drive_parameters
+from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.errors import DataError
 from leadthrough.estimation import kernels
 from leadthrough.estimation.estimator import (
@@ -366,20 +368,26 @@ def test_force_fit_damping_follows_the_shortest_lever(lever: float, w: float, se
         assert info[1] > 0.0
 
 
-def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
-    """Noise-free, friction-free simulator of the nominal model: mass and CoM are exact."""
-    from leadthrough.data.recording import Recording
+def _quiet_payload_run(robot: Robot, seconds: float, payload: Payload | None
+                       ) -> tuple[Recording, DriveModelParameters]:
+    """A recording of the noise-free, friction-free simulator of the nominal model (with
+    ``payload``), and that model's parameters (its true rotor inertia, no friction)."""
     from leadthrough.sim.run import run_trajectory
 
-    quiet = _quiet_config()
-    s = _trajectory(er20, 3, seconds=20.0, rate=1000.0, amplitude=0.04)
-    sim = SimRobot(er20, quiet, q0=s.q[0], payload=Payload(8.0, (0.02, -0.01, 0.12)))
+    s = _trajectory(robot, 3, seconds=seconds, rate=1000.0, amplitude=0.04)
+    sim = SimRobot(robot, _quiet_config(), q0=s.q[0], payload=payload)
     log = run_trajectory(sim, s.q, s.qd)
-    rec = Recording(time=log.time, q=log.q, current=log.current, robot="er20")
-    params = nominal_drive_parameters(er20)
-    params = type(params)(phi=params.phi, friction_model=params.friction_model,
-                          rotor_inertia=sim.truth.drive.armature, coulomb=np.zeros(6),
-                          viscous=np.zeros(6))
+    rec = Recording(time=log.time, q=log.q, current=log.current, robot=robot.name)
+    nominal = nominal_drive_parameters(robot)
+    params = type(nominal)(phi=nominal.phi, friction_model=nominal.friction_model,
+                           rotor_inertia=sim.truth.drive.armature, coulomb=np.zeros(robot.n),
+                           viscous=np.zeros(robot.n))
+    return rec, params
+
+
+def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
+    """Noise-free, friction-free simulator of the nominal model: mass and CoM are exact."""
+    rec, params = _quiet_payload_run(er20, 20.0, Payload(8.0, (0.02, -0.01, 0.12)))
     est = estimate_payload(rec, er20, params, "motion", refit_friction=False)
     assert est.mass_kg == pytest.approx(8.0, rel=5e-3)
     assert est.com_tcp is not None
@@ -392,18 +400,9 @@ def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
 def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
     """Without a payload the mass is ~0 and no CoM is reported (a first moment over a mass
     of zero); a model whose last link is 1 kg too heavy reads about −1 kg, with a warning."""
-    from leadthrough.data.recording import Recording
     from leadthrough.errors import DataWarning
-    from leadthrough.sim.run import run_trajectory
 
-    s = _trajectory(er20, 3, seconds=10.0, rate=1000.0, amplitude=0.04)
-    sim = SimRobot(er20, _quiet_config(), q0=s.q[0])
-    log = run_trajectory(sim, s.q, s.qd)
-    rec = Recording(time=log.time, q=log.q, current=log.current, robot="er20")
-    nominal = nominal_drive_parameters(er20)
-    params = type(nominal)(phi=nominal.phi, friction_model=nominal.friction_model,
-                           rotor_inertia=sim.truth.drive.armature, coulomb=np.zeros(6),
-                           viscous=np.zeros(6))
+    rec, params = _quiet_payload_run(er20, 10.0, None)
     est = estimate_payload(rec, er20, params, "motion", refit_friction=False)
     assert abs(est.mass_kg) < 0.02 and est.com_tcp is None
     phi = params.phi.copy()
