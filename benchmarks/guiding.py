@@ -190,11 +190,10 @@ def main() -> None:
           f"{100 * rate * np.median(fastest[mov]) * 1e-6:.1f} %")
 
 
-def interruptions(seconds: float = 0.0) -> np.ndarray:
+def interruptions(seconds: float = INTERRUPTION_PROBE_S) -> np.ndarray:
     """The machine's interruptions of a running thread: gaps [µs] longer than
     :data:`INTERRUPTION_GAP_US` between consecutive clock reads of a loop that does nothing
-    else, over ``seconds`` (default :data:`INTERRUPTION_PROBE_S`)."""
-    seconds = seconds or INTERRUPTION_PROBE_S
+    else, over ``seconds``."""
     reads = np.ones(round(seconds * 1e7))   # touched (no page faults while timing); ~7e6 reads/s
     clock = time.perf_counter
     end = clock() + seconds

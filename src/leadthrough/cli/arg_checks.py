@@ -9,19 +9,22 @@ import numpy as np
 
 from leadthrough.errors import DataError
 from leadthrough.excitation.fourier import TrajectorySamples
+from leadthrough.fileio import require_folder
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_PAYLOAD_COM_M", "check_trajectory_limits", "require_suffix"]
+__all__ = ["MAX_PAYLOAD_COM_M", "check_output", "check_trajectory_limits"]
 
 #: Farthest payload CoM from the TCP ``record`` simulates [m].
 MAX_PAYLOAD_COM_M = 1.0
 
 
-def require_suffix(path: Path, suffixes: tuple[str, ...]) -> None:
-    """An output's file type, checked before any work (the writer would not convert)."""
+def check_output(path: Path, suffixes: tuple[str, ...]) -> None:
+    """An output file, checked before any work: its type (the writer would not convert) and
+    its folder (:func:`leadthrough.fileio.require_folder`)."""
     if Path(path).suffix.lower() not in suffixes:
         raise DataError("unsupported output file type", source=path, field="-o",
                         value=Path(path).suffix or "(none)", expected=" or ".join(suffixes))
+    require_folder(path)
 
 
 def check_trajectory_limits(path: Path, traj: TrajectorySamples, robot: Robot) -> None:

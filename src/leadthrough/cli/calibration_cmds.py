@@ -13,8 +13,8 @@ import numpy as np
 
 from leadthrough.cli.arg_checks import (
     MAX_PAYLOAD_COM_M,
+    check_output,
     check_trajectory_limits,
-    require_suffix,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
 from leadthrough.data.io import load_recording, save_recording
@@ -210,8 +210,7 @@ MAX_EXCITATION_S = 3600.0
 
 def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
-    require_suffix(args.output, (".csv",))
-    require_folder(args.output)
+    check_output(args.output, (".csv",))
     robot = load_robot(args.robot)
     if args.sweep or args.presliding:
         return excite_friction_experiment(args, robot)
@@ -255,8 +254,7 @@ def run_excite(args: argparse.Namespace) -> int:
 
 def run_record(args: argparse.Namespace) -> int:
     """Execute ``leadthrough record``."""
-    require_suffix(args.output, (".csv", ".parquet", ".pq"))
-    require_folder(args.output)
+    check_output(args.output, (".csv", ".parquet", ".pq"))
     robot = load_robot(args.robot)
     traj, traj_robot = load_trajectory(args.trajectory)
     if traj_robot is not None and traj_robot != robot.name:
@@ -302,8 +300,7 @@ def run_identify(args: argparse.Namespace) -> int:
         raise DataError("a friction sweep is used by the consistent method only",
                         field="--method", value=args.method,
                         expected="'consistent' with --friction-sweep")
-    require_suffix(args.output, (".toml",))
-    require_folder(args.output)
+    check_output(args.output, (".toml",))
     if args.urdf_out is not None:
         # checked before the identification, so that nothing is written if it cannot be
         require_folder(args.urdf_out)

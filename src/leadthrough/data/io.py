@@ -300,10 +300,9 @@ def _load_split(folder: Path, cmap: ColumnMap) -> Recording:
     for file in cmap.files:
         path = folder / file
         names = [n for n, s in cmap.signals.items() if s.file == file]
-        if not path.is_file():
-            raise DataError("file of the column map not found", source=folder,
-                            field=f"{names[0]}.file", value=file,
-                            expected=f"an existing file in the folder (see {cmap.path})")
+        require_file(path, "file of the column map",
+                     f"an existing file in the folder (see {cmap.path})", source=folder,
+                     field=f"{names[0]}.file", value=file)
         arrays, bad, why = _read_mapped(path, cmap, names, cmap.max_column_in(file))
         part = _clean_rows(arrays, str(path), bad, why)
         t = part["time"]

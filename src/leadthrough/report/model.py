@@ -15,6 +15,7 @@ from typing import Any
 
 from leadthrough import __version__
 from leadthrough.errors import DataError
+from leadthrough.fileio import require_file
 
 __all__ = [
     "PNG_SIGNATURE",
@@ -257,9 +258,8 @@ def _check_figure(figure: Any, name: str, root: Path) -> FigureFile:
         raise DataError("lies outside the report folder", field=f"{name}.path",
                         value=str(figure.path),
                         expected=f"a PNG inside {root} (save the figure there first)")
-    if not path.is_file():
-        raise DataError("figure file not found", source=path, field=f"{name}.path",
-                        value=str(figure.path), expected=f"an existing PNG inside {root}")
+    require_file(path, "figure file", f"an existing PNG inside {root}", field=f"{name}.path",
+                 value=str(figure.path))
     try:
         data = path.read_bytes()
     except OSError as e:

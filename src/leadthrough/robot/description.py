@@ -15,6 +15,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.errors import RobotFileError, UnknownRobotError
+from leadthrough.fileio import require_file
 from leadthrough.robot.drive_file import DriveFile, JointDrive, parse_drive_file
 
 __all__ = ["BUILTIN_ROBOTS", "Robot", "builtin_robot_path", "load_robot"]
@@ -180,8 +181,7 @@ def load_robot(spec: str | Path = "er20") -> Robot:
                 raise UnknownRobotError("unknown robot", field="robot", value=text,
                                         expected=f"one of {', '.join(BUILTIN_ROBOTS)} "
                                                  "or a path to a robot TOML file")
-            raise RobotFileError("robot file not found", source=path,
-                                 expected="an existing robot TOML file")
+            require_file(path, "robot file", "an existing robot TOML file", RobotFileError)
         if path.suffix.lower() == ".urdf":
             raise RobotFileError("a robot is a TOML drive file that names its URDF", source=path,
                                  expected="the robot TOML file (with [robot] urdf = ...)")
