@@ -110,8 +110,8 @@ class EstimatorConfig:
             noise while the drive's friction is at its highest (Stribeck): the command gives
             friction its true direction and the identified Stribeck curve its level. The
             friction then has memory (eq. 15 as the steady state of a LuGre/Dahl model, see
-            ``kernels.presliding_friction_step``): after a stop, the drives keep the friction
-            they had while moving, and so does the model.
+            ``presliding_kernels.presliding_friction_step``): after a stop, the drives keep the
+            friction they had while moving, and so does the model.
         presliding_rad: z₀ of the ``"command"`` friction while a joint is commanded to move
             [rad]: the friction turns over a commanded displacement of a few z₀, which is the
             gear's presliding plus the servo's lag. A smaller z₀ turns the model's friction
@@ -122,8 +122,8 @@ class EstimatorConfig:
             z₀ per joint (``DriveModelParameters.presliding``, from a presliding test), or
             this value where none was identified.
         presliding_play_counts: Width of the play operator on the encoder that drives the
-            friction at rest [encoder counts] (``kernels.play_step``): chatter within it moves
-            nothing. 0 passes every count.
+            friction at rest [encoder counts] (``presliding_kernels.play_step``): chatter
+            within it moves nothing. 0 passes every count.
         friction_weighting: κ of the ``axes="force"`` fit with ``"command"`` friction: each
             joint's weight 1/σ_j becomes 1/√(σ_j² + (κ·u_j)²), u_j the friction's uncertainty
             (see ``kernels.friction_weights``), held over two time constants of the output

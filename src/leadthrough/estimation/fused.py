@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.estimation import kernels
+from leadthrough.estimation import kernels, presliding_kernels
 
 __all__ = [
     "CONST_ROWS",
@@ -157,10 +157,10 @@ def sample_front(q: Array, current: Array, qd_cmd: Array, t: float, const: Array
     stribeck = counters[STRIBECK] != 0
     if command:
         # driven by the command while it moves, by the measured motion when it is at rest
-        kernels.play_step(q, const[HALF_PLAY], state[PLAY], state[INCREMENT])
-        kernels.presliding_friction_step(qd_cmd, state[INCREMENT], fp, stribeck, settings[DT],
-                                         settings[PRESLIDING_RAD], const[REST_PRESLIDING],
-                                         state[PRESLIDING], state[FRICTION], state[LEVEL])
+        presliding_kernels.play_step(q, const[HALF_PLAY], state[PLAY], state[INCREMENT])
+        presliding_kernels.presliding_friction_step(
+            qd_cmd, state[INCREMENT], fp, stribeck, settings[DT], settings[PRESLIDING_RAD],
+            const[REST_PRESLIDING], state[PRESLIDING], state[FRICTION], state[LEVEL])
         if counters[WEIGH] != 0:
             kernels.friction_weights(state[LEVEL], state[PRESLIDING], settings[ENVELOPE_DECAY],
                                      settings[KAPPA], const[STD], state[ENVELOPE],

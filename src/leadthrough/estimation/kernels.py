@@ -4,7 +4,7 @@ With six joints, each NumPy call costs more in dispatch (~0.5–1 µs) than in a
 estimator sample needs dozens of them. These kernels fuse the element-wise work of one sample
 into a single compiled call each, so an update costs a few Pinocchio calls plus two kernel
 calls. The real-time filter and model classes call them too. The friction here is eq. 15 with
-the smoothed sign (or, with memory, :func:`presliding_friction_step`); the offline model
+the smoothed sign (with memory: :mod:`leadthrough.estimation.presliding_kernels`); the offline model
 (:mod:`leadthrough.dynamics.friction`, exact sign) is the reference, and
 ``tests/test_estimation.py`` checks that both agree away from standstill.
 
@@ -26,7 +26,6 @@ __all__ = [
     "FRICTION_ROWS",
     "cholesky_factor",
     "cholesky_solve",
-    "dahl_step",
     "damping_of",
     "direct_residual",
     "friction_torque",
@@ -34,8 +33,6 @@ __all__ = [
     "gram_manipulability",
     "low_pass_step",
     "momentum_step",
-    "play_step",
-    "presliding_friction_step",
     "smallest_eigenvalue_3",
     "smooth_sign",
     "svf_step",
@@ -83,105 +80,6 @@ def smooth_sign(qd: Array, fp: Array, sign: Array) -> None:
     """
     for j in range(qd.size):
         sign[j] = min(1.0, max(-1.0, qd[j] * fp[0, j]))
-
-
-@njit(cache=True, nogil=True)
-def play_step(q: Array, half_width: Array, play: Array, increment: Array) -> None:
-    """The play (backlash) operator on the encoder, one step (in place on ``play``).
-
-    The output follows the input only once it leaves a band of ±``half_width`` around it, so
-    quantisation chatter of one or two counts at rest moves nothing. A friction state driven by
-    the raw encoder would otherwise be worn down by thousands of tiny reversals.
-
-    Args:
-        q: Measured joint positions [rad], shape (n,).
-        half_width: Half the band per joint [rad], shape (n,), ≥ 0.
-        play: The operator's output (state) [rad], shape (n,).
-        increment: Output: this step's change of ``play`` [rad], shape (n,).
-    """
-    for j in range(q.size):
-        new = min(max(play[j], q[j] - half_width[j]), q[j] + half_width[j])
-        increment[j] = new - play[j]
-        play[j] = new
-
-
-@njit(cache=True, nogil=True)
-def dahl_step(state: float, displacement: float, level: float, presliding: float) -> float:
-    """One exact step of a Dahl friction state driven by a displacement.
-
-    F turns toward ±``level`` (the sign of the displacement) by the factor
-    e^{−|displacement|/z₀}: dF = (g·sgn(dq) − F)·|dq|/z₀, exact for one monotone step.
-
-    Args:
-        state: F before the step [N·m] (or normalised, with ``level`` 1).
-        displacement: dq of the step [rad], non-zero.
-        level: g [N·m], > 0.
-        presliding: z₀ [rad], > 0.
-
-    Returns:
-        F after the step.
-    """
-    target = level if displacement > 0.0 else -level
-    return target + (state - target) * np.exp(-abs(displacement) / presliding)
-
-
-@njit(cache=True, nogil=True)
-def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: bool,
-                             dt: float, command_presliding: float, rest_presliding: Array,
-                             state: Array, out: Array, level: Array) -> None:
-    """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
-
-    The Coulomb + Stribeck part F follows dF = k·(dq − |dq|·F/g(q̇)), with g(q̇) the eq. 15
-    level f1 + f2·e^{−(R q̇/q̇sm)²} + f3·e^{−(q̇/q̇sg)²} and the presliding stiffness
-    k = g(0)/z₀: F turns over a displacement of a few z₀ toward ±g, and keeps its value at
-    standstill (a stopped gear still carries the friction it had when it stopped, not the static
-    peak). In steady sliding F = g·sgn(q̇), eq. 15 itself. Two drives:
-
-    * a joint commanded to move (q̇ ≠ 0): dq = q̇·dt with ``command_presliding`` (z₀ plus the
-      servo's lag behind the command), the level at the commanded speed;
-    * a joint commanded to stand still (q̇ = 0): the measured displacement ``increment`` (play
-      operator on the encoder, :func:`play_step`) with the joint's own z₀ (identified by a
-      presliding test, :mod:`leadthrough.identification.presliding`), the static level g(0).
-      A push at rest deflects the drive by a fraction of z₀, and how much of the push the
-      current then carries follows from that displacement.
-
-    Each step is the exact solution for a constant rate. The viscous (and cube-root) terms of
-    the commanded velocity are added as usual.
-
-    Args:
-        qd: Joint velocities commanded to the servo [rad/s], shape (n,) (0: at rest).
-        increment: Measured displacement of this step, after the play operator [rad], shape
-            (n,) (used where ``qd`` is 0).
-        fp: Friction parameter rows, shape (8, n).
-        stribeck: Use the Stribeck rows (eq. 15) instead of the cube-root row.
-        dt: Step [s].
-        command_presliding: z₀ of the commanded motion [rad].
-        rest_presliding: z₀ per joint at rest [rad], shape (n,).
-        state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
-        out: Friction torque [N·m], shape (n,).
-        level: The eq. 15 level g(q̇) [N·m] (written), shape (n,).
-    """
-    for j in range(qd.size):
-        v = qd[j]
-        g = fp[1, j]
-        g0 = g
-        if stribeck:
-            a = v * fp[3, j]
-            b = v * fp[5, j]
-            g += fp[4, j] * np.exp(-a * a) + fp[6, j] * np.exp(-b * b)
-            g0 += fp[4, j] + fp[6, j]
-        level[j] = g
-        if v != 0.0:
-            if g > 0.0:
-                target = g if v > 0.0 else -g
-                state[j] = target + (state[j] - target) * np.exp(
-                    -g0 * abs(v) * dt / (command_presliding * g))
-        elif increment[j] != 0.0 and g0 > 0.0:
-            state[j] = dahl_step(state[j], increment[j], g0, rest_presliding[j])
-        f = state[j] + v * fp[2, j]
-        if not stribeck:
-            f += fp[7, j] * np.cbrt(v)
-        out[j] = f
 
 
 @njit(cache=True, nogil=True)

@@ -12,8 +12,9 @@ such moves works). Per joint:
    the nominal model).
 2. **Model.** The friction at rest is a Dahl state: F = g·s, with s ∈ [−1, 1] driven by the
    joint's displacement, ds = (sgn(dq) − s)·|dq|/z₀ (:func:`dahl_states`, the estimator's
-   friction at rest, :func:`leadthrough.estimation.kernels.presliding_friction_step`). The
-   encoder goes through a play operator of ``play_counts`` counts first, as in the estimator:
+   friction at rest,
+   :func:`leadthrough.estimation.presliding_kernels.presliding_friction_step`). The encoder
+   goes through a play operator of ``play_counts`` counts first, as in the estimator:
    quantisation chatter at rest would otherwise wear the state down.
 3. **Fit.** ΔF = g·Δs(z₀) over all pairs: for each z₀ of a log grid, g is linear least squares
    (≥ 0); the best grid point is polished by a bounded scalar search on log z₀. The standard
@@ -38,7 +39,7 @@ from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError, check_fields
-from leadthrough.estimation import kernels
+from leadthrough.estimation import presliding_kernels
 from leadthrough.robot.description import Robot
 
 __all__ = ["PreslidingAnalysisConfig", "PreslidingFit", "RestPairs", "dahl_states",
@@ -135,8 +136,8 @@ def dahl_states(q: Array, half_width: Array, presliding: Array) -> Array:
     """The normalised Dahl friction state s of every sample (F = g·s), from rest at s = 0.
 
     The estimator's friction at rest, replayed: the same play operator
-    (:func:`~leadthrough.estimation.kernels.play_step`) and step
-    (:func:`~leadthrough.estimation.kernels.dahl_step`).
+    (:func:`~leadthrough.estimation.presliding_kernels.play_step`) and step
+    (:func:`~leadthrough.estimation.presliding_kernels.dahl_step`).
 
     Args:
         q: Joint positions [rad], shape (N, n).
@@ -152,10 +153,10 @@ def dahl_states(q: Array, half_width: Array, presliding: Array) -> Array:
     increment = np.zeros(n)
     s = np.zeros(n)
     for i in range(N):
-        kernels.play_step(q[i], half_width, play, increment)
+        presliding_kernels.play_step(q[i], half_width, play, increment)
         for j in range(n):
             if increment[j] != 0.0:
-                s[j] = kernels.dahl_step(s[j], increment[j], 1.0, presliding[j])
+                s[j] = presliding_kernels.dahl_step(s[j], increment[j], 1.0, presliding[j])
         out[i] = s
     return out
 
