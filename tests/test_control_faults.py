@@ -3,6 +3,7 @@ position jump, latched until cleared; and ``update`` never raises."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,16 +16,20 @@ from leadthrough.control import (
     CartesianLimits,
     Cause,
     DifferentialIK,
+    Event,
     Fault,
     GuidingConfig,
     GuidingController,
     GuidingInput,
+    GuidingOutput,
     SafetyConfig,
     SafetySupervisor,
     State,
     Status,
     VirtualFrictionConfig,
 )
+from leadthrough.control import safety_kernels as sk
+from leadthrough.errors import ControlError
 from leadthrough.robot import Robot, load_robot
 from test_control_guiding import (
     DT,
@@ -287,3 +292,53 @@ def test_event_log_is_bounded(er20: Robot) -> None:
     assert [e.cause for e in sup.events] == [Cause.DEADMAN_PRESSED, Cause.DEADMAN_RELEASED,
                                              Cause.STOPPED]
     assert sup.events[-1].t == pytest.approx(0.32)
+
+
+def test_event_ring_keeps_each_transitions_details(er20: Robot) -> None:
+    """The compiled ring gives back every field of a transition: states, cause, fault, value
+    and index, oldest first, and the latched fault's details."""
+    sup = SafetySupervisor(er20, SafetyConfig(max_events=4), CartesianLimits())
+    sup.reset(1.0)
+    sup.deadman(1.1, False)                                 # arms, no transition
+    sup.deadman(1.2, True)
+    sup.trip(1.3, Fault.JOINT_LIMIT, 2.5, 3)
+    sup.trip(1.4, Fault.COLLISION, 200.0, 0)                # already latched: ignored
+    want = [Event(1.0, State.IDLE, State.IDLE, Cause.RESET),
+            Event(1.2, State.IDLE, State.GUIDING, Cause.DEADMAN_PRESSED),
+            Event(1.3, State.GUIDING, State.FAULT, Cause.FAULT, Fault.JOINT_LIMIT, 2.5, 3)]
+    assert [_fields(e) for e in sup.events] == [_fields(e) for e in want]
+    assert (sup.fault, sup.fault_value, sup.fault_index) == (Fault.JOINT_LIMIT, 2.5, 3)
+    assert sup.clear_fault(1.5, at_rest=True) and sup.fault == Fault.NONE
+    assert _fields(sup.events[-1]) == _fields(Event(1.5, State.FAULT, State.IDLE,
+                                                    Cause.FAULT_CLEARED))
+    assert sup.events_dropped == 0 and len(sup.events) == 4
+
+
+def _fields(e: Event) -> tuple[object, ...]:
+    """An event's fields, NaN as None (NaN != NaN)."""
+    return tuple(None if isinstance(v, float) and math.isnan(v) else v
+                 for v in dataclasses.astuple(e))
+
+
+def test_compiled_codes_match_the_enums() -> None:
+    """The compiled supervisor's codes are those of State, Fault and Cause."""
+    assert tuple(State) == (sk.IDLE, sk.GUIDING, sk.STOPPING, sk.FAULT)
+    assert list(Fault) == [
+        sk.F_NONE, sk.F_NONFINITE, sk.F_POSITION, sk.F_CURRENT, sk.F_STALE, sk.F_FOLLOWING,
+        sk.F_COLLISION, sk.F_JOINT_LIMIT, sk.F_WORKSPACE, sk.F_SINGULARITY, sk.F_TRACKING,
+        sk.F_NOT_STARTED, sk.F_ESTIMATOR]
+    assert list(Cause) == [sk.C_PRESSED, sk.C_RELEASED, sk.C_STOPPED, sk.C_FAULT, sk.C_CLEARED,
+            sk.C_RESET]
+
+
+@pytest.mark.parametrize("buffer", [np.zeros(45), np.zeros(58, dtype=np.float32),
+                                    np.zeros((2, 29)), np.zeros(116)[::2], [0.0] * 58])
+def test_output_needs_its_packed_buffer(buffer: object) -> None:
+    """GuidingOutput is built on one contiguous float64 buffer of 46 + 2·n values; anything
+    else is refused at construction, naming the field."""
+    with pytest.raises(ControlError, match="buffer"):
+        GuidingOutput(buffer)  # type: ignore[arg-type]
+    out = GuidingOutput(np.zeros(58))
+    assert out.q.shape == (6,) and out.transform_tool_to_base[3, 3] == 1.0
+    out.q[:] = 1.0
+    assert np.shares_memory(out.q, out.buffer)

@@ -11,8 +11,8 @@ from leadthrough.control import (
     AutoFrictionConfig,
     DifferentialIK,
     IKConfig,
-    guiding_kernel,
     joint_kernels,
+    se3_kernels,
 )
 from leadthrough.control.ik import dls_damping
 from leadthrough.errors import ControlError
@@ -253,14 +253,49 @@ def test_compiled_base_frame_step_matches_pinocchio_exp3() -> None:
     rotations far below and far above the small-angle branch."""
     rng = np.random.default_rng(5)
     R_out, p_out = np.zeros((3, 3)), np.zeros(3)
-    for scale in (1e-12, 1e-9, 1e-6, 1e-2, 1.0, 3.0):
+    for scale in (1e-12, 1e-9, 1e-6, 1e-2, 1.0, 3.0, 30.0):
         for _ in range(20):
             twist = rng.normal(size=6) * scale
             R = pin.exp3(rng.normal(size=3))
             p = rng.normal(size=3)
-            guiding_kernel.integrate_base(R, p, twist, DT, R_out, p_out)
+            se3_kernels.integrate_base(R, p, twist, DT, R_out, p_out)
             np.testing.assert_allclose(R_out, pin.exp3(twist[3:] * DT) @ R, atol=1e-14)
             np.testing.assert_allclose(p_out, p + twist[:3] * DT, atol=1e-15)
+
+
+def test_compiled_tool_frame_step_matches_pinocchio_exp6() -> None:
+    """T·exp6(ν·dt) compiled vs Pinocchio, on both sides of the series branch (0.1 rad)."""
+    rng = np.random.default_rng(6)
+    R_out, p_out = np.zeros((3, 3)), np.zeros(3)
+    for scale in (0.0, 1e-12, 1e-6, 1e-2, 1.0, 9.9, 10.1, 100.0, 300.0):
+        for _ in range(20):
+            T = pin.SE3.Random()
+            twist = rng.normal(size=6) * scale
+            se3_kernels.integrate_tool(T.rotation, T.translation, twist, DT, R_out, p_out)
+            ref = T * pin.exp6(pin.Motion(twist * DT))
+            np.testing.assert_allclose(R_out, ref.rotation, atol=1e-14)
+            np.testing.assert_allclose(p_out, ref.translation, atol=1e-13)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-12, 1e-7, 1e-3, 0.0999, 0.1001, 1.0, 3.0,
+                                   np.pi - 1e-3, np.pi - 1e-6])
+def test_compiled_log6_matches_pinocchio(angle: float) -> None:
+    """log6(T_a⁻¹·T_b) compiled vs pin.log6 (and its norm), from the identity to a half
+    turn: 1e-12 up to 3 rad; closer to π the problem itself is ill-conditioned (the axis of
+    a half turn is only determined up to its sign), and both agree to 1e-9."""
+    rng = np.random.default_rng(7)
+    out = np.zeros(6)
+    tol = 1e-12 if angle <= 3.0 else 1e-9
+    for _ in range(50):
+        Ta = pin.SE3.Random()
+        axis = rng.normal(size=3)
+        xi = np.concatenate([rng.normal(size=3), axis / np.linalg.norm(axis) * angle])
+        Tb = Ta * pin.exp6(pin.Motion(xi))
+        norm = se3_kernels.log6_between(Ta.rotation, Ta.translation, Tb.rotation,
+                                        Tb.translation, out)
+        ref = pin.log6(Ta.actInv(Tb)).vector
+        np.testing.assert_allclose(out, ref, atol=tol)
+        assert norm == pytest.approx(np.linalg.norm(ref), abs=tol)
 
 
 def test_compiled_manipulability_matches_numpy(er20: Robot) -> None:

@@ -19,6 +19,7 @@ from leadthrough.control import (
     VirtualFriction,
     VirtualFrictionConfig,
     kernels,
+    se3_kernels,
 )
 from leadthrough.control import guiding_kernel as gk
 from leadthrough.control.guiding import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
@@ -296,7 +297,7 @@ def test_guiding_step_is_the_chain_of_its_kernels(
              desired)
     limiter.limit(twist, desired, scale, new)
     R_ref, p_ref = np.zeros((3, 3)), np.zeros(3)
-    gk.integrate_base(R, p, new, DT, R_ref, p_ref)
+    se3_kernels.integrate_base(R, p, new, DT, R_ref, p_ref)
     assert release_after == release_s + DT
     for got, want in ((axes[gk.SMOOTH], smooth_ref), (axes[gk.PEAK], peak_ref),
                       (axes[gk.DESIRED], desired), (axes[gk.NEW], new), (R_out, R_ref),

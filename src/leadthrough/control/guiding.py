@@ -39,10 +39,16 @@ One cycle:
    the joint setpoint is held bit for bit and q̇ = 0.0 exactly (until then the IK tracks the
    held pose and brakes the joints). While the setpoint and the commanded pose are unchanged,
    the cycle reuses their kinematics (FK, Jacobian, μ) and IK residual instead of recomputing
-   the same numbers (a cycle at rest: 14 instead of 22 µs, ``benchmarks/guiding.py``).
+   the same numbers.
 
-``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio and
-``numpy.linalg`` allocate their results; a state transition appends one event to the log).
+Steps 1–4 run as one compiled call (:func:`~leadthrough.control.cycle_kernel.controller_cycle`)
+on the packed state of the controller, its IK and its supervisor; only the Pinocchio kinematics
+of a setpoint that moved, and eq. 36 (automatic friction), run in Python before it
+(``benchmarks/guiding.py`` measures the cycle).
+
+``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio
+allocates the Jacobian it returns, and eq. 36 its ``numpy.linalg`` results; a state transition
+writes one row of the supervisor's preallocated event ring).
 """
 
 from __future__ import annotations
@@ -50,9 +56,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
+from leadthrough.control import cycle_kernel as ck
 from leadthrough.control import guiding_kernel as gk
 from leadthrough.control import kernels
 from leadthrough.control.admittance import AdmittanceLaw
@@ -128,53 +134,44 @@ class GuidingController:
             if self._auto.n != n:
                 raise ControlError("wrong size", field="noise_mean", value=self._auto.n,
                                    expected=f"{n} values")
-        self._limiter = TwistLimiter(cfg.limits, cfg.dt)
-        self._ik = DifferentialIK(robot, cfg.ik, cfg.dt)
-        self._ik_result = self._ik.make_result()
+        self._limiter = lim = TwistLimiter(cfg.limits, cfg.dt)
+        self._ik = ik = DifferentialIK(robot, cfg.ik, cfg.dt)
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
         self._tool = cfg.frame == "tool"
-        self._mask = np.array([1.0 if a else 0.0 for a in cfg.axes_enabled])
-        # the per-axis state, one row per vector (guiding_kernel's layout); the names are views
-        self._axes = axes = np.zeros((gk.AXES_ROWS, 6))
+        # the cycle's state, packed for its compiled call (cycle_kernel); the names are views
+        self._state = np.zeros(ck.state_size(n))
+        values, axes, self._rotations, self._positions, joints = ck.state_views(self._state, n)
+        self._values, self._axes, self._joints = values, axes, joints
         self._twist = axes[gk.TWIST]
-        self._twist_des = axes[gk.DESIRED]
-        self._twist_new = axes[gk.NEW]
-        self._wrench = axes[gk.WRENCH]
         self._friction = axes[gk.FRICTION]
         self._stop_friction = axes[gk.STOP_FRICTION]
-        self._smooth = axes[gk.SMOOTH]  # the wrench smoothed for the release
-        self._peak = axes[gk.PEAK]      # signed peak force per axis at rest since the release
         self._friction[:] = cfg.virtual_friction.friction
         self._stop_friction[:] = cfg.virtual_friction.stopping_friction
         axes[gk.LAW] = self._law.coefficients
-        self._vdt = np.zeros(6)
-        self._Jc = np.zeros((6, n))
-        self._q_cmd = np.zeros(n)
-        self._qd_cmd = np.zeros(n)
-        self._measured_q = np.full(n, math.nan)   # the last finite q before the first reset
-        # the commanded TCP pose and the next cycle's, two poses swapped when the step is taken;
-        # the kernels write them through views of their rotation and translation (no SE3 is
-        # built in the cycle)
-        self._T_cmd = pin.SE3.Identity()
-        self._R_cmd, self._p_cmd = self._T_cmd.rotation, self._T_cmd.translation
-        self._T_new = pin.SE3.Identity()
-        self._R_new, self._p_new = self._T_new.rotation, self._T_new.translation
-        self._resync = False
-        # the kinematics (FK, Jacobian, μ) of the IK are those of _q_cmd, and _residual is the
-        # IK residual of _T_cmd from there: at rest neither changes, and the cycle reuses them
-        self._kinematics_fresh = False
-        self._residual_fresh = False
-        self._residual = 0.0
-        self._started = False
-        self._rest_s = math.inf
-        self._release_s = math.inf  # time since the force was removed at rest [s]
-        # cycles of the stop the last workspace check planned (inf: no box, no plan)
-        self._stop_plan = math.inf
-        self._hold_s = cfg.settle_s + cfg.rezero_s
+        axes[gk.MASK] = [1.0 if a else 0.0 for a in cfg.axes_enabled]
+        self._q_cmd = joints[ck.Q_CMD]
+        self._qd_cmd = joints[ck.QD_CMD]
+        joints[ck.MEASURED] = math.nan       # the last finite q before the first reset
+        self._flags = flags = np.zeros(ck.FLAG_SLOTS, dtype=np.int64)
+        flags[ck.TOOL] = int(self._tool)
+        flags[ck.LAW_ID] = self._law.law_id
+        values[ck.REST_S] = values[ck.RELEASE_S] = values[ck.STOP_PLAN] = math.inf
+        values[ck.IK_SCALE] = values[ck.SPEED_SCALE] = 1.0
         # guiding_step's settings: hold, dt, release drop, smoothing weight, forgetting factor
-        self._step_settings = np.array([self._hold_s, cfg.dt, RELEASE_DROP,
-                                        cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt),
-                                        math.exp(-cfg.dt / RELEASE_WINDOW_S)])
+        values[ck.STEP_SETTINGS:ck.STEP_SETTINGS + 5] = (
+            cfg.settle_s + cfg.rezero_s, cfg.dt, RELEASE_DROP,
+            cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt), math.exp(-cfg.dt / RELEASE_WINDOW_S))
+        values[ck.LAW_ALPHA] = self._law.alpha
+        values[ck.MAX_SPEED:ck.MAX_SPEED + 2] = lim.max_speed
+        values[ck.MAX_STEP:ck.MAX_STEP + 2] = lim.max_step
+        values[ck.STOP_FRACTION] = cfg.ik.stop_acceleration_fraction
+        values[ck.MU0] = cfg.ik.manipulability_threshold
+        values[ck.MAX_DAMPING] = cfg.ik.max_damping
+        self._Jc = np.zeros((6, n))
+        sup = self._safety
+        # the arguments of the compiled cycle after the input's, in its order
+        self._cycle_args = (ik.rotation_tool_to_base, ik.translation_tool_to_base, ik.buffer,
+                            self._state, flags, sup.buffer, sup.flags)
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
@@ -185,11 +182,10 @@ class GuidingController:
 
     def make_output(self) -> GuidingOutput:
         """A preallocated output."""
-        n = self.n
-        return GuidingOutput(q=np.zeros(n), qd=np.zeros(n), transform_tool_to_base=np.eye(4),
-                             twist_base=np.zeros(6), twist_tool=np.zeros(6),
-                             wrench=np.zeros(6), friction=self._friction.copy(),
-                             stopping_friction=self._stop_friction.copy())
+        out = GuidingOutput(np.zeros(ck.output_size(self.n)))
+        out.friction[:] = self._friction
+        out.stopping_friction[:] = self._stop_friction
+        return out
 
     def reset(self, q: Array, t: float = 0.0) -> None:
         """(Re)start at rest at joint position ``q``, IDLE, any fault cleared.
@@ -217,27 +213,27 @@ class GuidingController:
                                expected=f"within {r.lower_limits.tolist()} .. "
                                         f"{r.upper_limits.tolist()} rad")
         # the IK's kinematics are those of q from here, not of the setpoint (if refused below)
-        self._kinematics_fresh = False
-        self._ik.compute_kinematics(q)
-        p = self._ik.transform_tool_to_base.translation
+        flags, values, ik = self._flags, self._values, self._ik
+        flags[ck.KINEMATICS_FRESH] = 0
+        ik.compute_kinematics(q)
+        p = ik.translation_tool_to_base
         if self._safety.workspace_clearance(p, 0.0) < 0.0:
             sc = self.config.safety
             raise ControlError("TCP outside the workspace box", field="q", value=p.tolist(),
                                expected=f"TCP within {sc.workspace_min} .. {sc.workspace_max} m, "
                                         f"{sc.workspace_margin} m inside")
         self._q_cmd[:] = q
-        self._kinematics_fresh = True
-        self._qd_cmd[:] = 0.0
-        self._ik_result.qd_dls[:] = 0.0
-        self._stop_plan = math.inf if not self._safety.has_box else 0.0
+        self._joints[[ck.QD_CMD, ck.QD_DLS]] = 0.0
+        flags[ck.KINEMATICS_FRESH] = flags[ck.KINEMATICS_NEW] = 1
+        self._update_auto_friction()
         self._twist[:] = 0.0
-        self._hold_fk()
-        self._resync = False
-        self._started = True
-        self._release_s = math.inf
-        self._peak[:] = 0.0
-        self._smooth[:] = 0.0
-        self._rest_s = math.inf
+        self._axes[[gk.PEAK, gk.SMOOTH]] = 0.0
+        self._rotations[ck.CMD] = ik.rotation_tool_to_base
+        self._positions[ck.CMD] = p
+        flags[ck.RESIDUAL_FRESH] = flags[ck.RESYNC] = 0
+        flags[ck.STARTED] = 1
+        values[ck.STOP_PLAN] = 0.0 if self._safety.has_box else math.inf
+        values[ck.RELEASE_S] = values[ck.REST_S] = math.inf
         self._safety.reset(t)
 
     def clear_fault(self, t: float = 0.0) -> bool:
@@ -249,10 +245,9 @@ class GuidingController:
             Whether the fault was cleared (False while the twist or the joints are still
             decelerating, or if not in FAULT).
         """
-        ok = self._safety.clear_fault(t, kernels.is_zero(self._twist)
-                                      and kernels.is_zero(self._qd_cmd))
+        ok = self._safety.clear_fault(t, not (self._twist.any() or self._qd_cmd.any()))
         if ok:
-            self._resync = True
+            self._flags[ck.RESYNC] = 1
         return ok
 
     @property
@@ -281,145 +276,60 @@ class GuidingController:
         Returns:
             ``Status.OK``, or ``Status.FAULT`` while a fault is latched.
         """
-        sup, ik, t = self._safety, self._ik, inp.t
-        if not self._started:
-            # no setpoint yet: hold wherever the robot was last measured (NaN before any
-            # finite measurement: there is no position to command)
-            sup.trip(t, Fault.NOT_STARTED)
-            if inp.q.shape == self._measured_q.shape and np.isfinite(inp.q).all():
-                self._measured_q[:] = inp.q
-            self._write(out, 1.0)
-            out.q[:] = self._measured_q
-            return out.status
-        sup.check_feedback(t, inp.sequence, inp.q, inp.current, inp.wrench_base, self._q_cmd)
-        if inp.estimator_status < 0:
-            sup.trip(t, Fault.ESTIMATOR, float(inp.estimator_status))
-        if not self._kinematics_fresh:
-            ik.compute_kinematics(self._q_cmd)
-            self._kinematics_fresh = True
-        if self._resync:
-            self._hold_fk()
-            self._resync = False
-        if not self._residual_fresh:
-            err = pin.log6(ik.transform_tool_to_base.actInv(self._T_cmd)).vector
-            self._residual = kernels.norm(err)
-            self._residual_fresh = True
-        residual = self._residual
-        mu = ik.manipulability
-        twist, new = self._twist, self._twist_new
-        # cycles a stop gives the joints (IKConfig.stop_acceleration_fraction) from the setpoint;
-        # computed where needed (-1: not yet)
-        joint_stop = -1.0
-        sup.check_motion(t, mu, self._q_cmd, self._qd_cmd, residual)
-        sup.deadman(t, inp.deadman)
-        scale = sup.speed_scale(mu)
-        kernels.control_wrench(inp.wrench_base, ik.rotation_tool_to_base, self._tool,
-                               sup.inputs_finite, self._mask, self._wrench)
-        if sup.state == State.GUIDING:
-            if self._auto is not None:
-                ik.jacobian_in_frame(self.config.frame, self._Jc)
-                self._auto.update(self._Jc, mu, self._friction, self._stop_friction)
-            # settling after a stop, or after a release at rest (the force on some axis falls
-            # back from its peak: the gears unload, and the estimate swings the other way):
-            # breaking away takes the stopping friction; then the law, the limits and (base
-            # frame) the next pose, in one compiled call
-            law, lim = self._law, self._limiter
-            self._release_s = gk.guiding_step(
-                self._axes, law.law_id, law.alpha, self._step_settings, lim.max_speed,
-                lim.max_step, scale, self._rest_s, self._release_s, not self._tool,
-                self._R_cmd, self._p_cmd, self._R_new, self._p_new)
-            if self._tool:
-                self._integrate(new)
-            if sup.has_box:
-                joint_stop = ik.stop_cycles(self._qd_cmd)
-                # a stop starting next cycle lasts at most this long: the Cartesian one, or the
-                # joints' from the faster of their velocity and the one the twist asks for
-                # (ahead while their acceleration holds them back), plus this cycle's step
-                stop = max(self._limiter.stop_cycles(twist), joint_stop,
-                           ik.stop_cycles(self._ik_result.qd_dls)) + 1.0
-                speed = kernels.norm(new[:3])
-                clearance = sup.workspace_clearance(self._p_new, speed,
-                                                    stop * self.config.dt)
-                if clearance < 0.0:
-                    # stop from the last cycle's twist, as planned (and checked) there
-                    sup.trip(t, Fault.WORKSPACE, clearance)
-                else:
-                    self._stop_plan = stop
-        if sup.state != State.GUIDING:
-            if joint_stop < 0.0:
-                joint_stop = ik.stop_cycles(self._qd_cmd)
-            # at the joints' pace, but never longer than the stop the last check planned
-            self._limiter.decelerate(twist, new, min(joint_stop, self._stop_plan))
-            self._stop_plan = max(self._stop_plan - 1.0, 0.0)
-            self._integrate(new)
-        # at rest: no twist, and joints slow enough to halt within one cycle's acceleration
-        # (else the IK keeps tracking the held pose and brakes them at their limits)
-        at_rest = kernels.is_zero(new)
-        if at_rest and not kernels.is_zero(self._qd_cmd):
-            if joint_stop < 0.0:
-                joint_stop = ik.stop_cycles(self._qd_cmd)
-            at_rest = joint_stop * ik.config.stop_acceleration_fraction <= 1.0
-        sup.stopped(t, at_rest)
-        twist[:] = new
-        res = self._ik_result
-        if at_rest:
-            if self._rest_s == 0.0:
-                # came to rest (a reset or an earlier rest cycle did this already, and the
-                # setpoint has not moved since): hold, the setpoint stays bit for bit, the
-                # target is the pose of the setpoint
-                self._qd_cmd[:] = 0.0
-                res.qd_dls[:] = 0.0
-                self._hold_fk()
-                res.scale = 1.0
-            self._rest_s += self.config.dt
+        flags = self._flags
+        if not flags[ck.STARTED]:
+            return self._not_started(inp, out)
+        if not flags[ck.KINEMATICS_FRESH]:
+            flags[ck.KINEMATICS_FRESH] = flags[ck.KINEMATICS_NEW] = 1
+            if self._auto is None:
+                self._ik.frame_kinematics(self._q_cmd)
+            else:
+                self._ik.compute_kinematics(self._q_cmd)
+                self._update_auto_friction()
+        state = ck.controller_cycle(
+            inp.t, inp.sequence, inp.deadman, inp.estimator_status, inp.q, inp.current,
+            inp.wrench_base, *self._cycle_args, out.buffer)
+        values = self._values
+        out.state = _STATES[state]
+        if state == State.FAULT:
+            out.fault = self._safety.fault
+            out.status = Status.FAULT
         else:
-            self._rest_s = 0.0
-            self._take_new_pose()
-            ik.solve(self._q_cmd, self._qd_cmd, self._T_cmd, res)
-            self._q_cmd[:] = res.q
-            self._kinematics_fresh = self._residual_fresh = False
-            self._qd_cmd[:] = res.qd
-            self._resync = res.limited
-        out.manipulability = mu
-        out.ik_residual = residual
-        self._write(out, scale)
+            out.fault = Fault.NONE
+            out.status = Status.OK
+        out.manipulability = values[ck.MANIPULABILITY]
+        out.ik_residual = values[ck.RESIDUAL]
+        out.speed_scale = values[ck.SPEED_SCALE]
+        out.ik_scale = values[ck.IK_SCALE]
+        out.rest_s = values[ck.REST_S]
         return out.status
 
-    def _integrate(self, twist: Array) -> None:
-        """The next pose (``_T_new``) after one cycle of ``twist`` from the commanded one: tool
-        frame T·exp6(ν·dt); base frame (axes of the base at the TCP) p + v·dt and
-        exp3(ω·dt)·R (the TCP point moves with v)."""
-        if self._tool:
-            np.multiply(twist, self.config.dt, out=self._vdt)
-            T = self._T_cmd * pin.exp6(self._vdt)
-            gk.copy_pose(T.rotation, T.translation, self._R_new, self._p_new)
+    def _not_started(self, inp: GuidingInput, out: GuidingOutput) -> Status:
+        """No setpoint yet: NOT_STARTED fault, holding wherever the robot was last measured
+        (NaN before any finite measurement: there is no position to command)."""
+        sup, measured = self._safety, self._joints[ck.MEASURED]
+        sup.trip(inp.t, Fault.NOT_STARTED)
+        if inp.q.shape == measured.shape and np.isfinite(inp.q).all():
+            measured[:] = inp.q
+        kernels.write_output(measured, self._qd_cmd, self._rotations[ck.CMD],
+                             self._positions[ck.CMD], self._twist, self._tool,
+                             self._axes[gk.WRENCH], self._friction, self._stop_friction, out.q,
+                             out.qd, out.transform_tool_to_base, out.twist_base, out.twist_tool,
+                             out.wrench, out.friction, out.stopping_friction)
+        out.state, out.fault, out.status = sup.state, sup.fault, Status.FAULT
+        out.speed_scale = out.ik_scale = 1.0
+        out.rest_s = self._values[ck.REST_S]
+        return out.status
+
+    def _update_auto_friction(self) -> None:
+        """Eq. 36 at the setpoint's pose (automatic friction only), after its
+        ``compute_kinematics``."""
+        if self._auto is None:
             return
-        gk.integrate_base(self._R_cmd, self._p_cmd, twist, self.config.dt, self._R_new,
-                          self._p_new)
-
-    def _hold_fk(self) -> None:
-        """The commanded pose becomes the pose of the joint setpoint (a copy of its FK)."""
         ik = self._ik
-        gk.copy_pose(ik.rotation_tool_to_base, ik.translation_tool_to_base, self._R_cmd,
-                     self._p_cmd)
-        self._residual_fresh = False
+        ik.jacobian_in_frame(self.config.frame, self._Jc)
+        self._auto.update(self._Jc, ik.manipulability, self._friction, self._stop_friction)
 
-    def _take_new_pose(self) -> None:
-        """The next pose becomes the commanded one (the two poses swap)."""
-        self._T_cmd, self._T_new = self._T_new, self._T_cmd
-        self._residual_fresh = False
-        self._R_cmd, self._R_new = self._R_new, self._R_cmd
-        self._p_cmd, self._p_new = self._p_new, self._p_cmd
 
-    def _write(self, out: GuidingOutput, scale: float) -> None:
-        sup = self._safety
-        kernels.write_output(self._q_cmd, self._qd_cmd, self._R_cmd, self._p_cmd, self._twist,
-                             self._tool, self._wrench, self._friction, self._stop_friction,
-                             out.q, out.qd, out.transform_tool_to_base, out.twist_base,
-                             out.twist_tool, out.wrench, out.friction, out.stopping_friction)
-        out.state = sup.state
-        out.fault = sup.fault
-        out.status = Status.FAULT if sup.state == State.FAULT else Status.OK
-        out.speed_scale = scale
-        out.ik_scale = self._ik_result.scale
-        out.rest_s = self._rest_s
+#: The states by code (a tuple lookup is cheaper than the enum's constructor).
+_STATES: tuple[State, ...] = tuple(State)

@@ -16,13 +16,12 @@ The controller keeps its per-axis state in one array of shape (``AXES_ROWS``, 6)
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
 from leadthrough.control.kernels import is_zero, limit_twist, release_step, virtual_friction_step
+from leadthrough.control.se3_kernels import integrate_base
 
 __all__ = [
     "AXES_ROWS",
@@ -31,15 +30,14 @@ __all__ = [
     "LAW",
     "LAW_VELOCITY",
     "LAW_VIRTUAL_FRICTION",
+    "MASK",
     "NEW",
     "PEAK",
     "SMOOTH",
     "STOP_FRICTION",
     "TWIST",
     "WRENCH",
-    "copy_pose",
     "guiding_step",
-    "integrate_base",
     "velocity_baseline_step",
 ]
 
@@ -47,9 +45,10 @@ Array = NDArray[np.float64]
 
 #: Rows of the controller's per-axis state: the twist of the last cycle, the law's desired twist,
 #: the limited new twist, the wrench in the controller's frame, δ, δ_s, the smoothed wrench and
-#: its peak (release detection), the law's per-axis coefficients.
-TWIST, DESIRED, NEW, WRENCH, FRICTION, STOP_FRICTION, SMOOTH, PEAK, LAW = range(9)
-AXES_ROWS = 9
+#: its peak (release detection), the law's per-axis coefficients, the axes' enable mask (1.0 or
+#: 0.0).
+TWIST, DESIRED, NEW, WRENCH, FRICTION, STOP_FRICTION, SMOOTH, PEAK, LAW, MASK = range(10)
+AXES_ROWS = 10
 
 #: The admittance laws :func:`guiding_step` can run (``AdmittanceLaw.law_id``).
 LAW_VIRTUAL_FRICTION = 0
@@ -128,38 +127,3 @@ def guiding_step(axes: Array, law_id: int, law_alpha: float, settings: Array, ma
     if integrate:
         integrate_base(rotation, position, axes[NEW], dt, rotation_out, position_out)
     return release_s
-
-
-@njit(cache=True, nogil=True)
-def integrate_base(rotation: Array, position: Array, twist: Array, dt: float,
-                   rotation_out: Array, position_out: Array) -> None:
-    """Pose after one cycle of a base-axes twist: p + v·dt, exp3(ω·dt)·R (Rodrigues)."""
-    wx, wy, wz = twist[3] * dt, twist[4] * dt, twist[5] * dt
-    th2 = wx * wx + wy * wy + wz * wz
-    th = math.sqrt(th2)
-    if th < 1e-8:
-        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
-    else:
-        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
-    e00 = 1.0 - b * (wy * wy + wz * wz)
-    e11 = 1.0 - b * (wx * wx + wz * wz)
-    e22 = 1.0 - b * (wx * wx + wy * wy)
-    e01, e10 = b * wx * wy - a * wz, b * wx * wy + a * wz
-    e02, e20 = b * wx * wz + a * wy, b * wx * wz - a * wy
-    e12, e21 = b * wy * wz - a * wx, b * wy * wz + a * wx
-    for c in range(3):
-        r0, r1, r2 = rotation[0, c], rotation[1, c], rotation[2, c]
-        rotation_out[0, c] = e00 * r0 + e01 * r1 + e02 * r2
-        rotation_out[1, c] = e10 * r0 + e11 * r1 + e12 * r2
-        rotation_out[2, c] = e20 * r0 + e21 * r1 + e22 * r2
-    for r in range(3):
-        position_out[r] = position[r] + twist[r] * dt
-
-
-@njit(cache=True, nogil=True)
-def copy_pose(rotation: Array, position: Array, rotation_out: Array, position_out: Array) -> None:
-    """Copy a pose given as rotation, shape (3, 3), and position, shape (3,)."""
-    for r in range(3):
-        for c in range(3):
-            rotation_out[r, c] = rotation[r, c]
-        position_out[r] = position[r]

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.auto_friction import AutoFrictionConfig
+from leadthrough.control.cycle_kernel import output_size, output_views
 from leadthrough.control.ik import IKConfig
 from leadthrough.control.limits import CartesianLimits
 from leadthrough.control.safety import Fault, SafetyConfig, State
@@ -138,6 +139,14 @@ class GuidingInput:
 class GuidingOutput:
     """One controller cycle's result, filled by ``update``.
 
+    Built from one buffer (``GuidingController.make_output`` allocates it), which ``update``
+    fills in one compiled call: the arrays are views of it, written in place (read or copy
+    them; never rebind them).
+
+    Args:
+        buffer: The output's storage, shape (46 + 2·n,) for n joints
+            (``cycle_kernel.output_size``).
+
     Attributes:
         q: Joint position setpoint for the end of the cycle [rad], shape (n,).
         qd: Joint velocity over the cycle [rad/s], shape (n,) (exactly 0.0 at rest).
@@ -160,14 +169,15 @@ class GuidingOutput:
             moving; infinite before the first motion).
     """
 
-    q: Array
-    qd: Array
-    transform_tool_to_base: Array
-    twist_base: Array
-    twist_tool: Array
-    wrench: Array
-    friction: Array
-    stopping_friction: Array
+    buffer: Array
+    q: Array = field(init=False)
+    qd: Array = field(init=False)
+    transform_tool_to_base: Array = field(init=False)
+    twist_base: Array = field(init=False)
+    twist_tool: Array = field(init=False)
+    wrench: Array = field(init=False)
+    friction: Array = field(init=False)
+    stopping_friction: Array = field(init=False)
     state: State = State.IDLE
     fault: Fault = Fault.NONE
     status: Status = Status.OK
@@ -176,3 +186,17 @@ class GuidingOutput:
     ik_scale: float = 1.0
     ik_residual: float = 0.0
     rest_s: float = math.inf
+
+    def __post_init__(self) -> None:
+        b = self.buffer
+        n = (b.size - output_size(0)) // 2 if isinstance(b, np.ndarray) else -1
+        if (not isinstance(b, np.ndarray) or b.dtype != np.float64 or b.ndim != 1
+                or not b.flags.c_contiguous or n < 1 or b.size != output_size(n)):
+            raise ControlError("not an output buffer", field="buffer",
+                               value=getattr(b, "shape", type(b).__name__),
+                               expected="a contiguous float64 vector of 46 + 2·n values "
+                                        "(GuidingController.make_output)")
+        self.transform_tool_to_base, six, self.q, self.qd = output_views(b, n)
+        self.twist_base, self.twist_tool, self.wrench = six[0], six[1], six[2]
+        self.friction, self.stopping_friction = six[3], six[4]
+        self.transform_tool_to_base[3, 3] = 1.0

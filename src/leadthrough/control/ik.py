@@ -30,7 +30,8 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from leadthrough.control import joint_kernels, kernels
+from leadthrough.control import joint_kernels
+from leadthrough.control.se3_kernels import log6_between
 from leadthrough.errors import ControlError, check_fields, check_period
 from leadthrough.estimation.kernels import damping_of, gram_manipulability
 from leadthrough.robot.description import Robot
@@ -134,14 +135,22 @@ class DifferentialIK:
         self._model = robot.model
         self._data = robot.model.createData()
         self._fid = robot.tcp_frame_id
+        amax = robot.acceleration_limit * cfg.acceleration_scale
+        #: All arrays of the IK, one buffer (``joint_kernels.ik_views``); the arrays below are
+        #: its views.
+        self.buffer = np.zeros(joint_kernels.ik_size(n))
+        self.gram, self.scratch, self._err, self.jacobian, self.table = (
+            joint_kernels.ik_views(self.buffer, n))
+        #: Per-joint table, shape (``joint_kernels.IK_ROWS``, n): the bounds, speed limits,
+        #: a·dt, 1/(2a) and the planned stop's a·dt (``joint_kernels.IK_*`` rows).
+        self.table[:] = [lo, hi, robot.velocity_limit * cfg.velocity_scale, amax * dt,
+                         0.5 / amax, amax * dt * cfg.stop_acceleration_fraction]
         #: Joint position bounds of the IK (the robot limits shrunk by the margin) [rad].
-        self.lower = lo
-        self.upper = hi
-        self._vmax = robot.velocity_limit * cfg.velocity_scale
-        self._amax = robot.acceleration_limit * cfg.acceleration_scale
-        self._dv = self._amax * dt
-        #: Frame Jacobian of the TCP in tool axes (``pin.LOCAL``), shape (6, n), at the last q.
-        self.jacobian = np.zeros((6, n))
+        self.lower = self.table[joint_kernels.IK_LOWER]
+        self.upper = self.table[joint_kernels.IK_UPPER]
+        #: Frame Jacobian of the TCP in tool axes (``pin.LOCAL``), shape (6, n), at the last q
+        #: (a view of ``buffer``), with J Jᵀ and its Cholesky factor (``gram``, shape (2, 6, 6))
+        #: and the least squares' work space (``scratch``, shape (7, 6)).
         #: TCP pose at the last q: Pinocchio's own frame placement (``data.oMf``), updated in
         #: place by :meth:`compute_kinematics` (copy it to keep a pose).
         self.transform_tool_to_base: pin.SE3 = self._data.oMf[self._fid]
@@ -152,11 +161,6 @@ class DifferentialIK:
         self.manipulability = 0.0
         #: λ of the damped least squares at the last q.
         self.damping = 0.0
-        self._JJt = np.zeros((6, 6))
-        self._factor = np.zeros((6, 6))
-        self._scratch = np.zeros((7, 6))
-        self._half_inv_a = 0.5 / self._amax
-        self._dv_stop = self._dv * cfg.stop_acceleration_fraction
 
     def stop_cycles(self, qd: Array) -> float:
         """Cycles a planned stop gives the joints to stop from ``qd``.
@@ -168,7 +172,7 @@ class DifferentialIK:
             max_j |q̇_j|/(f·a_j·dt) (not rounded), f the ``stop_acceleration_fraction`` and
             a_j the IK's joint acceleration limits.
         """
-        return float(joint_kernels.joint_stop_cycles(qd, self._dv_stop))
+        return float(joint_kernels.joint_stop_cycles(qd, self.table[joint_kernels.IK_DV_STOP]))
 
     def make_result(self) -> IKResult:
         """A preallocated result."""
@@ -176,13 +180,19 @@ class DifferentialIK:
 
     def compute_kinematics(self, q: Array) -> None:
         """Jacobian, TCP pose, manipulability and damping at ``q`` (shape (n,) [rad])."""
+        self.frame_kinematics(q)
+        self.manipulability = gram_manipulability(self.jacobian, self.gram[0], self.gram[1])
+        self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
+                                   self.config.max_damping)
+
+    def frame_kinematics(self, q: Array) -> None:
+        """Only the Pinocchio part of :meth:`compute_kinematics`: the TCP pose and Jacobian at
+        ``q`` (``manipulability``, ``damping`` and ``gram`` are left as they were; the guiding
+        cycle computes them in its compiled call)."""
         m, d = self._model, self._data
         pin.computeJointJacobians(m, d, q)
         pin.updateFramePlacement(m, d, self._fid)   # in place: transform_tool_to_base
         self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
-        self.manipulability = gram_manipulability(self.jacobian, self._JJt, self._factor)
-        self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
-                                   self.config.max_damping)
 
     def jacobian_in_frame(self, frame: str, out: Array) -> None:
         """The TCP Jacobian at the last q in the controller's frame.
@@ -208,11 +218,12 @@ class DifferentialIK:
             target: TCP pose to reach at the end of the cycle.
             out: Result, filled in place.
         """
-        err = pin.log6(self.transform_tool_to_base.actInv(target)).vector
-        out.residual = kernels.norm(err)
-        scale = joint_kernels.dls_step(self.jacobian, self._JJt, self.damping, err, self.dt,
-                                       q, qd_previous, self.lower, self.upper, self._vmax,
-                                       self._dv, self._half_inv_a, out.qd_dls, out.qd, out.q,
-                                       self._scratch)
+        err, tb, jk = self._err, self.table, joint_kernels
+        out.residual = log6_between(self.rotation_tool_to_base, self.translation_tool_to_base,
+                                    target.rotation, target.translation, err)
+        scale = jk.dls_step(self.jacobian, self.gram[0], self.damping, err, self.dt, q,
+                            qd_previous, tb[jk.IK_LOWER], tb[jk.IK_UPPER], tb[jk.IK_VMAX],
+                            tb[jk.IK_DV], tb[jk.IK_HALF_INV_A], out.qd_dls, out.qd, out.q,
+                            self.scratch)
         out.scale = scale
         out.limited = scale < 1.0

@@ -30,13 +30,44 @@ __all__ = [
     "HERMITE_V0",
     "HERMITE_V1",
     "HERMITE_WORKING",
+    "IK_ROWS",
     "dls_step",
     "hermite_start",
     "hermite_step",
+    "ik_size",
+    "ik_views",
     "joint_stop_cycles",
 ]
 
 Array = NDArray[np.float64]
+
+
+# The IK's buffer (``DifferentialIK.buffer``, one array so that a compiled call takes it as one
+# argument): J Jᵀ and its factor (2, 6, 6), the least squares' work space (7, 6), the log6 error
+# (6,), the Jacobian (6, n), then the joint table (IK_ROWS, n), whose rows are the IK's bounds,
+# speed limits, a·dt, 1/(2a) and the planned stop's a·dt (the fraction a stop may take)
+IK_LOWER, IK_UPPER, IK_VMAX, IK_DV, IK_HALF_INV_A, IK_DV_STOP = range(6)
+IK_ROWS = 6
+
+_SCRATCH_AT = 72
+_ERROR_AT = _SCRATCH_AT + 42
+_JACOBIAN_AT = _ERROR_AT + 6
+
+
+def ik_size(n: int) -> int:
+    """Length of the IK's buffer for ``n`` joints."""
+    return _JACOBIAN_AT + (6 + IK_ROWS) * n
+
+
+@njit(cache=True, nogil=True)
+def ik_views(buffer: Array, n: int) -> tuple[Array, Array, Array, Array, Array]:
+    """``gram`` (2, 6, 6), ``scratch`` (7, 6), ``error`` (6,), ``jacobian`` (6, n) and
+    ``table`` (``IK_ROWS``, n) of the IK's buffer."""
+    table_at = _JACOBIAN_AT + 6 * n
+    return (buffer[:_SCRATCH_AT].reshape((2, 6, 6)),
+            buffer[_SCRATCH_AT:_ERROR_AT].reshape((7, 6)), buffer[_ERROR_AT:_JACOBIAN_AT],
+            buffer[_JACOBIAN_AT:table_at].reshape((6, n)),
+            buffer[table_at:table_at + IK_ROWS * n].reshape((IK_ROWS, n)))
 
 
 @njit(cache=True, nogil=True)

@@ -20,22 +20,21 @@ States::
   fault is latched with the offending value and index; later ones are not recorded.
 
 Every transition is logged as an :class:`Event` (time, from, to, cause, fault, value, index).
-Transitions are rare, so the log is a ``collections.deque`` bounded at ``max_events`` (oldest
-dropped, counted in ``events_dropped``): appending an event is the only allocation of our own in
-the real-time path, and happens only on a transition.
+The log is a preallocated ring of the last ``max_events`` transitions (older ones dropped,
+counted in ``events_dropped``): logging allocates nothing; :attr:`SafetySupervisor.events`
+builds the :class:`Event` objects when asked.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control import kernels
+from leadthrough.control import safety_kernels as sk
 from leadthrough.control.limits import CartesianLimits
 from leadthrough.errors import ControlError, check_fields
 from leadthrough.robot.description import Robot
@@ -86,16 +85,6 @@ class Fault(IntEnum):
     #: The force estimator latched a fault since the last cycle (a non-finite or wrong-size
     #: sample between the controller's cycles, or an overflow; value: the estimator's status).
     ESTIMATOR = 12
-
-
-#: The fault of each failed check of ``kernels.feedback_fault``.
-_FEEDBACK_FAULTS: dict[int, Fault] = {
-    kernels.FEEDBACK_POSITION: Fault.POSITION_RANGE,
-    kernels.FEEDBACK_CURRENT: Fault.CURRENT_RANGE,
-    kernels.FEEDBACK_FOLLOWING: Fault.FOLLOWING_ERROR,
-    kernels.FEEDBACK_COLLISION_FORCE: Fault.COLLISION,
-    kernels.FEEDBACK_COLLISION_TORQUE: Fault.COLLISION,
-}
 
 
 class Cause(IntEnum):
@@ -210,6 +199,10 @@ class SafetyConfig:
 class SafetySupervisor:
     """The state machine and the fault checks (no motion: the guiding controller moves).
 
+    The state and the rules are compiled (:mod:`leadthrough.control.safety_kernels`), so that
+    the guiding cycle runs them inside its own compiled call; these methods run the same
+    functions on the same state, one call each.
+
     Args:
         robot: The robot (joint limits, max currents).
         config: Thresholds.
@@ -219,62 +212,92 @@ class SafetySupervisor:
     def __init__(self, robot: Robot, config: SafetyConfig, limits: CartesianLimits) -> None:
         self.config = cfg = config
         self.limits = limits
-        # per joint: middle of the range, half range + tolerance [rad], current bound [A]
-        self._joint_bounds = np.vstack([
-            0.5 * (robot.lower_limits + robot.upper_limits),
-            0.5 * (robot.upper_limits - robot.lower_limits) + cfg.position_tolerance,
-            robot.max_current * cfg.current_range_factor])
-        self._feedback_limits = np.array([cfg.following_error_limit, cfg.max_force,
-                                          cfg.max_torque])
-        # speed scale near a singularity: s = (μ − μ_stop)/_scale_span, in [min_speed_scale, 1]
-        self._mu_stop = cfg.stop_manipulability
-        self._scale_span = cfg.slow_manipulability - cfg.stop_manipulability
-        self._min_scale = cfg.min_speed_scale
-        self._lo_margin = robot.lower_limits + cfg.joint_limit_margin
-        self._hi_margin = robot.upper_limits - cfg.joint_limit_margin
-        self._box_lo = np.asarray(cfg.workspace_min, dtype=float)
-        self._box_hi = np.asarray(cfg.workspace_max, dtype=float)
-        self._has_box = bool(np.isfinite(self._box_lo).any() or np.isfinite(self._box_hi).any())
-        self._info = np.zeros(2)
-        self.state = State.IDLE
-        self.fault = Fault.NONE
-        self.fault_value = math.nan
-        self.fault_index = -1
-        self.events: deque[Event] = deque(maxlen=cfg.max_events)
-        self.events_dropped = 0
-        self._armed = not cfg.require_deadman_edge
-        self._last_seq: int | None = None
-        self._missed = 0
-        self._mu_prev = math.nan
-        #: Whether t, q, current and wrench of the last ``check_feedback`` were all finite.
-        self.inputs_finite = True
+        n = robot.n
+        #: Packed state (see :mod:`~leadthrough.control.safety_kernels`): int64 flags.
+        self.flags = flags = np.zeros(sk.FLAG_SLOTS, dtype=np.int64)
+        #: The float state, one buffer: its views are ``values`` (values and settings),
+        #: ``joints`` (per-joint bounds, shape (JOINT_ROWS, n)) and ``event_ring`` (the last
+        #: ``max_events`` transitions).
+        self.buffer = np.zeros(sk.safety_size(n, cfg.max_events))
+        values, joints, self.event_ring = sk.safety_views(self.buffer, n)
+        self.values, self.joints = values, joints
+        joints[sk.MIDDLE] = 0.5 * (robot.lower_limits + robot.upper_limits)
+        joints[sk.HALF_RANGE] = (0.5 * (robot.upper_limits - robot.lower_limits)
+                                 + cfg.position_tolerance)
+        joints[sk.MAX_CURRENT] = robot.max_current * cfg.current_range_factor
+        joints[sk.LOWER_MARGIN] = robot.lower_limits + cfg.joint_limit_margin
+        joints[sk.UPPER_MARGIN] = robot.upper_limits - cfg.joint_limit_margin
+        values[sk.FEEDBACK_LIMITS:sk.FEEDBACK_LIMITS + 3] = (
+            cfg.following_error_limit, cfg.max_force, cfg.max_torque)
+        values[sk.MU_STOP] = cfg.stop_manipulability
+        values[sk.SCALE_SPAN] = cfg.slow_manipulability - cfg.stop_manipulability
+        values[sk.MIN_SCALE] = cfg.min_speed_scale
+        values[sk.TRACKING_LIMIT] = cfg.tracking_error_limit
+        values[sk.WORKSPACE_MARGIN] = cfg.workspace_margin
+        values[sk.MAX_LINEAR_ACCELERATION] = limits.max_linear_acceleration
+        values[sk.BOX_LOW:sk.BOX_LOW + 3] = cfg.workspace_min
+        values[sk.BOX_HIGH:sk.BOX_HIGH + 3] = cfg.workspace_max
+        values[sk.FAULT_VALUE] = math.nan
+        values[sk.MU_PREVIOUS] = math.nan
+        flags[sk.STATE] = State.IDLE
+        flags[sk.FAULT_CODE] = Fault.NONE
+        flags[sk.FAULT_INDEX] = -1
+        flags[sk.REQUIRE_EDGE] = int(cfg.require_deadman_edge)
+        flags[sk.ARMED] = 1 - flags[sk.REQUIRE_EDGE]
+        flags[sk.STALE_CYCLES] = cfg.stale_cycles
+        flags[sk.HAS_BOX] = int(bool(np.isfinite(values[sk.BOX_LOW:sk.BOX_HIGH + 3]).any()))
+        flags[sk.INPUTS_FINITE] = 1
+
+    # ----------------------------------------------------------------- state
+    @property
+    def state(self) -> State:
+        """The current state."""
+        return _STATES[self.flags[sk.STATE]]
+
+    @property
+    def fault(self) -> Fault:
+        """The latched fault (``Fault.NONE`` unless in FAULT)."""
+        return _FAULTS[self.flags[sk.FAULT_CODE]]
+
+    @property
+    def fault_value(self) -> float:
+        """The latched fault's offending value (see :class:`Fault`), NaN if none."""
+        return float(self.values[sk.FAULT_VALUE])
+
+    @property
+    def fault_index(self) -> int:
+        """The latched fault's joint or axis index, -1 if none."""
+        return int(self.flags[sk.FAULT_INDEX])
+
+    @property
+    def inputs_finite(self) -> bool:
+        """Whether t, q, current and wrench of the last ``check_feedback`` were all finite."""
+        return bool(self.flags[sk.INPUTS_FINITE])
+
+    @property
+    def events(self) -> list[Event]:
+        """The logged transitions, oldest first (at most ``max_events``)."""
+        ring, count = self.event_ring, int(self.flags[sk.EVENT_COUNT])
+        cap = ring.shape[0]
+        rows = (ring[k % cap] for k in range(max(0, count - cap), count))
+        return [Event(float(r[sk.EVENT_T]), _STATES[int(r[sk.EVENT_FROM])],
+                      _STATES[int(r[sk.EVENT_TO])], Cause(int(r[sk.EVENT_CAUSE])),
+                      _FAULTS[int(r[sk.EVENT_FAULT])], float(r[sk.EVENT_VALUE]),
+                      int(r[sk.EVENT_INDEX])) for r in rows]
+
+    @property
+    def events_dropped(self) -> int:
+        """Number of transitions dropped from the bounded log (the oldest)."""
+        return max(0, int(self.flags[sk.EVENT_COUNT]) - self.event_ring.shape[0])
 
     # ----------------------------------------------------------------- transitions
-    def _go(self, t: float, to: State, cause: Cause, fault: Fault = Fault.NONE,
-            value: float = math.nan, index: int = -1) -> None:
-        if len(self.events) == self.events.maxlen:
-            self.events_dropped += 1
-        self.events.append(Event(t, self.state, to, cause, fault, value, index))
-        self.state = to
-
     def reset(self, t: float) -> None:
         """Back to IDLE, fault cleared, counters restarted (logged as RESET)."""
-        self.fault, self.fault_value, self.fault_index = Fault.NONE, math.nan, -1
-        self._restart()
-        self._go(t, State.IDLE, Cause.RESET)
-
-    def _restart(self) -> None:
-        self._armed = not self.config.require_deadman_edge
-        self._last_seq = None
-        self._missed = 0
-        self._mu_prev = math.nan
+        sk.reset(self.flags, self.values, self.event_ring, t)
 
     def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
         """Enter FAULT (no-op if already there: the first fault is kept)."""
-        if self.state == State.FAULT:
-            return
-        self.fault, self.fault_value, self.fault_index = fault, value, index
-        self._go(t, State.FAULT, Cause.FAULT, fault, value, index)
+        sk.trip(self.flags, self.values, self.event_ring, t, int(fault), value, index)
 
     def clear_fault(self, t: float, at_rest: bool) -> bool:
         """Leave FAULT for IDLE, only once the commanded motion is at rest.
@@ -282,30 +305,15 @@ class SafetySupervisor:
         Returns:
             Whether the fault was cleared.
         """
-        if self.state != State.FAULT or not at_rest:
-            return False
-        self.fault, self.fault_value, self.fault_index = Fault.NONE, math.nan, -1
-        self._restart()
-        self._go(t, State.IDLE, Cause.FAULT_CLEARED)
-        return True
+        return bool(sk.clear_fault(self.flags, self.values, self.event_ring, t, at_rest))
 
     def deadman(self, t: float, held: bool) -> None:
         """IDLE → GUIDING on a press, GUIDING → STOPPING on a release."""
-        if self.state == State.IDLE:
-            if held and self._armed:
-                self._go(t, State.GUIDING, Cause.DEADMAN_PRESSED)
-            elif not held:
-                self._armed = True
-        elif self.state == State.GUIDING and not held:
-            self._armed = True
-            self._go(t, State.STOPPING, Cause.DEADMAN_RELEASED)
-        elif not held:
-            self._armed = True
+        sk.deadman(self.flags, self.event_ring, t, held)
 
     def stopped(self, t: float, at_rest: bool) -> None:
         """STOPPING → IDLE once the commanded motion is at rest."""
-        if self.state == State.STOPPING and at_rest:
-            self._go(t, State.IDLE, Cause.STOPPED)
+        sk.stopped(self.flags, self.event_ring, t, at_rest)
 
     # ----------------------------------------------------------------- checks
     def check_feedback(self, t: float, sequence: int, q: Array, current: Array, wrench: Array,
@@ -320,25 +328,8 @@ class SafetySupervisor:
             wrench: Estimated wrench [N, N·m], shape (6,), force first (any frame: norms only).
             q_commanded: Joint position commanded for now [rad], shape (n,).
         """
-        info = self._info
-        code = kernels.feedback_fault(q, current, wrench, q_commanded, self._joint_bounds,
-                                      self._feedback_limits, info)
-        self.inputs_finite = math.isfinite(t) and code != kernels.FEEDBACK_NONFINITE
-        if self.state == State.FAULT:
-            return
-        if not self.inputs_finite:
-            self.trip(t, Fault.NONFINITE_INPUT)
-            return
-        if self._last_seq is not None and sequence <= self._last_seq:
-            self._missed += 1
-            if self._missed >= self.config.stale_cycles:
-                self.trip(t, Fault.STALE_FEEDBACK, float(sequence))
-                return
-        else:
-            self._missed = 0
-            self._last_seq = sequence
-        if code != kernels.FEEDBACK_OK:
-            self.trip(t, _FEEDBACK_FAULTS[code], float(info[0]), int(info[1]))
+        sk.check_feedback(self.flags, self.values, self.joints, self.event_ring, t, sequence,
+                          q, current, wrench, q_commanded)
 
     def check_motion(self, t: float, manipulability: float, q_commanded: Array,
                      qd_commanded: Array, residual: float) -> None:
@@ -351,31 +342,19 @@ class SafetySupervisor:
             qd_commanded: Commanded joint velocity of the last cycle [rad/s], shape (n,).
             residual: IK residual ‖log6(T(q)⁻¹·T_target)‖ [m, rad].
         """
-        mu_prev, self._mu_prev = self._mu_prev, manipulability
-        if self.state == State.FAULT:
-            return
-        if manipulability < self.config.stop_manipulability and manipulability < mu_prev:
-            self.trip(t, Fault.SINGULARITY, manipulability)
-            return
-        j = kernels.joint_limit_index(q_commanded, qd_commanded, self._lo_margin,
-                                      self._hi_margin)
-        if j >= 0:
-            self.trip(t, Fault.JOINT_LIMIT, float(q_commanded[j]), j)
-            return
-        if residual > self.config.tracking_error_limit:
-            self.trip(t, Fault.TRACKING, residual)
+        sk.check_motion(self.flags, self.values, self.joints, self.event_ring, t,
+                        manipulability, q_commanded, qd_commanded, residual)
 
     def speed_scale(self, manipulability: float) -> float:
         """Factor of the speed limits near a singularity: (μ − μ_stop)/(μ_slow − μ_stop) of
         ``stop_manipulability`` and ``slow_manipulability``, clipped to
         [``min_speed_scale``, 1]."""
-        s = (manipulability - self._mu_stop) / self._scale_span
-        return min(1.0, max(self._min_scale, s))
+        return float(sk.speed_scale(self.values, manipulability))
 
     @property
     def has_box(self) -> bool:
         """Whether a workspace box is configured (a finite face)."""
-        return self._has_box
+        return bool(self.flags[sk.HAS_BOX])
 
     def workspace_clearance(self, position: Array, linear_speed: float,
                             stop_time: float = 0.0) -> float:
@@ -391,11 +370,11 @@ class SafetySupervisor:
             min over the faces of (distance to the face) − margin − braking distance; negative:
             the TCP could not stop inside the box (less the margin). +inf without a box.
         """
-        if not self._has_box:
-            return math.inf
-        c = math.inf
-        for i in range(3):
-            p = float(position[i])
-            c = min(c, p - float(self._box_lo[i]), float(self._box_hi[i]) - p)
-        return (c - self.config.workspace_margin
-                - self.limits.braking_distance(linear_speed, stop_time))
+        return float(sk.workspace_clearance(self.flags, self.values,
+                                            np.asarray(position, dtype=float), linear_speed,
+                                            stop_time))
+
+
+#: The states and faults by code (a tuple lookup is cheaper than the enum's constructor).
+_STATES: tuple[State, ...] = tuple(State)
+_FAULTS: tuple[Fault, ...] = tuple(Fault)
