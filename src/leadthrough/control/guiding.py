@@ -72,7 +72,7 @@ from leadthrough.control.guiding_types import (
 )
 from leadthrough.control.ik import DifferentialIK
 from leadthrough.control.limits import TwistLimiter
-from leadthrough.control.safety import Event, Fault, SafetySupervisor, State
+from leadthrough.control.safety import STATE_BY_CODE, Event, Fault, SafetySupervisor, State
 from leadthrough.control.velocity_baseline import VelocityBaseline
 from leadthrough.control.virtual_friction import VirtualFriction
 from leadthrough.errors import ControlError
@@ -290,7 +290,7 @@ class GuidingController:
             inp.t, inp.sequence, inp.deadman, inp.estimator_status, inp.q, inp.current,
             inp.wrench_base, *self._cycle_args, out.buffer)
         values = self._values
-        out.state = _STATES[state]
+        out.state = STATE_BY_CODE[state]
         if state == State.FAULT:
             out.fault = self._safety.fault
             out.status = Status.FAULT
@@ -329,7 +329,3 @@ class GuidingController:
         ik = self._ik
         ik.jacobian_in_frame(self.config.frame, self._Jc)
         self._auto.update(self._Jc, ik.manipulability, self._friction, self._stop_friction)
-
-
-#: The states by code (a tuple lookup is cheaper than the enum's constructor).
-_STATES: tuple[State, ...] = tuple(State)

@@ -39,7 +39,16 @@ from leadthrough.control.limits import CartesianLimits
 from leadthrough.errors import ControlError, check_fields
 from leadthrough.robot.description import Robot
 
-__all__ = ["Cause", "Event", "Fault", "SafetyConfig", "SafetySupervisor", "State"]
+__all__ = [
+    "FAULT_BY_CODE",
+    "STATE_BY_CODE",
+    "Cause",
+    "Event",
+    "Fault",
+    "SafetyConfig",
+    "SafetySupervisor",
+    "State",
+]
 
 Array = NDArray[np.float64]
 _INF3 = (math.inf,) * 3
@@ -252,12 +261,12 @@ class SafetySupervisor:
     @property
     def state(self) -> State:
         """The current state."""
-        return _STATES[self.flags[sk.STATE]]
+        return STATE_BY_CODE[self.flags[sk.STATE]]
 
     @property
     def fault(self) -> Fault:
         """The latched fault (``Fault.NONE`` unless in FAULT)."""
-        return _FAULTS[self.flags[sk.FAULT_CODE]]
+        return FAULT_BY_CODE[self.flags[sk.FAULT_CODE]]
 
     @property
     def fault_value(self) -> float:
@@ -280,9 +289,9 @@ class SafetySupervisor:
         ring, count = self.event_ring, int(self.flags[sk.EVENT_COUNT])
         cap = ring.shape[0]
         rows = (ring[k % cap] for k in range(max(0, count - cap), count))
-        return [Event(float(r[sk.EVENT_T]), _STATES[int(r[sk.EVENT_FROM])],
-                      _STATES[int(r[sk.EVENT_TO])], Cause(int(r[sk.EVENT_CAUSE])),
-                      _FAULTS[int(r[sk.EVENT_FAULT])], float(r[sk.EVENT_VALUE]),
+        return [Event(float(r[sk.EVENT_T]), STATE_BY_CODE[int(r[sk.EVENT_FROM])],
+                      STATE_BY_CODE[int(r[sk.EVENT_TO])], Cause(int(r[sk.EVENT_CAUSE])),
+                      FAULT_BY_CODE[int(r[sk.EVENT_FAULT])], float(r[sk.EVENT_VALUE]),
                       int(r[sk.EVENT_INDEX])) for r in rows]
 
     @property
@@ -375,6 +384,7 @@ class SafetySupervisor:
                                             stop_time))
 
 
-#: The states and faults by code (a tuple lookup is cheaper than the enum's constructor).
-_STATES: tuple[State, ...] = tuple(State)
-_FAULTS: tuple[Fault, ...] = tuple(Fault)
+#: The states by code (a tuple lookup is cheaper than the enum's constructor).
+STATE_BY_CODE: tuple[State, ...] = tuple(State)
+#: The faults by code.
+FAULT_BY_CODE: tuple[Fault, ...] = tuple(Fault)
