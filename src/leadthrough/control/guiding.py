@@ -122,7 +122,7 @@ class GuidingController:
         self.config = cfg = config if config is not None else GuidingConfig()
         self.robot = robot
         self.n = n = robot.n
-        self._law: AdmittanceLaw = (
+        law: AdmittanceLaw = (
             VirtualFriction(cfg.virtual_friction, cfg.dt) if cfg.controller == "virtual-friction"
             else VelocityBaseline(cfg.velocity_baseline, cfg.dt))
         self._auto: AutoFriction | None = None
@@ -134,7 +134,7 @@ class GuidingController:
             if self._auto.n != n:
                 raise ControlError("wrong size", field="noise_mean", value=self._auto.n,
                                    expected=f"{n} values")
-        self._limiter = lim = TwistLimiter(cfg.limits, cfg.dt)
+        lim = TwistLimiter(cfg.limits, cfg.dt)
         self._ik = ik = DifferentialIK(robot, cfg.ik, cfg.dt)
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
         self._tool = cfg.frame == "tool"
@@ -147,21 +147,21 @@ class GuidingController:
         self._stop_friction = axes[gk.STOP_FRICTION]
         self._friction[:] = cfg.virtual_friction.friction
         self._stop_friction[:] = cfg.virtual_friction.stopping_friction
-        axes[gk.LAW] = self._law.coefficients
+        axes[gk.LAW] = law.coefficients
         axes[gk.MASK] = [1.0 if a else 0.0 for a in cfg.axes_enabled]
         self._q_cmd = joints[ck.Q_CMD]
         self._qd_cmd = joints[ck.QD_CMD]
         joints[ck.MEASURED] = math.nan       # the last finite q before the first reset
         self._flags = flags = np.zeros(ck.FLAG_SLOTS, dtype=np.int64)
         flags[ck.TOOL] = int(self._tool)
-        flags[ck.LAW_ID] = self._law.law_id
+        flags[ck.LAW_ID] = law.law_id
         values[ck.REST_S] = values[ck.RELEASE_S] = values[ck.STOP_PLAN] = math.inf
         values[ck.IK_SCALE] = values[ck.SPEED_SCALE] = 1.0
         # guiding_step's settings: hold, dt, release drop, smoothing weight, forgetting factor
         values[ck.STEP_SETTINGS:ck.STEP_SETTINGS + 5] = (
             cfg.settle_s + cfg.rezero_s, cfg.dt, RELEASE_DROP,
             cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt), math.exp(-cfg.dt / RELEASE_WINDOW_S))
-        values[ck.LAW_ALPHA] = self._law.alpha
+        values[ck.LAW_ALPHA] = law.alpha
         values[ck.MAX_SPEED:ck.MAX_SPEED + 2] = lim.max_speed
         values[ck.MAX_STEP:ck.MAX_STEP + 2] = lim.max_step
         values[ck.STOP_FRACTION] = cfg.ik.stop_acceleration_fraction

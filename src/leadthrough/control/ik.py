@@ -31,7 +31,6 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.control import joint_kernels
-from leadthrough.control.se3_kernels import log6_between
 from leadthrough.errors import ControlError, check_fields, check_period
 from leadthrough.estimation.kernels import damping_of, gram_manipulability
 from leadthrough.robot.description import Robot
@@ -218,12 +217,9 @@ class DifferentialIK:
             target: TCP pose to reach at the end of the cycle.
             out: Result, filled in place.
         """
-        err, tb, jk = self._err, self.table, joint_kernels
-        out.residual = log6_between(self.rotation_tool_to_base, self.translation_tool_to_base,
-                                    target.rotation, target.translation, err)
-        scale = jk.dls_step(self.jacobian, self.gram[0], self.damping, err, self.dt, q,
-                            qd_previous, tb[jk.IK_LOWER], tb[jk.IK_UPPER], tb[jk.IK_VMAX],
-                            tb[jk.IK_DV], tb[jk.IK_HALF_INV_A], out.qd_dls, out.qd, out.q,
-                            self.scratch)
+        scale, out.residual = joint_kernels.ik_step(
+            self.jacobian, self.gram, self.table, self.scratch, self._err, self.damping,
+            self.dt, self.rotation_tool_to_base, self.translation_tool_to_base,
+            target.rotation, target.translation, q, qd_previous, out.qd_dls, out.qd, out.q)
         out.scale = scale
         out.limited = scale < 1.0

@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from leadthrough.control.se3_kernels import log6_between
 from leadthrough.estimation.kernels import cholesky_factor, cholesky_solve
 
 __all__ = [
@@ -35,6 +36,7 @@ __all__ = [
     "hermite_start",
     "hermite_step",
     "ik_size",
+    "ik_step",
     "ik_views",
     "joint_stop_cycles",
 ]
@@ -197,6 +199,44 @@ def dls_step(jacobian: Array, gram: Array, damping: float, err: Array, dt: float
     for j in range(n):
         q_next[j] = qd[j] * dt + q[j]
     return scale
+
+
+@njit(cache=True, nogil=True)
+def ik_step(jacobian: Array, gram: Array, table: Array, scratch: Array, err: Array,
+            damping: float, dt: float, fk_rotation: Array, fk_position: Array,
+            target_rotation: Array, target_position: Array, q: Array, qd_previous: Array,
+            qd_dls: Array, qd: Array, q_next: Array) -> tuple[float, float]:
+    """One step of the differential IK (:meth:`DifferentialIK.solve
+    <leadthrough.control.ik.DifferentialIK.solve>`): the log6 error from the TCP pose at ``q``
+    to the target, then :func:`dls_step` with the IK's joint table.
+
+    Args:
+        jacobian: TCP Jacobian in tool axes at ``q``, shape (6, n).
+        gram: J Jᵀ at ``q`` (and its factor), shape (2, 6, 6).
+        table: The IK's joint table, shape (``IK_ROWS``, n).
+        scratch: Work space, shape (7, 6).
+        err: Output log6 error [m, rad], shape (6,).
+        damping: λ at ``q``.
+        dt: Controller cycle [s].
+        fk_rotation: R of the TCP at ``q``, shape (3, 3).
+        fk_position: p of the TCP at ``q`` [m], shape (3,).
+        target_rotation: R of the target, shape (3, 3).
+        target_position: p of the target [m], shape (3,).
+        q: Joint position [rad], shape (n,).
+        qd_previous: Joint velocity of the last cycle [rad/s], shape (n,).
+        qd_dls: Output DLS joint velocity before the bounds [rad/s], shape (n,).
+        qd: Output joint velocity [rad/s], shape (n,).
+        q_next: Output q + q̇·dt [rad], shape (n,).
+
+    Returns:
+        The fraction of the step kept by the bounds (:func:`dls_step`) and the residual
+        ‖log6‖ before the step [m and rad, mixed].
+    """
+    residual = log6_between(fk_rotation, fk_position, target_rotation, target_position, err)
+    scale = dls_step(jacobian, gram[0], damping, err, dt, q, qd_previous, table[IK_LOWER],
+                     table[IK_UPPER], table[IK_VMAX], table[IK_DV], table[IK_HALF_INV_A],
+                     qd_dls, qd, q_next, scratch)
+    return scale, residual
 
 
 #: Rows of the Hermite interpolator's segment state (``hermite_start`` / ``hermite_step``):
