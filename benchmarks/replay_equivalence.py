@@ -1,0 +1,132 @@
+"""Same commands as a reference commit: replay recorded guiding sessions through today's loop.
+
+    python benchmarks/replay_equivalence.py --reference REV [--work DIR] [CASE ...]
+
+1. The reference commit's source is exported (``git archive REV src``) into ``DIR/ref`` and
+   ``benchmarks/equivalence_reference.py`` runs there: it calibrates the simulated er20 (seed 1,
+   30 s excitation and a friction sweep), runs the cases below with the reference code, and
+   saves each session's feedback (every driver read) and what the loop computed from it.
+2. Today's code loads the same params file and replays each feedback trace through today's loop
+   (:func:`leadthrough.sim.session.replay_session`), built from the same settings.
+3. Per case: the largest difference of the joint commands (position [rad], velocity [rad/s]) of
+   every servo period, and whether the safety states, faults and transitions are identical.
+
+The replay is open loop (the recorded robot does not answer today's commands), so the comparison
+holds for any change of the simulator: it checks the loop alone. Goal: 1e-12 rad.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+GOAL_RAD = 1e-12
+
+
+def export_reference(rev: str, work: Path) -> Path:
+    """The reference commit's ``src`` under ``work/ref`` (fresh)."""
+    ref = work / "ref"
+    subprocess.run(["rm", "-rf", str(ref)], check=True)
+    ref.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev, "src"], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(ref)], input=archive, check=True)
+    return ref
+
+
+def run_reference(ref: Path, out: Path, cases: list[str]) -> None:
+    """The reference sessions, computed by the reference code."""
+    env = dict(os.environ, PYTHONPATH=str(ref / "src"))
+    subprocess.run([sys.executable, str(HERE / "equivalence_reference.py"), str(out), *cases],
+                   check=True, env=env)
+
+
+def compare(out: Path, names: list[str]) -> bool:
+    """Replay each case with today's code and compare; returns whether all meet the goal."""
+    from equivalence_reference import CASES  # the case table (plain values)
+    from leadthrough.identification.params_file import load_params
+    from leadthrough.robot import load_robot
+
+    today = _today_api()
+    robot = load_robot("er20")
+    pf = load_params(out / "params.toml", robot)
+    print(f"{'case':<22}{'reads':>7}  {'max |Δq_cmd| [rad]':>19}  {'max |Δqd_cmd|':>14}  "
+          f"{'states':>7}  {'events':>7}  reference replays itself")
+    ok = True
+    for name in names:
+        ref = np.load(out / f"{name}.npz")
+        trace = today.trace(ref)
+        log = today.replay(robot, pf, CASES[name], trace)
+        dq = float(np.max(np.abs(log.q_cmd - ref["q_cmd"])))
+        dqd = float(np.max(np.abs(log.qd_cmd - ref["qd_cmd"])))
+        states = bool(np.array_equal(log.state, ref["state"])
+                      and np.array_equal(log.fault, ref["fault"]))
+        events = [[e.t, e.kind, e.label, e.cause] for e in log.events if e.kind == "transition"]
+        same_events = events == json.loads(str(ref["events"]))
+        itself = all(np.array_equal(ref[k], ref["replay_" + k])
+                     for k in ("q_cmd", "qd_cmd", "state", "fault"))
+        good = dq <= GOAL_RAD and dqd <= GOAL_RAD and states and same_events
+        ok = ok and good
+        print(f"{name:<22}{ref['fb_t'].size:>7}  {dq:>19.3g}  {dqd:>14.3g}  "
+              f"{'same' if states else 'DIFFER':>7}  {'same' if same_events else 'DIFFER':>7}  "
+              f"{'yes' if itself else 'NO'}")
+    return ok
+
+
+class _TodayAPI:
+    """Today's names for the trace, the configuration of a case and the replay."""
+
+    def trace(self, ref: np.lib.npyio.NpzFile) -> object:
+        from leadthrough.drivers.replay import FeedbackTrace
+        return FeedbackTrace(dt=float(ref["fb_dt"]), t=ref["fb_t"], q=ref["fb_q"],
+                             current=ref["fb_current"], sequence=ref["fb_sequence"],
+                             fresh=ref["fb_fresh"])
+
+    def replay(self, robot: object, pf: object, case: dict[str, object], trace: object
+               ) -> object:
+        from equivalence_reference import session_config
+        from leadthrough.session.sim_session import replay_session
+        cfg = session_config(robot, case)
+        return replay_session(robot, pf, cfg, trace).log  # type: ignore[arg-type]
+
+
+def _today_api() -> _TodayAPI:
+    return _TodayAPI()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--reference", required=True, help="reference commit (e.g. ffa859f)")
+    parser.add_argument("--work", type=Path, default=None,
+                        help="folder for the export and the recordings (default: a temporary "
+                             "one; reuse one to skip the reference run)")
+    parser.add_argument("cases", nargs="*", help="cases to run (default: all)")
+    args = parser.parse_args()
+    sys.path.insert(0, str(HERE))
+    from equivalence_reference import CASES
+    names = args.cases or list(CASES)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = args.work if args.work is not None else Path(tmp)
+        out = work / "sessions"
+        if not all((out / f"{n}.npz").exists() for n in names):
+            print(f"reference {args.reference}: exporting and running its sessions ...",
+                  flush=True)
+            run_reference(export_reference(args.reference, work), out, names)
+        ok = compare(out, names)
+    print(f"\nall cases within {GOAL_RAD:g} rad with the same states and transitions: "
+          f"{'yes' if ok else 'NO'}")
+    raise SystemExit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()
