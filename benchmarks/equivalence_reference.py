@@ -41,36 +41,7 @@ from leadthrough.session.sim_session import (
 )
 from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 
-#: The sessions: name -> the settings of SimSessionConfig, in plain values (the same table is
-#: interpreted by today's code in replay_equivalence.py).
-CASES: dict[str, dict[str, object]] = {
-    "rest": {"operator": "rest"},
-    "rest-velocity": {"operator": "rest", "controller": "velocity"},
-    "push-x": {"operator": "push-x", "mass": 100.0},
-    "push-x-velocity": {"operator": "push-x", "controller": "velocity", "mass": 100.0},
-    "push-x-1000kg": {"operator": "push-x"},
-    "diagonal": {"operator": "diagonal"},
-    "seam": {"operator": "seam"},
-    "random-0": {"operator": "random", "operator_seed": 0, "mass": 100.0},
-    "random-8": {"operator": "random", "operator_seed": 8, "mass": 100.0},
-    "random-18": {"operator": "random", "operator_seed": 18, "mass": 100.0},
-    "tool-frame": {"operator": "push-x", "mass": 100.0, "frame": "tool"},
-    "tool-frame-diagonal": {"operator": "diagonal", "frame": "tool"},
-    "auto-friction": {"operator": "push-x", "mass": 100.0, "friction_mode": "auto"},
-    "translation-rezero": {"operator": "random", "operator_seed": 3, "mass": 100.0,
-                           "axes": "translation", "rezero_s": 0.3},
-    "momentum": {"operator": "push-x", "mass": 100.0, "method": "momentum"},
-    "workspace": {"operator": "push-x", "mass": 100.0, "box_dx": 0.15},
-    "fault-stale": {"operator": "push-x", "mass": 100.0,
-                    "fault": ["stale", 3.0, 1e9, None, 0.0]},
-    "fault-nan-current": {"operator": "push-x", "mass": 100.0,
-                          "fault": ["nan_current", 3.0035, 3.0045, 2, 0.0]},
-    "fault-nan-q": {"operator": "push-x", "mass": 100.0,
-                    "fault": ["nan_q", 2.5, 2.52, None, 0.0]},
-    "fault-following": {"operator": "push-x", "mass": 100.0,
-                        "fault": ["q_offset", 3.0, 1e9, 1, 0.2]},
-}
-
+from equivalence_cases import CASES  # noqa: E402 (beside this file; plain values)
 
 def session_config(robot: object, case: dict[str, object]) -> SimSessionConfig:
     """The reference API's SimSessionConfig of a case."""

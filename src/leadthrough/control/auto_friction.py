@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control.ik import dls_damping
+from leadthrough.damped_least_squares import damping_of
 from leadthrough.errors import ControlError, check_fields
 
 __all__ = ["AutoFriction", "AutoFrictionConfig"]
@@ -138,7 +138,7 @@ class AutoFriction:
             out: |A·τ̄_ω|, √(A²·σ²) or their sum per axis [N, N·m], shape (6,).
         """
         cfg = self.config
-        lam = dls_damping(manipulability, cfg.manipulability_threshold, cfg.max_damping)
+        lam = damping_of(manipulability, cfg.manipulability_threshold, cfg.max_damping)
         np.matmul(jacobian, jacobian.T, out=self._M)
         self._M.flat[::7] += lam * lam
         out[:] = 0.0

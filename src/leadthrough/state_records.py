@@ -1,0 +1,90 @@
+"""Named real-time state: NumPy structured records that compiled code reads by field.
+
+The real-time parts (the estimator, the guiding controller, its IK and safety supervisor, the
+interpolator) keep their state in one record each: a NumPy structured array of one element whose
+fields have names, units and shapes (``dtype`` builders next to each part). Numba compiles
+functions that take such an array and read ``s = record[0]`` then ``s.q_cmd``, ``s.rest_s``
+(field access is a pointer offset; nested arrays are views; nothing is allocated). Python reads
+the same fields with attribute access through :func:`view` (a ``numpy.record`` over the same
+memory). Codes (states, faults, statuses) are ``IntEnum`` members stored in integer fields;
+compiled code compares and assigns the members themselves, so every code is defined once.
+
+:class:`RecordView` turns a record into a typed public object (``GuidingOutput``,
+``EstimatorOutput`` ...) whose attributes are :func:`field` descriptors: arrays are read-only
+attributes (fill or read them in place: they are the record's own memory and cannot be rebound),
+scalars read and write, codes come back as their ``IntEnum``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from enum import IntEnum
+from typing import Any, Generic, TypeVar, overload
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["RecordView", "field", "new_record", "view"]
+
+T = TypeVar("T")
+E = TypeVar("E", bound=IntEnum)
+
+
+def new_record(dtype: np.dtype[Any]) -> NDArray[np.void]:
+    """A zeroed record: a structured array of one element (what compiled code takes)."""
+    return np.zeros(1, dtype=dtype)
+
+
+def view(record: NDArray[np.void]) -> np.record:
+    """Attribute access to a record's fields from Python (same memory, no copy)."""
+    return record.view(np.recarray)[0]  # type: ignore[no-any-return]
+
+
+class RecordView:
+    """A typed object over one record (see :func:`field`).
+
+    Args:
+        dtype: The record's layout.
+
+    Attributes:
+        record: The structured array of one element (what the compiled code takes).
+    """
+
+    __slots__ = ("_view", "record")
+
+    def __init__(self, dtype: np.dtype[Any]) -> None:
+        self.record = new_record(dtype)
+        self._view = view(self.record)
+
+
+class field(Generic[T]):  # noqa: N801 (a descriptor, used like a function)
+    """A record field as an attribute of a :class:`RecordView`.
+
+    Args:
+        name: The field's name in the record.
+        doc: What it is, with units and shape.
+        convert: Applied to the value read (e.g. an ``IntEnum`` for a code, ``float``, ``bool``).
+            Arrays are returned as they are (views) and are read-only attributes.
+    """
+
+    def __init__(self, name: str, doc: str, convert: Callable[[Any], T] | None = None) -> None:
+        self.name = name
+        self.__doc__ = doc
+        self._convert = convert
+
+    @overload
+    def __get__(self, obj: None, owner: type) -> field[T]: ...
+
+    @overload
+    def __get__(self, obj: RecordView, owner: type) -> T: ...
+
+    def __get__(self, obj: RecordView | None, owner: type) -> T | field[T]:
+        if obj is None:
+            return self
+        value = getattr(obj._view, self.name)
+        return value if self._convert is None else self._convert(value)
+
+    def __set__(self, obj: RecordView, value: T) -> None:
+        if self._convert is None:
+            raise AttributeError(f"{self.name} is an array: fill it in place ({self.name}[:] = ...)")
+        setattr(obj._view, self.name, value)
