@@ -13,7 +13,8 @@ writes into ``OUT_DIR``: ``params.toml`` (calibrated on the simulated er20, seed
 ``<case>.npz``: the feedback trace of every driver read (``fb_*``), the commands and states the
 loop produced from it (``q_cmd``, ``qd_cmd``, ``twist``, ``tcp``, ``state``, ``fault``,
 ``wrench``, ``tau_ext``), the transitions (``events``), and the same arrays from a replay of the
-trace through the reference loop (``replay_*``: the reference's own determinism).
+trace through the reference loop (``replay_*``: the reference's own determinism), and the
+compute time of each controller cycle in the simulated session (``cycle_us`` [µs]).
 """
 
 from __future__ import annotations
@@ -24,14 +25,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
-from leadthrough.control.guiding import GuidingConfig
-from leadthrough.control.safety import SafetyConfig
 from leadthrough.drivers.sim_driver import Fault, FaultKind
-from leadthrough.excitation.design import ExcitationConfig
-from leadthrough.identification.api import identify_with_sweep
-from leadthrough.identification.params_file import ParamsFile, load_params, save_params
-from leadthrough.robot import load_robot
 from leadthrough.session.sim_session import (
     SimSessionConfig,
     guide_start_pose,
@@ -39,9 +33,16 @@ from leadthrough.session.sim_session import (
     replay_session,
     run_sim_session,
 )
+
+from equivalence_cases import CASES
+from leadthrough.control.guiding import GuidingConfig
+from leadthrough.control.safety import SafetyConfig
+from leadthrough.excitation.design import ExcitationConfig
+from leadthrough.identification.api import identify_with_sweep
+from leadthrough.identification.params_file import ParamsFile, load_params, save_params
+from leadthrough.robot import load_robot
 from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 
-from equivalence_cases import CASES  # noqa: E402 (beside this file; plain values)
 
 def session_config(robot: object, case: dict[str, object]) -> SimSessionConfig:
     """The reference API's SimSessionConfig of a case."""
@@ -117,6 +118,7 @@ def main() -> None:
         np.savez_compressed(
             out / f"{name}.npz", fb_dt=fb.dt, fb_t=fb.t, fb_q=fb.q, fb_current=fb.current,
             fb_sequence=fb.sequence, fb_fresh=fb.fresh, events=json.dumps(events),
+            cycle_us=s.result.cycle_us,
             **_arrays("", s.result.log), **_arrays("replay_", again.log))
         print(f"{name}: {fb.reads} reads, faults {s.summary.faults or 'none'}", flush=True)
 

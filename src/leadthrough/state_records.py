@@ -37,7 +37,7 @@ def new_record(dtype: np.dtype[Any]) -> NDArray[np.void]:
 
 def view(record: NDArray[np.void]) -> np.record:
     """Attribute access to a record's fields from Python (same memory, no copy)."""
-    return record.view(np.recarray)[0]  # type: ignore[no-any-return]
+    return record.view(np.recarray)[0]
 
 
 class RecordView:
@@ -86,5 +86,11 @@ class field(Generic[T]):  # noqa: N801 (a descriptor, used like a function)
 
     def __set__(self, obj: RecordView, value: T) -> None:
         if self._convert is None:
-            raise AttributeError(f"{self.name} is an array: fill it in place ({self.name}[:] = ...)")
+            # ``obj.q += dq`` computes in place, then assigns the field's own memory back
+            current = getattr(obj._view, self.name)
+            if not (isinstance(value, np.ndarray) and value.shape == current.shape
+                    and value.__array_interface__["data"] == current.__array_interface__["data"]):
+                raise AttributeError(
+                    f"{self.name} is an array: fill it in place ({self.name}[:] = ...)")
+            return
         setattr(obj._view, self.name, value)

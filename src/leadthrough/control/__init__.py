@@ -24,6 +24,7 @@
 Twists and wrenches are 6-vectors, linear first (Pinocchio's order, :data:`AXIS_NAMES`).
 """
 
+from leadthrough.control import ik_step, se3
 from leadthrough.control.auto_friction import AutoFriction, AutoFrictionConfig
 from leadthrough.control.guiding import GuidingController
 from leadthrough.control.guiding_types import (
@@ -78,4 +79,6 @@ __all__ = [
     "State",
     "VelocityBaselineConfig",
     "VirtualFrictionConfig",
+    "ik_step",
+    "se3",
 ]

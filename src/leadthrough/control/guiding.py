@@ -122,9 +122,12 @@ class GuidingController:
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
         #: The controller's record (:func:`~leadthrough.control.guiding_state.controller_dtype`).
         self.record = new_record(controller_dtype(n))
-        self._s = s = view(self.record)
+        self._s = view(self.record)
         self._set_up(cfg)
-        self._Jc = np.zeros((6, n))
+        self._jacobian_in_frame = np.zeros((6, n))
+        # what a cycle runs on when given an input or output made for another robot
+        self._bad_input, self._spare_output = GuidingInput(n), GuidingOutput(n)
+        self._bad_input.q[:] = math.nan
 
     def _set_up(self, cfg: GuidingConfig) -> None:
         """The record's settings, and the state before the first reset."""
@@ -267,6 +270,9 @@ class GuidingController:
             ``GuidingStatus.OK``, or ``GuidingStatus.FAULT`` while a fault is latched.
         """
         s, sup = self._s, self._safety
+        if inp.record.dtype != self._bad_input.record.dtype or \
+                out.record.dtype != self._spare_output.record.dtype:
+            return self._wrong_layout(inp, out)
         if not s.started:
             not_started_cycle(inp.record[0], self.record[0], sup.record[0], sup.event_ring,
                               out.record[0])
@@ -282,11 +288,29 @@ class GuidingController:
                               sup.record[0], sup.event_ring, out.record[0])
         return GuidingStatus.FAULT if state == State.FAULT else GuidingStatus.OK
 
+    def _wrong_layout(self, inp: GuidingInput, out: GuidingOutput) -> GuidingStatus:
+        """An input or output made for another robot: the cycle runs on a non-finite input
+        (``Fault.NONFINITE_INPUT``, a stop at the limit), into a spare output if ``out`` cannot
+        take it."""
+        bad = self._bad_input
+        bad.t = float(inp.record["t"][0]) if "t" in (inp.record.dtype.names or ()) else math.nan
+        if out.record.dtype != self._spare_output.record.dtype:
+            out = self._spare_output
+        s = self._s
+        if not s.started:
+            not_started_cycle(bad.record[0], self.record[0], self._safety.record[0],
+                              self._safety.event_ring, out.record[0])
+            return GuidingStatus.FAULT
+        guiding_cycle(bad.record[0], self.record[0], self._ik.record[0],
+                      self._safety.record[0], self._safety.event_ring, out.record[0])
+        return GuidingStatus.FAULT
+
     def _update_auto_friction(self) -> None:
         """Eq. 36 at the setpoint's pose (automatic friction only), after its
         ``compute_kinematics``."""
         if self._auto is None:
             return
         ik, s = self._ik, self._s
-        ik.jacobian_in_frame(self.config.frame, self._Jc)
-        self._auto.update(self._Jc, ik.manipulability, s.friction, s.stopping_friction)
+        ik.jacobian_in_frame(self.config.frame, self._jacobian_in_frame)
+        self._auto.update(self._jacobian_in_frame, ik.manipulability, s.friction,
+                          s.stopping_friction)

@@ -177,28 +177,28 @@ class DifferentialIK:
     @property
     def lower(self) -> Array:
         """Joint position bounds of the IK (the robot limits shrunk by the margin) [rad]."""
-        return self._s.lower  # type: ignore[no-any-return]
+        return self._s.lower
 
     @property
     def upper(self) -> Array:
         """Upper joint position bounds of the IK [rad]."""
-        return self._s.upper  # type: ignore[no-any-return]
+        return self._s.upper
 
     @property
     def jacobian(self) -> Array:
         """Frame Jacobian of the TCP in tool axes (``pin.LOCAL``) at the last q, shape (6, n)
         (the record's own array)."""
-        return self._s.jacobian  # type: ignore[no-any-return]
+        return self._s.jacobian
 
     @property
     def rotation_tool_to_base(self) -> Array:
         """R of the TCP at the last q, shape (3, 3) (the record's own array)."""
-        return self._s.tcp_rotation  # type: ignore[no-any-return]
+        return self._s.tcp_rotation
 
     @property
     def translation_tool_to_base(self) -> Array:
         """p of the TCP at the last q [m], shape (3,) (the record's own array)."""
-        return self._s.tcp_position  # type: ignore[no-any-return]
+        return self._s.tcp_position
 
     @property
     def manipulability(self) -> float:
@@ -251,13 +251,12 @@ class DifferentialIK:
                 ``pin.LOCAL_WORLD_ALIGNED``): blockdiag(R, R)·J_tool with R the TCP rotation.
             out: Result, shape (6, n); Jᵀ·w maps a wrench w in that frame to joint torques.
         """
-        J = self._s.jacobian
+        jacobian, rotation = self._s.jacobian, self._s.tcp_rotation
         if frame == "tool":
-            out[:] = J
+            out[:] = jacobian
             return
-        R = self._s.tcp_rotation
-        np.matmul(R, J[:3], out=out[:3])
-        np.matmul(R, J[3:], out=out[3:])
+        np.matmul(rotation, jacobian[:3], out=out[:3])
+        np.matmul(rotation, jacobian[3:], out=out[3:])
 
     def solve(self, q: Array, qd_previous: Array, target: pin.SE3, out: IKResult) -> None:
         """One DLS step toward ``target`` from ``q`` (after ``compute_kinematics(q)``): the

@@ -72,6 +72,44 @@ def _speed_bound(v: float, q: float, lower: float, upper: float, vmax: float, dv
 
 
 @njit(cache=True, nogil=True)
+def _position_bounds(ik: Record, q: Array, qd_previous: Array, qd: Array) -> float:
+    """The speed limits and the braking distance to the position bounds, applied to ``qd`` in
+    place: a fast path when no bound is near, else each joint's exact bound and one common
+    factor (a fast joint it would slow by more than its own a·dt slows at its limit instead).
+    Returns the common factor (1: none)."""
+    n, dt = q.size, ik.dt
+    lower, upper, vmax = ik.lower, ik.upper, ik.max_velocity
+    dv, half_inv_a = ik.velocity_step, ik.half_inverse_acceleration
+    fast = True
+    for j in range(n):
+        v = abs(qd[j])
+        dist = upper[j] - q[j] if qd[j] >= 0.0 else q[j] - lower[j]
+        if v * (v * half_inv_a[j] + dt) > dist or v > vmax[j]:
+            fast = False
+            break
+    s_bound = 1.0
+    if not fast:
+        for j in range(n):
+            v = qd[j]
+            if v == 0.0:
+                continue
+            bound = _speed_bound(v, q[j], lower[j], upper[j], vmax[j], dv[j], dt)
+            if abs(v) > bound:
+                s_bound = min(s_bound, bound / abs(v))
+        if s_bound < 1.0:
+            for j in range(n):
+                qd[j] *= s_bound
+            # the common factor may slow a fast joint by more than its own a·dt: such a joint
+            # slows at its limit instead (the TCP leaves its line while a joint bound brakes);
+            # the braking joint's own bound admits its previous speed less a·dt, so both hold
+            for j in range(n):
+                v = min(max(qd[j], qd_previous[j] - dv[j]), qd_previous[j] + dv[j])
+                bound = _speed_bound(v, q[j], lower[j], upper[j], vmax[j], dv[j], dt)
+                qd[j] = min(max(v, -bound), bound)
+    return s_bound
+
+
+@njit(cache=True, nogil=True)
 def dls_step(ik: Record, q: Array, qd_previous: Array, qd_dls: Array, qd: Array,
              q_next: Array) -> float:
     """Damped least squares with the joint acceleration, speed and braking bounds (see
@@ -92,9 +130,7 @@ def dls_step(ik: Record, q: Array, qd_previous: Array, qd_dls: Array, qd: Array,
         singular, λ = 0 at a singularity, and every joint brakes at its limit instead).
     """
     n = q.size
-    jacobian, err, dt = ik.jacobian, ik.error, ik.dt
-    lower, upper, vmax = ik.lower, ik.upper, ik.max_velocity
-    dv, half_inv_a = ik.velocity_step, ik.half_inverse_acceleration
+    jacobian, err, dt, dv = ik.jacobian, ik.error, ik.dt, ik.velocity_step
     factor, y = ik.solve_factor, ik.solve_rhs
     if not cholesky_factor(ik.gram, 6, ik.damping * ik.damping, factor):
         # singular (λ = 0 exactly at a singularity): brake every joint at its limit
@@ -122,34 +158,7 @@ def dls_step(ik: Record, q: Array, qd_previous: Array, qd_dls: Array, qd: Array,
         for j in range(n):
             qd[j] = qd_previous[j] + (qd[j] - qd_previous[j]) * k
         scale = k
-    # speed and braking distance to the bounds: fast path, then exact per joint
-    fast = True
-    for j in range(n):
-        v = abs(qd[j])
-        dist = upper[j] - q[j] if qd[j] >= 0.0 else q[j] - lower[j]
-        if v * (v * half_inv_a[j] + dt) > dist or v > vmax[j]:
-            fast = False
-            break
-    if not fast:
-        s_bound = 1.0
-        for j in range(n):
-            v = qd[j]
-            if v == 0.0:
-                continue
-            bound = _speed_bound(v, q[j], lower[j], upper[j], vmax[j], dv[j], dt)
-            if abs(v) > bound:
-                s_bound = min(s_bound, bound / abs(v))
-        if s_bound < 1.0:
-            for j in range(n):
-                qd[j] *= s_bound
-            scale *= s_bound
-            # the common factor may slow a fast joint by more than its own a·dt: such a joint
-            # slows at its limit instead (the TCP leaves its line while a joint bound brakes);
-            # the braking joint's own bound admits its previous speed less a·dt, so both hold
-            for j in range(n):
-                v = min(max(qd[j], qd_previous[j] - dv[j]), qd_previous[j] + dv[j])
-                bound = _speed_bound(v, q[j], lower[j], upper[j], vmax[j], dv[j], dt)
-                qd[j] = min(max(v, -bound), bound)
+    scale *= _position_bounds(ik, q, qd_previous, qd)
     for j in range(n):
         q_next[j] = qd[j] * dt + q[j]
     return scale

@@ -1,7 +1,7 @@
 """Virtual mass and virtual friction, the paper's force-following law (eq. 31–33).
 
-Per Cartesian axis i (see :mod:`leadthrough.control.admittance` for the axis order) the TCP
-behaves like a mass M_i on a surface with dry friction:
+Per Cartesian axis i (linear first, :data:`leadthrough.control.guiding_types.AXIS_NAMES`) the
+TCP behaves like a mass M_i on a surface with dry friction:
 
 * eq. 31: M_i·v̇_i = F̂_i − f_i, with F̂_i the estimated operator force (torque) and v_i the
   commanded velocity;
@@ -22,7 +22,8 @@ Defaults are the paper's Table IV: 1000 kg and 1000 kg·m², δ = 15 N and 15 N�
 δ_s = 50 N and 50 N·m. The speed and acceleration limits of Table IV are in
 :class:`leadthrough.control.limits.CartesianLimits`; the automatic friction of eq. 36 in
 :mod:`leadthrough.control.auto_friction`. :func:`virtual_friction` is the law (compiled: Numba,
-``nopython``, cached on disk) that the guiding cycle runs (:mod:`leadthrough.control.guiding_cycle`).
+``nopython``, cached on disk) that the guiding cycle runs
+(:mod:`leadthrough.control.guiding_cycle`).
 """
 
 from __future__ import annotations

@@ -323,8 +323,9 @@ class ExternalForceEstimator:
         inp.q[:] = self._q
         read_sample(inp.record[0], est[0], out.record[0])
         mdl, q = self.model, est[0]["q_filtered"]
-        J = pin.computeFrameJacobian(mdl.model, mdl.data, q, self.robot.tcp_frame_id, self._ref)
-        finish_sample(q, self._unused, self._unused, q, J, est[0], out.record[0])
+        jacobian = pin.computeFrameJacobian(mdl.model, mdl.data, q, self.robot.tcp_frame_id,
+                                            self._ref)
+        finish_sample(q, self._unused, self._unused, q, jacobian, est[0], out.record[0])
 
     def update(self, inp: EstimatorInput, out: EstimatorOutput) -> EstimatorStatus:
         """Process one sample; fills ``out``; never raises."""
@@ -335,15 +336,15 @@ class ExternalForceEstimator:
             return EstimatorStatus(o["status"])
         mdl = self.model
         m, d, q, u = mdl.model, mdl.data, self._q, self._unused
-        J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
+        jacobian = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
         if self._s.direct:
             rnea = pin.rnea(m, d, q, self._qd, self._qdd)
-            finish_sample(rnea, u, u, q, J, est, o)
+            finish_sample(rnea, u, u, q, jacobian, est, o)
         else:
-            M = pin.crba(m, d, q)  # upper triangle only
-            C = pin.computeCoriolisMatrix(m, d, q, self._qd)
-            g = pin.computeGeneralizedGravity(m, d, q)
-            finish_sample(q, M, C, g, J, est, o)
+            mass = pin.crba(m, d, q)  # upper triangle only
+            coriolis = pin.computeCoriolisMatrix(m, d, q, self._qd)
+            gravity = pin.computeGeneralizedGravity(m, d, q)
+            finish_sample(q, mass, coriolis, gravity, jacobian, est, o)
         return EstimatorStatus(o["status"])
 
     def _wrong_size(self, out: EstimatorOutput) -> EstimatorStatus:

@@ -7,7 +7,8 @@
   (:func:`differentiator_coefficients`, :func:`differentiate`), with missed samples bridged
   (:func:`bridge_gap`).
 * The first-order low-pass y ← y + α·(x − y), α = 1 − exp(−2π·f_c·dt), on τ_ext
-  (:func:`low_pass_alpha`; the estimator applies it in :mod:`~leadthrough.estimation.external_torque`).
+  (:func:`low_pass_alpha`; the estimator applies it in
+  :mod:`~leadthrough.estimation.external_torque`).
 
 The per-sample steps are compiled (Numba, ``nopython``, cached on disk).
 """

@@ -38,8 +38,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
-from leadthrough.errors import DataError, check_fields
 from leadthrough.dynamics.presliding import dahl_step, play_step
+from leadthrough.errors import DataError, check_fields
 from leadthrough.robot.description import Robot
 
 __all__ = ["PreslidingAnalysisConfig", "PreslidingFit", "RestPairs", "dahl_states",

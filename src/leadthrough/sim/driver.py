@@ -63,7 +63,8 @@ class InjectedFault:
             object.__setattr__(self, "kind", InjectedFaultKind(self.kind))
         except ValueError as e:
             raise SimulationError("unknown fault kind", field="fault.kind", value=self.kind,
-                                  expected="one of " + ", ".join(k.value for k in InjectedFaultKind)) from e
+                                  expected="one of " + ", ".join(
+                                      k.value for k in InjectedFaultKind)) from e
         if not (math.isfinite(self.t_start) and self.t_end > self.t_start):
             raise SimulationError("bad fault window", field="fault.t_start/t_end",
                                   value=(self.t_start, self.t_end),

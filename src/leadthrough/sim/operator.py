@@ -17,8 +17,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from leadthrough.session.record import Mark
 from leadthrough.errors import SimulationError
+from leadthrough.session.record import Mark
 
 __all__ = ["ConstantWrench", "Mark", "NoOperator", "Operator", "ScriptedOperator", "vector3"]
 

@@ -8,6 +8,7 @@ simulated robot is a different, richer plant than the identified model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -143,7 +144,8 @@ def sim_robot_seed(requested: int | None, params: ParamsFile) -> int:
 
 
 def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
-                    record_feedback: bool = False) -> SimSession:
+                    record_feedback: bool = False,
+                    wrap_driver: Callable[[Driver], Driver] | None = None) -> SimSession:
     """Run one guiding session on the simulated robot.
 
     Args:
@@ -152,6 +154,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         config: Session settings.
         record_feedback: Keep every read of the driver in ``SimSession.feedback`` (for
             :func:`replay_session`).
+        wrap_driver: Wraps the driver the loop talks to (e.g. to probe every servo period).
 
     Returns:
         The session and its summary.
@@ -173,6 +176,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     recorder = (RecordingDriver(sim_driver, round(duration / sim_driver.dt) + 1)
                 if record_feedback else None)
     driver: Driver = sim_driver if recorder is None else recorder
+    if wrap_driver is not None:
+        driver = wrap_driver(driver)
     parts = build_loop(robot, params, config.loop, driver.dt)
     est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
@@ -197,7 +202,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
 
 
 def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
-                   feedback: FeedbackTrace) -> LoopResult:
+                   feedback: FeedbackTrace,
+                   wrap_driver: Callable[[Driver], Driver] | None = None) -> LoopResult:
     """Run a session's loop again on its recorded feedback, without the simulator.
 
     With the settings and parameters of the recording, the loop computes exactly what it
@@ -209,11 +215,13 @@ def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         params: Identified parameters of the recorded session.
         config: Settings of the recorded session.
         feedback: ``SimSession.feedback`` of a session run with ``record_feedback=True``.
+        wrap_driver: Wraps the replay driver (e.g. to probe every servo period).
 
     Raises:
         ControlError, DataError: Invalid settings or trace.
     """
-    driver = ReplayDriver(feedback)
+    replay = ReplayDriver(feedback)
+    driver: Driver = replay if wrap_driver is None else wrap_driver(replay)
     parts = build_loop(robot, params, config.loop, driver.dt)
     duration = (feedback.reads - 1) * driver.dt
     return run_session(driver, parts.estimator, parts.controller, parts.interpolator, duration)
