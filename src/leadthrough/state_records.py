@@ -4,10 +4,13 @@ The real-time parts (the estimator, the guiding controller, its IK and safety su
 interpolator) keep their state in one record each: a NumPy structured array of one element whose
 fields have names, units and shapes (``dtype`` builders next to each part). Numba compiles
 functions that take such an array and read ``s = record[0]`` then ``s.q_cmd``, ``s.rest_s``
-(field access is a pointer offset; nested arrays are views; nothing is allocated). Python reads
-the same fields with attribute access through :func:`view` (a ``numpy.record`` over the same
-memory). Codes (states, faults, statuses) are ``IntEnum`` members stored in integer fields;
-compiled code compares and assigns the members themselves, so every code is defined once.
+(field access is a pointer offset; nested arrays are views; nothing is allocated). Python calls
+them with the array itself: Numba types a one-element array in a fraction of a microsecond, a
+record scalar (``record[0]``) of a large layout in about ten. Python reads and writes the same
+fields with attribute access through :func:`view` (:class:`Fields`: views made once, so an
+access costs a dictionary lookup). Codes (states, faults, statuses) are ``IntEnum`` members
+stored in integer fields; compiled code compares and assigns the members themselves, so every
+code is defined once.
 
 :class:`RecordView` turns a record into a typed public object (``GuidingOutput``,
 ``EstimatorOutput`` ...) whose attributes are :func:`field` descriptors: arrays are read-only
@@ -24,7 +27,7 @@ from typing import Any, Generic, TypeVar, overload
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["RecordView", "field", "new_record", "view"]
+__all__ = ["Fields", "RecordView", "field", "new_record", "view"]
 
 T = TypeVar("T")
 E = TypeVar("E", bound=IntEnum)
@@ -35,9 +38,46 @@ def new_record(dtype: np.dtype[Any]) -> NDArray[np.void]:
     return np.zeros(1, dtype=dtype)
 
 
-def view(record: NDArray[np.void]) -> np.record:
+class Fields:
+    """Attribute access to a record's fields, by views made once (same memory, no copy).
+
+    Reading an array field returns its view (fill it in place); reading a scalar returns its
+    value (a NumPy scalar); assigning a field copies the value into the record (an array is
+    broadcast, a nested record assigned as a whole).
+
+    Args:
+        record: A record (:func:`new_record`).
+    """
+
+    def __init__(self, record: NDArray[np.void]) -> None:
+        scalars: dict[str, NDArray[Any]] = {}
+        object.__setattr__(self, "_record", record)
+        object.__setattr__(self, "_scalars", scalars)
+        for name in record.dtype.names or ():
+            kind = record.dtype[name]
+            if kind.shape == () and kind.names is None:
+                scalars[name] = record[name]              # shape (1,): read and write [0]
+            else:
+                object.__setattr__(self, name, record[name][0])   # an array view, or a record
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self._scalars[name][0]
+        except KeyError:
+            raise AttributeError(f"the record has no field {name!r}") from None
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in self._scalars:
+            self._scalars[name][0] = value
+        elif name in (self._record.dtype.names or ()):
+            self._record[name] = value
+        else:
+            raise AttributeError(f"the record has no field {name!r}")
+
+
+def view(record: NDArray[np.void]) -> Fields:
     """Attribute access to a record's fields from Python (same memory, no copy)."""
-    return record.view(np.recarray)[0]
+    return Fields(record)
 
 
 class RecordView:

@@ -69,7 +69,7 @@ from leadthrough.control.guiding_types import (
     GuidingStatus,
 )
 from leadthrough.control.ik import DifferentialIK
-from leadthrough.control.ik_step import update_manipulability
+from leadthrough.control.ik_step import update_manipulability_of
 from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
 from leadthrough.control.safety import Event, SafetySupervisor, State
 from leadthrough.control.safety_rules import clear_fault
@@ -128,6 +128,7 @@ class GuidingController:
         # what a cycle runs on when given an input or output made for another robot
         self._bad_input, self._spare_output = GuidingInput(n), GuidingOutput(n)
         self._bad_input.q[:] = math.nan
+        self._layouts = (self._bad_input.record.dtype, self._spare_output.record.dtype)
 
     def _set_up(self, cfg: GuidingConfig) -> None:
         """The record's settings, and the state before the first reset."""
@@ -253,9 +254,9 @@ class GuidingController:
                                sup.event_ring.copy())
         inp, out = self.make_input(), self.make_output()
         inp.q[:] = self._s.q_cmd
-        update_manipulability(ik[0])
-        not_started_cycle(inp.record[0], ctl[0], sv[0], events, out.record[0])
-        guiding_cycle(inp.record[0], ctl[0], ik[0], sv[0], events, out.record[0])
+        update_manipulability_of(ik)
+        not_started_cycle(inp.record, ctl, sv, events, out.record)
+        guiding_cycle(inp.record, ctl, ik, sv, events, out.record)
         clear_fault(sv[0], events, 0.0, True)
 
     # ----------------------------------------------------------------- real time
@@ -270,12 +271,11 @@ class GuidingController:
             ``GuidingStatus.OK``, or ``GuidingStatus.FAULT`` while a fault is latched.
         """
         s, sup = self._s, self._safety
-        if inp.record.dtype != self._bad_input.record.dtype or \
-                out.record.dtype != self._spare_output.record.dtype:
+        # a tuple compares its items by identity first: fast for the layouts of make_input
+        if (inp.record.dtype, out.record.dtype) != self._layouts:
             return self._wrong_layout(inp, out)
         if not s.started:
-            not_started_cycle(inp.record[0], self.record[0], sup.record[0], sup.event_ring,
-                              out.record[0])
+            not_started_cycle(inp.record, self.record, sup.record, sup.event_ring, out.record)
             return GuidingStatus.FAULT
         if not s.kinematics_fresh:
             s.kinematics_fresh = s.kinematics_new = True
@@ -284,8 +284,8 @@ class GuidingController:
             else:
                 self._ik.compute_kinematics(s.q_cmd)
                 self._update_auto_friction()
-        state = guiding_cycle(inp.record[0], self.record[0], self._ik.record[0],
-                              sup.record[0], sup.event_ring, out.record[0])
+        state = guiding_cycle(inp.record, self.record, self._ik.record, sup.record,
+                              sup.event_ring, out.record)
         return GuidingStatus.FAULT if state == State.FAULT else GuidingStatus.OK
 
     def _wrong_layout(self, inp: GuidingInput, out: GuidingOutput) -> GuidingStatus:
@@ -298,11 +298,11 @@ class GuidingController:
             out = self._spare_output
         s = self._s
         if not s.started:
-            not_started_cycle(bad.record[0], self.record[0], self._safety.record[0],
-                              self._safety.event_ring, out.record[0])
+            not_started_cycle(bad.record, self.record, self._safety.record,
+                              self._safety.event_ring, out.record)
             return GuidingStatus.FAULT
-        guiding_cycle(bad.record[0], self.record[0], self._ik.record[0],
-                      self._safety.record[0], self._safety.event_ring, out.record[0])
+        guiding_cycle(bad.record, self.record, self._ik.record, self._safety.record,
+                      self._safety.event_ring, out.record)
         return GuidingStatus.FAULT
 
     def _update_auto_friction(self) -> None:

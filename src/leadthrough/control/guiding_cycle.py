@@ -49,25 +49,28 @@ __all__ = ["guiding_cycle", "not_started_cycle"]
 
 Array = NDArray[np.float64]
 Record = Any     # a record of its part's dtype (compiled code reads it by field)
+Records = NDArray[np.void]   # a record as Python passes it: a structured array of one element
 Events = NDArray[np.void]
 
 
 @njit(cache=True, nogil=True)
-def guiding_cycle(inp: Record, ctl: Record, ik: Record, sup: Record, events: Events,
-                  out: Record) -> int:
+def guiding_cycle(inputs: Records, controller: Records, ik_records: Records,
+                  supervisor: Records, events: Events, outputs: Records) -> int:
     """One cycle of a started controller, from the feedback to the output.
 
     Args:
-        inp: The input record (``GuidingInput``).
-        ctl: The controller's record (``guiding_state.controller_dtype``), in place.
-        ik: The IK's record, with the kinematics of the setpoint ``ctl.q_cmd``, in place.
-        sup: The safety supervisor's record, in place.
+        inputs: The input's record (``GuidingInput.record``).
+        controller: The controller's record (``guiding_state.controller_dtype``), in place.
+        ik_records: The IK's record, with the kinematics of the setpoint ``q_cmd``, in place.
+        supervisor: The safety supervisor's record, in place.
         events: Its event ring, in place.
-        out: The output record (``GuidingOutput``), written.
+        outputs: The output's record (``GuidingOutput.record``), written.
 
     Returns:
         The safety state after the cycle.
     """
+    inp, ctl, ik, sup, out = (inputs[0], controller[0], ik_records[0], supervisor[0],
+                              outputs[0])
     t = inp.t
     # 1. the feedback and the estimator, the setpoint's kinematics, motion checks, deadman
     rules.check_feedback(sup, events, t, inp.sequence, inp.q, inp.current, inp.wrench_base,
@@ -104,11 +107,12 @@ def guiding_cycle(inp: Record, ctl: Record, ik: Record, sup: Record, events: Eve
 
 
 @njit(cache=True, nogil=True)
-def not_started_cycle(inp: Record, ctl: Record, sup: Record, events: Events,
-                      out: Record) -> int:
+def not_started_cycle(inputs: Records, controller: Records, supervisor: Records,
+                      events: Events, outputs: Records) -> int:
     """A cycle before the first reset: the NOT_STARTED fault, holding wherever the robot was
     last measured (NaN before any finite measurement: there is no position to command).
-    Returns the safety state."""
+    Takes the records as :func:`guiding_cycle`; returns the safety state."""
+    inp, ctl, sup, out = inputs[0], controller[0], supervisor[0], outputs[0]
     rules.trip(sup, events, inp.t, Fault.NOT_STARTED, math.nan, -1)
     finite = True
     for j in range(inp.q.size):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -119,6 +120,7 @@ class GuidingConfig:
                                expected=f"> ik.joint_limit_margin = {self.ik.joint_limit_margin}")
 
 
+@cache
 def input_dtype(n: int) -> np.dtype[Any]:
     """The record of :class:`GuidingInput` for ``n`` joints."""
     f8 = np.float64
@@ -127,6 +129,7 @@ def input_dtype(n: int) -> np.dtype[Any]:
                      ("wrench_base", f8, (6,))])
 
 
+@cache
 def output_dtype(n: int) -> np.dtype[Any]:
     """The record of :class:`GuidingOutput` for ``n`` joints."""
     f8, i8 = np.float64, np.int64

@@ -229,7 +229,7 @@ class DifferentialIK:
     def compute_kinematics(self, q: Array) -> None:
         """Jacobian, TCP pose, manipulability and damping at ``q`` (shape (n,) [rad])."""
         self.frame_kinematics(q)
-        ik_step.update_manipulability(self.record[0])
+        ik_step.update_manipulability_of(self.record)
 
     def frame_kinematics(self, q: Array) -> None:
         """Only the Pinocchio part of :meth:`compute_kinematics`: the TCP pose and Jacobian at

@@ -27,7 +27,8 @@ from leadthrough.damped_least_squares import (
     gram_manipulability,
 )
 
-__all__ = ["dls_step", "ik_step", "joint_stop_cycles", "update_manipulability"]
+__all__ = ["dls_step", "ik_step", "joint_stop_cycles", "update_manipulability",
+           "update_manipulability_of"]
 
 Array = NDArray[np.float64]
 Record = Any   # a record of ik_dtype(n)
@@ -195,3 +196,9 @@ def update_manipulability(ik: Record) -> None:
     """J Jᵀ, its factor, μ and the damping λ of the least squares at the kinematics' q."""
     ik.manipulability = gram_manipulability(ik.jacobian, ik.gram, ik.gram_factor)
     ik.damping = damping_of(ik.manipulability, ik.manipulability_threshold, ik.max_damping)
+
+
+@njit(cache=True, nogil=True)
+def update_manipulability_of(ik_record: NDArray[np.void]) -> None:
+    """:func:`update_manipulability` of the IK's record as Python passes it (one element)."""
+    update_manipulability(ik_record[0])

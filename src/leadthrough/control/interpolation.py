@@ -123,17 +123,19 @@ def interpolator_dtype(n: int, substeps: int) -> np.dtype[Any]:
 
 
 @njit(cache=True, nogil=True)
-def start_segment(seg: Any, q: Array, qd: Array) -> bool:
+def start_segment(segment: NDArray[np.void], q: Array, qd: Array) -> bool:
     """A new segment from the last command to the setpoint (q, q̇).
 
     Args:
-        seg: The interpolator's record (:func:`interpolator_dtype`), in place.
+        segment: The interpolator's record (:func:`interpolator_dtype`, one element), in
+            place.
         q: Setpoint [rad], shape (n,).
         qd: Velocity at the setpoint [rad/s], shape (n,).
 
     Returns:
         False, with nothing changed, for a setpoint of the wrong size or not finite.
     """
+    seg = segment[0]
     n = seg.q.size
     if q.size != n or qd.size != n:
         return False
@@ -151,14 +153,14 @@ def start_segment(seg: Any, q: Array, qd: Array) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def next_command(seg: Any, q_out: Array, qd_out: Array) -> int:
+def next_command(segment: NDArray[np.void], q_out: Array, qd_out: Array) -> int:
     """The segment's next command: q = p0 + h01·Δp + T·h10·v0 + T·h11·v1,
     q̇ = h01'/T·Δp + h10'·v0 + h11'·v1; the last one is the setpoint itself; past it, the end
     position is held at rest.
 
     Args:
-        seg: The interpolator's record (:func:`interpolator_dtype`); the last command and the
-            substep advance.
+        segment: The interpolator's record (:func:`interpolator_dtype`, one element); the last
+            command and the substep advance.
         q_out: Position command [rad], shape (n,).
         qd_out: Velocity command [rad/s], shape (n,).
 
@@ -166,6 +168,7 @@ def next_command(seg: Any, q_out: Array, qd_out: Array) -> int:
         ``InterpolatorStatus``: WORKING inside the segment, FINISHED at its end, STARVED past
         it.
     """
+    seg = segment[0]
     k = seg.k
     substeps = seg.h01.size
     if k < substeps:
@@ -238,14 +241,18 @@ class HermiteInterpolator:
         A setpoint of the wrong size or not finite is ignored, like a missed one: the current
         segment runs to its end, then the end is held (``STARVED``); no command is ever NaN.
         """
-        start_segment(self.record[0], q, qd)
+        start_segment(self.record, q, qd)
 
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
         """Advance one servo period and write the command into ``out.q``, ``out.qd``."""
-        return InterpolatorStatus(next_command(self.record[0], out.q, out.qd))
+        return _STATUS[next_command(self.record, out.q, out.qd)]
 
     def warm_up(self) -> None:
         """Load (or compile) the compiled steps on a copy of the segment (nothing changes)."""
         seg, cmd = self.record.copy(), self.make_command()
-        start_segment(seg[0], seg[0]["q"], seg[0]["qd"])
-        next_command(seg[0], cmd.q, cmd.qd)
+        start_segment(seg, seg["q"][0], seg["qd"][0])
+        next_command(seg, cmd.q, cmd.qd)
+
+
+#: The statuses by value (a dictionary lookup is cheaper than the enum's constructor).
+_STATUS = {int(s): s for s in InterpolatorStatus}

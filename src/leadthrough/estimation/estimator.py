@@ -269,7 +269,8 @@ class ExternalForceEstimator:
         # views handed to Pinocchio every sample
         self._q, self._qd, self._qdd = s.q_filtered, s.qd_filtered, s.qdd_filtered
         self._unused = np.zeros((n, n))
-        self._input_dtype, self._output_dtype = input_dtype(n), output_dtype(n)
+        self._layouts = (input_dtype(n), output_dtype(n))
+        self._direct = cfg.method == "direct"
         self._tare_len = round(cfg.tare_s / cfg.dt)
         self.reset(np.zeros(n))
 
@@ -321,23 +322,24 @@ class ExternalForceEstimator:
         est = self.record.copy()
         inp, out = self.make_input(), self.make_output()
         inp.q[:] = self._q
-        read_sample(inp.record[0], est[0], out.record[0])
-        mdl, q = self.model, est[0]["q_filtered"]
+        read_sample(inp.record, est, out.record)
+        mdl, q = self.model, est["q_filtered"][0]
         jacobian = pin.computeFrameJacobian(mdl.model, mdl.data, q, self.robot.tcp_frame_id,
                                             self._ref)
-        finish_sample(q, self._unused, self._unused, q, jacobian, est[0], out.record[0])
+        finish_sample(q, self._unused, self._unused, q, jacobian, est, out.record)
 
     def update(self, inp: EstimatorInput, out: EstimatorOutput) -> EstimatorStatus:
         """Process one sample; fills ``out``; never raises."""
-        if inp.record.dtype != self._input_dtype or out.record.dtype != self._output_dtype:
+        # a tuple compares its items by identity first: fast for the layouts of make_input
+        if (inp.record.dtype, out.record.dtype) != self._layouts:
             return self._wrong_size(out)
-        est, o = self.record[0], out.record[0]
-        if not read_sample(inp.record[0], est, o):
-            return EstimatorStatus(o["status"])
+        est, o = self.record, out.record
+        if not read_sample(inp.record, est, o):
+            return _STATUS[o["status"][0]]
         mdl = self.model
         m, d, q, u = mdl.model, mdl.data, self._q, self._unused
         jacobian = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
-        if self._s.direct:
+        if self._direct:
             rnea = pin.rnea(m, d, q, self._qd, self._qdd)
             finish_sample(rnea, u, u, q, jacobian, est, o)
         else:
@@ -345,14 +347,14 @@ class ExternalForceEstimator:
             coriolis = pin.computeCoriolisMatrix(m, d, q, self._qd)
             gravity = pin.computeGeneralizedGravity(m, d, q)
             finish_sample(q, mass, coriolis, gravity, jacobian, est, o)
-        return EstimatorStatus(o["status"])
+        return _STATUS[o["status"][0]]
 
     def _wrong_size(self, out: EstimatorOutput) -> EstimatorStatus:
         """An input or output of another robot: ``FAULT_INPUT_SIZE``, latched."""
         s = self._s
         s.faulted = True
         s.status = EstimatorStatus.FAULT_INPUT_SIZE
-        if out.record.dtype == self._output_dtype:
+        if out.record.dtype == self._layouts[1]:
             out.tau_ext[:] = s.last_tau_ext
             out.wrench[:] = s.last_wrench
             out.status = EstimatorStatus.FAULT_INPUT_SIZE
@@ -404,6 +406,9 @@ class ExternalForceEstimator:
         """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
         return np.array(self._s.tare)
 
+
+#: The statuses by value (a dictionary lookup is cheaper than the enum's constructor).
+_STATUS = {int(s): s for s in EstimatorStatus}
 
 #: Longest re-zero window [samples] (about 25 days at 1 kHz).
 _MAX_WINDOW = 2**31

@@ -20,6 +20,7 @@ Codes are the members of :class:`EstimatorStatus` themselves. Nothing here alloc
 from __future__ import annotations
 
 from enum import IntEnum
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -53,6 +54,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 Record = Any     # a record of its dtype (compiled code reads it by field)
+Records = NDArray[np.void]   # a record as Python passes it: a structured array of one element
 
 
 class EstimatorStatus(IntEnum):
@@ -68,12 +70,14 @@ class EstimatorStatus(IntEnum):
     FAULT_INPUT_SIZE = -2
 
 
+@cache
 def input_dtype(n: int) -> np.dtype[Any]:
     """The record of one sample (``EstimatorInput``) for ``n`` joints."""
     f8 = np.float64
     return np.dtype([("t", f8), ("q", f8, (n,)), ("current", f8, (n,)), ("qd_cmd", f8, (n,))])
 
 
+@cache
 def output_dtype(n: int) -> np.dtype[Any]:
     """The record of the estimate (``EstimatorOutput``) for ``n`` joints."""
     f8 = np.float64
@@ -131,21 +135,24 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
 
 
 @njit(cache=True, nogil=True)
-def read_sample(inp: Record, est: Record, out: Record) -> bool:
+def read_sample(inputs: Records, estimator: Records, outputs: Records) -> bool:
     """First half of a sample: checks, differentiator, τ̂_j = K·i, friction, weights.
 
     Args:
-        inp: The sample (:func:`input_dtype`): t (finite; an advance of k ≥ 2 periods since
-            the last sample bridges k − 1 missed samples), q, current, and qd_cmd (the joint
-            velocity commanded to the servo; used when the friction follows the command).
-        est: The estimator's record (in place).
-        out: The output (:func:`output_dtype`), written only when this returns False.
+        inputs: The sample's record (:func:`input_dtype`): t (finite; an advance of k ≥ 2
+            periods since the last sample bridges k − 1 missed samples), q, current, and
+            qd_cmd (the joint velocity commanded to the servo; used when the friction follows
+            the command).
+        estimator: The estimator's record (in place).
+        outputs: The output's record (:func:`output_dtype`), written only when this returns
+            False.
 
     Returns:
         False if an input is not finite (``qd_cmd`` only when the friction follows the
         command: ``FAULT_NONFINITE`` latched) or a fault is latched; ``out`` then holds the last
         valid estimate and the status. Else True.
     """
+    inp, est, out = inputs[0], estimator[0], outputs[0]
     if not est.faulted and not _finite(inp, est.friction_follows_command):
         est.faulted = True
         est.status = EstimatorStatus.FAULT_NONFINITE
@@ -241,7 +248,7 @@ def smoothed_friction(qd: Array, inverse_standstill_velocity: Array, fp: Record,
 
 @njit(cache=True, nogil=True)
 def finish_sample(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Array,
-                  jacobian: Array, est: Record, out: Record) -> None:
+                  jacobian: Array, estimator: Records, outputs: Records) -> None:
     """Second half of a sample: τ_ext, tare, wrench, status (after :func:`read_sample`).
 
     Args:
@@ -251,9 +258,11 @@ def finish_sample(rnea: Array, mass_upper: Array, coriolis: Array, gravity: Arra
         coriolis: C(q, q̇) (observer; else unused), shape (n, n).
         gravity: g(q) [N·m] (observer; else unused), shape (n,).
         jacobian: TCP Jacobian in the output frame, shape (6, n).
-        est: The estimator's record (in place).
-        out: The output (:func:`output_dtype`): τ_ext, wrench, q̇, μ, λ and the status.
+        estimator: The estimator's record (in place).
+        outputs: The output's record (:func:`output_dtype`): τ_ext, wrench, q̇, μ, λ and the
+            status.
     """
+    est, out = estimator[0], outputs[0]
     tau_ext = out.tau_ext
     if est.direct:
         direct_residual(rnea, est.friction_torque, est.qdd_filtered, est.drive_torque,
