@@ -39,10 +39,10 @@ from leadthrough.drivers.protocol import Driver
 from leadthrough.drivers.replay import FeedbackTrace
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify_with_sweep
-from leadthrough.identification.params_file import ParamsFile
+from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
-from leadthrough.session.loop_config import LoopConfig
+from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import release_overruns
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
 from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
@@ -53,7 +53,7 @@ from leadthrough.sim.session import (
     replay_session,
     run_sim_session,
 )
-from realtime_probe import ProbeDriver
+from realtime_probe import ProbeDriver, compiled_allocations
 
 CONTROLLERS = ("virtual-friction", "velocity")
 #: Replays of each session's loop for the cycle time.
@@ -87,17 +87,27 @@ def main() -> None:
     parser.add_argument("--reference", metavar="REV", default=None,
                         help="also time the diagonal and seam sessions with the code of commit "
                              "REV (section 5; via replay_equivalence.py's export)")
+    parser.add_argument("--params", type=Path, default=None,
+                        help="use these parameters instead of calibrating (e.g. the "
+                             "guiding_params.toml an earlier run wrote into --out)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/out"))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     robot = load_robot("er20")
-    cal = record_calibration_set(robot, seed=1, duration=60.0,
-                                 excitation_config=ExcitationConfig(starts=4))
-    sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
-    sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
-    pf = ParamsFile.from_result(sc.result)
-    print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
-          + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + " N·m")
+    if args.params is not None:
+        pf = load_params(args.params, robot)
+        print(f"Parameters: {args.params}")
+    else:
+        cal = record_calibration_set(robot, seed=1, duration=60.0,
+                                     excitation_config=ExcitationConfig(starts=4))
+        sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
+        sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
+        r = sc.result
+        path = save_params(args.out / "guiding_params.toml", robot, r.method, r.params,
+                           r.stats, sim_seed=1)
+        pf = load_params(path, robot)
+        print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
+              + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + f" N·m -> {path}")
     if "1" in args.sections:
         section_rest(robot, pf, args.poses, args.rest_seconds)
     if "2" in args.sections:
@@ -253,8 +263,8 @@ def _report_worst_case(robot: Robot, pf: ParamsFile, timed: list[TimedSession]) 
     nrt = sum(t.probe["nrt_allocations"] for t in timed)
     print(f"  {periods} servo periods of the simulated sessions: compiled or loaded "
           f"{sum(new.values())} signatures ({', '.join(new) or 'none'}), garbage collections "
-          f"{collections}, allocations by compiled code {nrt}")
-    net, transient = [], []
+          f"{collections}")
+    kept, transient = [], []
     for t in timed:
         holder: list[ProbeDriver] = []
 
@@ -265,14 +275,22 @@ def _report_worst_case(robot: Robot, pf: ParamsFile, timed: list[TimedSession]) 
 
         replay_session(robot, pf, t.config, t.feedback, wrap_driver=wrap)
         fig = holder[0].finish()
-        net.append(fig["net"])
+        kept.append(fig["kept"])
         transient.append(fig["transient"])
-    net_all, tr_all = np.concatenate(net), np.concatenate(transient)
-    print(f"  the loop alone (replay, tracemalloc): periods that kept memory "
-          f"{int(np.count_nonzero(net_all))} of {net_all.size} (net {int(net_all.sum())} B in "
-          f"all); transient allocation within a period: median {np.median(tr_all):.0f} B, max "
-          f"{tr_all.max():.0f} B (Pinocchio's returned arrays and Python scalars, freed in the "
-          "period)")
+    tr_all = np.concatenate(transient)
+    print(f"  the loop alone (replay under tracemalloc): memory kept over the periods "
+          f"{', '.join(f'{k:+d} B' for k in kept)}; allocated and freed within a period: "
+          f"median {np.median(tr_all):.0f} B, max {tr_all.max():.0f} B (Pinocchio's returned "
+          "arrays, Python scalars and views)")
+    parts = build_loop(robot, pf, timed[0].config.loop, timed[0].feedback.dt)
+    q0 = timed[0].feedback.q[np.argmax(timed[0].feedback.fresh)]
+    for part in parts:
+        part.reset(q0)
+    inside = compiled_allocations(parts)
+    print("  allocations per call inside the compiled functions (called from compiled code): "
+          + ", ".join(f"{k} {v:g}" for k, v in inside.items()) + f"; per period "
+          f"{nrt / max(periods, 1):.1f} come from the dispatcher wrapping each array "
+          "argument of a call from Python (freed when the call returns)")
 
 
 def reference_cycle_us(rev: str) -> np.ndarray:

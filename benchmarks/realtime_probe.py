@@ -7,10 +7,15 @@ in the loop's servo periods (used by ``benchmarks/guiding.py``).
   a period paid for it.
 * **Collects**: the cyclic garbage collector's runs (``gc.callbacks``) during the periods.
 * **Allocates**: :class:`ProbeDriver` wraps a driver and, at each read (once per servo
-  period), reads ``tracemalloc``'s traced memory: per period the memory it left allocated
-  (net) and the most it had allocated on top of its start (transient: Python objects and NumPy
-  buffers created and freed within the period), and Numba's own allocator's count (compiled
-  code: ``numba.core.runtime.rtsys``, its statistics switched on by the probe).
+  period), reads ``tracemalloc``'s traced memory: the memory the periods kept (the traced
+  memory after the last period against after the first) and, per period, the most it had
+  allocated on top of its start (transient: Python objects and NumPy buffers created and freed
+  within the period), and Numba's own allocator's count
+  (``numba.core.runtime.rtsys``, its statistics switched on by the probe). The dispatcher wraps
+  every array argument of a compiled call made from Python in a small allocation of its own
+  (freed when the call returns); :func:`compiled_allocations` calls the loop's compiled
+  functions from compiled code, where no argument is wrapped, to count what they allocate
+  themselves.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import tracemalloc
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numba.core.registry import CPUDispatcher
 
 from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
@@ -44,6 +50,53 @@ def nrt_allocations() -> int:
     if not _nrt_python.memsys_stats_enabled():
         _nrt_python.memsys_enable_stats()
     return int(rtsys.get_allocation_stats().alloc)
+
+
+def compiled_allocations(parts: Any, repeats: int = 1000) -> dict[str, float]:
+    """Allocations per call made inside the loop's compiled functions (the estimator's two
+    halves, the guiding cycle, the interpolator's steps), called ``repeats`` times from
+    compiled code on copies of the records of ``parts`` (a ``LoopParts``, reset)."""
+    from leadthrough.control.guiding_cycle import guiding_cycle
+    from leadthrough.control.interpolation import next_command, start_segment
+    from leadthrough.estimation.estimator_step import finish_sample, read_sample
+
+    est, ctl, interp = parts
+    e_in, e_out = est.make_input(), est.make_output()
+    e_in.q[:] = est.record["q_filtered"][0]
+    c_in, c_out = ctl.make_input(), ctl.make_output()
+    c_in.q[:] = ctl.record["q_cmd"][0]
+    n = e_in.q.size
+    rnea, jacobian, unused = np.zeros(n), np.zeros((6, n)), np.zeros((n, n))
+    calls = {
+        "read_sample": (read_sample, (e_in.record, est.record.copy(), e_out.record)),
+        "finish_sample": (finish_sample, (rnea, unused, unused, rnea, jacobian,
+                                          est.record.copy(), e_out.record)),
+        "guiding_cycle": (guiding_cycle, (c_in.record, ctl.record.copy(),
+                                          ctl._ik.record.copy(), ctl._safety.record.copy(),
+                                          ctl._safety.event_ring.copy(), c_out.record)),
+        "start_segment": (start_segment, (interp.record.copy(), c_in.q, np.zeros(n))),
+        "next_command": (next_command, (interp.record.copy(), np.zeros(n), np.zeros(n))),
+    }
+    out = {}
+    for name, (function, args) in calls.items():
+        repeat = _repeater(function)
+        repeat(1, *args)
+        counts = []
+        for k in (repeats, 2 * repeats):      # the difference cancels the outer call's own
+            before = nrt_allocations()
+            repeat(k, *args)
+            counts.append(nrt_allocations() - before)
+        out[name] = (counts[1] - counts[0]) / repeats
+    return out
+
+
+def _repeater(function: Any) -> Any:
+    """A compiled loop calling ``function`` k times with the same arguments."""
+    @njit
+    def repeat(k: int, *args: Any) -> None:
+        for _ in range(k):
+            function(*args)
+    return repeat
 
 
 class ProbeDriver:
@@ -105,7 +158,7 @@ class ProbeDriver:
                 self._start = tracemalloc.get_traced_memory()[0]
         elif k >= 2 and self._trace and k - 2 < self.net.size:
             current, peak = tracemalloc.get_traced_memory()
-            self.net[k - 2] = current - self._start
+            self.net[k - 2] = current          # the traced memory at the end of the period
             self.transient[k - 2] = peak - self._start
         if k >= 1 and self._trace:
             tracemalloc.reset_peak()
@@ -123,10 +176,15 @@ class ProbeDriver:
         new = {k: after[k] - self.signatures_before.get(k, 0) for k in after
                if after[k] != self.signatures_before.get(k, 0)}
         periods = max(0, min(self._reads - 2, self.net.size))
+        # memory kept: the traced memory after the last period against after the first (the
+        # probe's own bookkeeping is the same at both ends)
+        kept = int(self.net[periods - 1] - self.net[0]) if periods > 1 else 0
         return {"periods": periods, "new_signatures": new, "collections": self.collections,
                 "nrt_allocations": nrt_allocations() - self.nrt_before,
-                "net": self.net[:periods], "transient": self.transient[:periods]}
+                "kept": kept, "transient": self.transient[:periods]}
 
     def _collected(self, phase: str, info: dict[str, int]) -> None:
-        if phase == "start":
+        # the loop pauses the collector: a collection while it is paused is one in a period
+        # (after the loop it runs again until finish() is called, and those do not count)
+        if phase == "start" and not gc.isenabled():
             self.collections += 1

@@ -51,14 +51,19 @@ class Fields:
 
     def __init__(self, record: NDArray[np.void]) -> None:
         scalars: dict[str, NDArray[Any]] = {}
+        arrays: dict[str, NDArray[Any]] = {}
         object.__setattr__(self, "_record", record)
         object.__setattr__(self, "_scalars", scalars)
+        object.__setattr__(self, "_arrays", arrays)
         for name in record.dtype.names or ():
             kind = record.dtype[name]
             if kind.shape == () and kind.names is None:
                 scalars[name] = record[name]              # shape (1,): read and write [0]
+            elif kind.names is None:
+                arrays[name] = record[name][0]            # the field's own memory
+                object.__setattr__(self, name, arrays[name])
             else:
-                object.__setattr__(self, name, record[name][0])   # an array view, or a record
+                object.__setattr__(self, name, record[name][0])   # a nested record
 
     def __getattr__(self, name: str) -> Any:
         try:
@@ -69,6 +74,8 @@ class Fields:
     def __setattr__(self, name: str, value: Any) -> None:
         if name in self._scalars:
             self._scalars[name][0] = value
+        elif name in self._arrays:
+            self._arrays[name][...] = value
         elif name in (self._record.dtype.names or ()):
             self._record[name] = value
         else:
@@ -111,6 +118,10 @@ class field(Generic[T]):  # noqa: N801 (a descriptor, used like a function)
         self.name = name
         self.__doc__ = doc
         self._convert = convert
+        if isinstance(convert, type) and issubclass(convert, IntEnum):
+            # a dictionary lookup costs a tenth of the enum's constructor
+            by_value: dict[int, Any] = {int(m): m for m in convert}
+            self._convert = lambda v: by_value[int(v)]
 
     @overload
     def __get__(self, obj: None, owner: type) -> field[T]: ...

@@ -188,7 +188,7 @@ def next_command(segment: NDArray[np.void], q_out: Array, qd_out: Array) -> int:
             seg.qd[j] = dp * seg.dh01[k] + v0 * seg.dh10[k] + v1 * seg.dh11[k]
         q_out[j] = seg.q[j]
         qd_out[j] = seg.qd[j]
-    return status
+    return status.value      # an int: returning the member would box its class every call
 
 
 class HermiteInterpolator:

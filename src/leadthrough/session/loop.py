@@ -165,9 +165,14 @@ class _Loop:
         self.driver, self.estimator, self.controller = driver, estimator, controller
         self.interpolator, self.every = interpolator, every
         self.deadman, self.applied_wrench = deadman, applied_wrench
-        self.fb: DriverFeedback = driver.make_feedback()
-        self.cmd: JointCommand = driver.make_command()
         self.e_in, self.e_out = estimator.make_input(), estimator.make_output()
+        # the feedback's arrays are the estimator input's and the command's velocity is its
+        # qd_cmd (the command sent this period until the interpolator writes the next at its
+        # end): the driver fills what the estimator reads, with no copies in the period
+        self.e_in.q[:] = self.e_in.current[:] = np.nan
+        self.fb = DriverFeedback(t=float("nan"), q=self.e_in.q, current=self.e_in.current,
+                                 sequence=-1)
+        self.cmd = JointCommand(q=np.zeros(driver.n), qd=self.e_in.qd_cmd)
         self.c_in, self.c_out = controller.make_input(), controller.make_output()
         cfg = controller.config
         self.settle_s, self.cycle_s = cfg.settle_s, cfg.dt
@@ -203,12 +208,8 @@ class _Loop:
         fresh = driver.read(fb)
         t0 = time.perf_counter()
         if fresh:
-            e_in = self.e_in
-            e_in.t = fb.t
-            e_in.q[:] = fb.q
-            e_in.current[:] = fb.current
-            e_in.qd_cmd[:] = cmd.qd
-            self.estimator.update(e_in, self.e_out)
+            self.e_in.t = fb.t
+            self.estimator.update(self.e_in, self.e_out)
         if i % self.every == 0:
             self._cycle(t_loop)
         self.interpolator.update(cmd)
