@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numba.core.registry import CPUDispatcher
 
-from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
+from leadthrough.drivers.protocol import Driver, DriverFeedback, WrappedDriver
 
 
 def loaded_signatures() -> dict[str, int]:
@@ -99,7 +99,7 @@ def _repeater(function: Any) -> Any:
     return repeat
 
 
-class ProbeDriver:
+class ProbeDriver(WrappedDriver):
     """A driver that probes every servo period of the loop it serves (see the module doc).
 
     The first read is the loop's set-up (resets, warm-up); from the second on, each read ends
@@ -112,7 +112,7 @@ class ProbeDriver:
     """
 
     def __init__(self, driver: Driver, periods: int, trace_memory: bool = False) -> None:
-        self._driver = driver
+        super().__init__(driver)
         self._reads = 0
         self._trace = trace_memory
         self.net = np.zeros(periods, dtype=np.int64)
@@ -121,30 +121,6 @@ class ProbeDriver:
         self.signatures_before: dict[str, int] = {}
         self.nrt_before = 0
         self._start = 0
-
-    @property
-    def n(self) -> int:
-        return self._driver.n
-
-    @property
-    def dt(self) -> float:
-        return self._driver.dt
-
-    @property
-    def simulated(self) -> bool:
-        return self._driver.simulated
-
-    def make_feedback(self) -> DriverFeedback:
-        return self._driver.make_feedback()
-
-    def make_command(self) -> JointCommand:
-        return self._driver.make_command()
-
-    def write(self, cmd: JointCommand) -> None:
-        self._driver.write(cmd)
-
-    def step(self) -> None:
-        self._driver.step()
 
     def read(self, fb: DriverFeedback) -> bool:
         fresh = self._driver.read(fb)
