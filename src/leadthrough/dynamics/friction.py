@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -66,6 +67,7 @@ class StribeckParameters:
     f4: Array
 
 
+@cache
 def friction_dtype(n: int) -> np.dtype[Any]:
     """The friction parameters of ``n`` joints as a record, for compiled per-sample code.
 

@@ -85,6 +85,7 @@ def output_dtype(n: int) -> np.dtype[Any]:
                      ("manipulability", f8), ("damping", f8), ("status", np.int64)])
 
 
+@cache
 def estimator_dtype(n: int) -> np.dtype[Any]:
     """The estimator's record for ``n`` joints: settings, per-joint constants, state."""
     f8, i8, b1 = np.float64, np.int64, np.bool_
