@@ -29,6 +29,7 @@ from leadthrough.estimation.wrench import friction_weights, wrench_from_torque
 from leadthrough.robot import Robot
 from leadthrough.sim import ConstantWrench, Payload, SimConfig, SimRobot, hold
 from leadthrough.sim.mujoco_model import build_mujoco_model
+from leadthrough.state_records import view
 from test_identification import _trajectory
 
 Q0 = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
@@ -281,10 +282,20 @@ def test_rezero_takes_any_window_without_raising(er20: Robot) -> None:
     inp, out = est.make_input(), est.make_output()
     est.reset(Q0)
     inp.q[:] = Q0
-    for samples in (float("inf"), float("nan"), 2**70, -3, 0):
+    for k in range(3000):                 # past the start's settling (rezero waits for it)
+        inp.t = k * 1e-3
+        est.update(inp, out)
+    assert out.status == Status.OK
+    # documented clamping (the loop calls it in the hot path, so it never raises): NaN or
+    # less than one sample is a one-sample window, a huge window is capped at 2**31
+    for samples, window in ((float("inf"), 2**31), (2**70, 2**31), (float("nan"), 1), (-3, 1),
+                            (0, 1), (0.5, 1), (7, 7)):
         est.rezero(samples)  # type: ignore[arg-type]
         assert est.rezeroing
+        assert int(view(est.record).rezero_left) == window
+        inp.t += 1e-3
         est.update(inp, out)
+        assert est.rezeroing == (window > 1)
     assert np.all(np.isfinite(out.wrench))
 
 
@@ -420,7 +431,11 @@ def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
     np.testing.assert_allclose(est.com_tcp, [0.02, -0.01, 0.12], atol=5e-3)
     with pytest.raises(DataError, match="unknown method"):
         estimate_payload(rec, er20, params, "guess")
-    assert build_mujoco_model(er20) is not None
+    mj = build_mujoco_model(er20)
+    assert mj.nq == er20.n
+    # the same links: MuJoCo's total mass is Pinocchio's
+    pin_mass = sum(er20.model.inertias[i].mass for i in range(1, er20.model.njoints))
+    assert float(mj.body_mass.sum()) == pytest.approx(pin_mass, rel=1e-12)
 
 
 def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
