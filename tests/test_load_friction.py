@@ -220,3 +220,53 @@ def test_params_file_refuses_load_friction_on_some_joints_only(tmp_path: Path,
     with pytest.raises(DataError, match="some joints only") as e:
         load_params(path, er20)
     assert e.value.field == "joints.*.load_friction" and e.value.value == 5
+
+
+# --- estimator ------------------------------------------------------------------------------
+
+
+Q0 = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
+QD_CMD = np.array([0.5, -0.5, 0.5, -0.5, 0.5, -0.5])
+
+
+def _transmitted(er20: Robot, tau_ext: np.ndarray) -> np.ndarray:
+    """The torque the gears transmit at rest at Q0 under a push: gravity − τ_ext [N·m]."""
+    return pin.computeGeneralizedGravity(er20.model, er20.model.createData(), Q0) - tau_ext
+
+
+def _held_push(er20: Robot, params: DriveModelParameters, model: DriveModelParameters,
+               tau_ext: np.ndarray) -> np.ndarray:
+    """The estimator's τ_ext for a robot held at Q0 while commanded to move (friction with memory
+    at its sliding level), pushed by ``tau_ext``. Its currents are those of a drive whose gear
+    friction follows the torque it really transmits (``params``); the estimator runs ``model``."""
+    from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
+
+    transmitted = _transmitted(er20, tau_ext)
+    friction = (np.sign(QD_CMD) * (params.coulomb + params.load_friction * np.abs(transmitted))
+                + params.viscous * QD_CMD)
+    current = (transmitted + friction) / er20.torque_per_amp
+    est = ExternalForceEstimator(er20, model, np.zeros(er20.n), EstimatorConfig(
+        friction_velocity="command", warm_up_s=0.0))
+    inp, out = est.make_input(), est.make_output()
+    est.reset(Q0)
+    for k in range(3000):
+        inp.t, inp.q[:], inp.current[:], inp.qd_cmd[:] = k * 1e-3, Q0, current, QD_CMD
+        est.update(inp, out)
+    return np.array(out.tau_ext)
+
+
+def test_estimator_friction_carries_the_push_it_transmits(er20: Robot) -> None:
+    """The estimator's τ_load is the measured transmitted torque: a push changes the gear's
+    friction by f_cL·Δ|τ_load|, and the estimate is the push itself. The same model without its
+    load term is off by exactly the load friction, f_cL·|τ_load|."""
+    n = er20.n
+    fl = 0.08
+    params = replace(nominal_drive_parameters(er20), coulomb=np.full(n, 10.0),
+                     viscous=np.full(n, 4.0), load_friction=np.full(n, fl))
+    tau_ext = np.array([40.0, -60.0, 30.0, 10.0, -8.0, 5.0])
+    np.testing.assert_allclose(_held_push(er20, params, params, tau_ext), tau_ext, atol=1e-6)
+    np.testing.assert_allclose(_held_push(er20, params, params, np.zeros(n)), 0.0, atol=1e-6)
+    blind = replace(params, load_friction=np.zeros(0))
+    np.testing.assert_allclose(_held_push(er20, params, blind, tau_ext) - tau_ext,
+                               -np.sign(QD_CMD) * fl * np.abs(_transmitted(er20, tau_ext)),
+                               atol=1e-6)
