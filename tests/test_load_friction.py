@@ -109,7 +109,10 @@ def _exact(**kw: object) -> IdentifyConfig:
                           load_friction_tolerance=1e-10, **kw)  # type: ignore[arg-type]
 
 
-TRUE_FL = np.array([0.03, 0.05, 0.04, 0.06, 0.02, 0.05])
+#: f_cL of the synthetic robots: the wrists 2 and 3 carry too little load for the data to tell
+#: their f_cL from their Coulomb terms (the bound's effect is below the residual's σ), so the fit
+#: leaves them 0 (``load_excitation``), and so do these.
+TRUE_FL = np.array([0.03, 0.05, 0.04, 0.06, 0.0, 0.0])
 
 
 def test_ols_recovers_a_known_load_friction(er20: Robot) -> None:
@@ -120,12 +123,26 @@ def test_ols_recovers_a_known_load_friction(er20: Robot) -> None:
                                  rotor_inertia=np.zeros(6), coulomb=t.coulomb,
                                  viscous=t.viscous, load_friction=TRUE_FL)
     res = identify(_data(er20, truth, 1), er20, "ols-cv", _exact())
-    np.testing.assert_allclose(res.params.load_friction, TRUE_FL, rtol=1e-6)
+    np.testing.assert_allclose(res.params.load_friction, TRUE_FL, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(res.params.coulomb, truth.coulomb, rtol=1e-6)
     assert 2 < res.load_passes <= 13
     assert 1e-6 * er20.max_torque.sum() > evaluate(res.params, er20, _data(er20, truth, 2)).J
     # without the load term the same data leave a large residual
     assert identify(_data(er20, truth, 1), er20, "ols-cv").J > 1e3 * res.J
+
+
+def test_a_joint_without_load_keeps_no_load_friction(er20: Robot) -> None:
+    """Wrist 3 carries almost no load (RMS of its load column beyond the Coulomb, viscous and
+    offset columns: a few mN·m): even a true f_cL of 30 % there is below what the data can tell,
+    and the fit leaves it 0 instead of running to its bound."""
+    t = _true_params(er20, FrictionModel.COULOMB_VISCOUS)
+    fl = np.r_[TRUE_FL[:5], 0.3]
+    truth = DriveModelParameters(phi=t.phi, friction_model=FrictionModel.COULOMB_VISCOUS,
+                                 rotor_inertia=np.zeros(6), coulomb=t.coulomb,
+                                 viscous=t.viscous, load_friction=fl)
+    res = identify(_data(er20, truth, 1), er20, "ols-cv")
+    assert res.params.load_friction[5] == 0.0
+    np.testing.assert_allclose(res.params.load_friction[:4], TRUE_FL[:4], rtol=1e-2)
 
 
 def _grid_truth(er20: Robot) -> DriveModelParameters:
@@ -147,7 +164,7 @@ def _grid_truth(er20: Robot) -> DriveModelParameters:
 def test_consistent_recovers_a_known_load_friction(er20: Robot) -> None:
     truth = _grid_truth(er20)
     res = identify(_data(er20, truth, 1), er20, "consistent", _exact())
-    np.testing.assert_allclose(res.params.load_friction, TRUE_FL, rtol=1e-4)
+    np.testing.assert_allclose(res.params.load_friction, TRUE_FL, rtol=1e-4, atol=1e-7)
     assert res.params.stribeck is not None and truth.stribeck is not None
     np.testing.assert_allclose(res.params.stribeck.f1, truth.stribeck.f1, rtol=1e-4)
     np.testing.assert_array_equal(res.params.stribeck.qd_sm, truth.stribeck.qd_sm)
@@ -270,3 +287,32 @@ def test_estimator_friction_carries_the_push_it_transmits(er20: Robot) -> None:
     np.testing.assert_allclose(_held_push(er20, params, blind, tau_ext) - tau_ext,
                                -np.sign(QD_CMD) * fl * np.abs(_transmitted(er20, tau_ext)),
                                atol=1e-6)
+
+
+# --- real robots ---------------------------------------------------------------------------
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.mark.skipif(not (SHARED / "ur10e").is_dir() or not (SHARED / "kr300").is_dir(),
+                    reason="needs ../shared/data/ur10e and ../shared/data/kr300 beside the "
+                           "repository")
+def test_load_term_lowers_the_held_out_error_on_the_real_robots() -> None:
+    """``benchmarks/load_friction.py``: with the load term, the held-out J of consistent and
+    ols-cv falls on every held-out run of both robots (measured, mean over the runs, with /
+    without: UR10e consistent 0.654, ols-cv 0.686; KR300 consistent 0.897, ols-cv 0.972), and
+    the UR10e's shoulder and elbow carry a load friction of a few percent (measured 6.4–7.5 %)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from load_friction import rows_for
+
+    goal = {("UR10e", "consistent"): 0.70, ("UR10e", "ols-cv"): 0.72,
+            ("KR300", "consistent"): 0.92, ("KR300", "ols-cv"): 1.0}
+    for name in ("UR10e", "KR300"):
+        rows = rows_for(name)
+        for without, with_ in zip(rows[::2], rows[1::2], strict=True):
+            assert not without.load_term and with_.load_term
+            assert all(with_.J_held[k] < without.J_held[k] for k in without.J_held)
+            assert with_.J_held_mean / without.J_held_mean < goal[name, with_.method]
+            assert max(with_.load_friction) < IdentifyConfig().max_load_friction
+            if name == "UR10e":
+                assert all(0.03 < f < 0.12 for f in with_.load_friction[1:3])

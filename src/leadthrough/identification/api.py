@@ -91,7 +91,7 @@ class IdentifyConfig:
     k_omega: float = 1.0
     proposed: ProposedConfig = field(default_factory=ProposedConfig)
     consistent: ConsistentConfig = field(default_factory=ConsistentConfig)
-    load_friction: bool = False
+    load_friction: bool = True
     load_friction_iterations: int = 6
     load_friction_tolerance: float = 1e-4
     max_load_friction: float = 0.5

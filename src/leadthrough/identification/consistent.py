@@ -87,7 +87,8 @@ class _Joint:
         self.N = int(used.sum())
         self.R = float(obs.robot.gear_ratio[j])
         self.load = (None if load is None
-                     else load_friction_column(self.qd, load.torque[used, j]))
+                     else load_friction_column(self.qd, load.torque[used, j])
+                     if load.upper[j] > 0 else np.zeros(self.N))
 
     def drive_target(self, z: Array, layout: Layout, j: int) -> Array:
         """The torque left for the drive's M_j, Stribeck and offset terms: b − K·φ (− f_cL·load

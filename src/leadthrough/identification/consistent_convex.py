@@ -93,9 +93,10 @@ class FrictionBand:
 
 class Layout:
     """Index layout of z = [φ (10n), M (n), f1 (n), f2 (n), f3 (n), f4 (n), τ_0 (n)], and
-    f_cL (n) of the load-dependent Coulomb friction when ``load`` (its upper bound) is given."""
+    f_cL (n) of the load-dependent Coulomb friction when ``load`` (its upper bound per joint,
+    shape (n,)) is given."""
 
-    def __init__(self, n: int, load: float | None = None) -> None:
+    def __init__(self, n: int, load: NDArray[np.float64] | None = None) -> None:
         self.n = n
         self.load = load
         self.size = (16 if load is None else 17) * n

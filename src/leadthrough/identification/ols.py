@@ -41,21 +41,27 @@ def _friction_columns(qd: Array, kinds: tuple[str, ...], load: LoadTerm | None) 
 
 def _solve(obs: Observations, base: BaseParameters, K: Array, kinds: tuple[str, ...],
            load: LoadTerm | None) -> tuple[Array, Array, Array]:
-    """Base parameters and the friction columns' coefficients (with 0 <= f_cL <= its bound when
-    a load term is given); returns the standard φ, M (closest to nominal) and the friction
-    coefficients, shape (len(kinds) (+1), n)."""
+    """Base parameters and the friction columns' coefficients (with 0 <= f_cL <= its bound, on
+    the joints whose bound is > 0, when a load term is given); returns the standard φ, M
+    (closest to nominal) and the friction coefficients, shape (len(kinds) (+1), n)."""
     n = obs.robot.n
     if load is not None:
         kinds = (*kinds, "load_friction")
     Y = np.concatenate([base.regressor(K), _friction_columns(obs.data.qd, kinds, load)],
                        axis=2)
     names = list(base.names) + [f"{j}.{k}" for k in kinds for j in obs.robot.joint_names]
-    r = base.count
+    keep = np.ones(len(names), dtype=bool)
     bounds = None
     if load is not None:
-        free = np.full(len(names) - n, np.inf)
-        bounds = (np.r_[-free, np.zeros(n)], np.r_[free, np.full(n, load.upper)])
-    sol = solve_least_squares(Y, obs.data.torque, obs.used, names, obs.data.source, bounds)
+        fitted = load.upper > 0
+        keep[len(names) - n:] = fitted
+        free = np.full(int(keep.sum()) - int(fitted.sum()), np.inf)
+        bounds = (np.r_[-free, np.zeros(int(fitted.sum()))], np.r_[free, load.upper[fitted]])
+    sol = np.zeros(len(names))
+    sol[keep] = solve_least_squares(Y[..., keep], obs.data.torque, obs.used,
+                                    [m for m, k in zip(names, keep, strict=True) if k],
+                                    obs.data.source, bounds)
+    r = base.count
     phi, M = obs.standard_from_base(sol[:r], aug=base is obs.base_aug)
     return phi, M, sol[r:].reshape(len(kinds), n)
 
