@@ -1,0 +1,62 @@
+"""Helpers shared by the wire-protocol tests (not a test module)."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+POSE = (0.3, -0.6, 0.4, 0.5, 0.8, 0.2)
+DIRECTION = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+
+
+def min_jerk(start: np.ndarray, delta: np.ndarray, t: float, duration: float) -> np.ndarray:
+    """Minimum-jerk interpolation from ``start`` by ``delta`` over ``duration`` at ``t``."""
+    s = min(max(t / duration, 0.0), 1.0)
+    return start + (10 * s**3 - 15 * s**4 + 6 * s**5) * delta
+
+
+def hexbytes(text: str) -> bytes:
+    """Bytes from hex text with spaces and newlines (golden packets are written that way)."""
+    return bytes.fromhex("".join(text.split()))
+
+
+def spawn_emulator(kind: str, robot: str, host: str, port: int) -> subprocess.Popen[str]:
+    """Start ``python -m leadthrough.sim.emulators`` in a subprocess and wait for its port.
+
+    Raises:
+        RuntimeError: The port did not open within 30 s (the process is killed).
+    """
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "leadthrough.sim.emulators", kind, "--robot", robot,
+         "--host", host, "--port", str(port)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30.0
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"emulator exited: {proc.communicate()}")
+        try:
+            socket.create_connection((host, port), 0.2).close()
+            return proc
+        except OSError:
+            time.sleep(0.05)
+    proc.kill()
+    proc.communicate()
+    raise RuntimeError(f"emulator {kind} did not open {host}:{port}")
+
+
+def free_loopback_address(port: int) -> str:
+    """A 127.x.y.z address on which ``port`` is free (a fixed port without collisions)."""
+    rng = np.random.default_rng()
+    for _ in range(50):
+        host = "127.{}.{}.{}".format(*rng.integers(1, 255, size=3))
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind((host, port))
+                return host
+            except OSError:
+                continue
+    raise RuntimeError(f"no free loopback address for port {port}")
