@@ -9,7 +9,6 @@ import time
 
 import numpy as np
 import pytest
-from wire_helpers import DIRECTION, POSE, min_jerk
 
 from leadthrough.drivers.kuka_rsi.client import RsiClient
 from leadthrough.drivers.kuka_rsi.config import EthernetConfig, RsiContext, shipped_file
@@ -25,6 +24,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
+from wire_helpers import DIRECTION, POSE, min_jerk
 
 # ------------------------------------------------------------------ golden documents (by hand)
 # as the robot sends them (RSI manual style, one element per line)
@@ -168,7 +168,7 @@ def test_corrections_follow_a_trajectory_with_torque_and_inputs(er20: Robot) -> 
     assert last.delay is not None and last.delay <= 2 and client.stats.missed == 0
     assert first.gear_torque is not None and abs(first.gear_torque[1]) > 50.0  # gravity, N·m
     pressed = [(m.ipoc - first.ipoc) * 1e-3 for m in msgs if m.digital_inputs == 2]
-    assert pressed and 0.19 <= min(pressed) and max(pressed) <= 0.31
+    assert pressed and min(pressed) >= 0.19 and max(pressed) <= 0.31
     assert first.cart_actual is not None and 500 < math.hypot(*first.cart_actual[:2]) < 2000
     assert report.violations == () and report.stop_kind is None and report.accepted > 150
 

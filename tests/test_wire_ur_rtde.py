@@ -9,7 +9,6 @@ import time
 
 import numpy as np
 import pytest
-from wire_helpers import DIRECTION, POSE, hexbytes, min_jerk
 
 from leadthrough.drivers.link import LinkErrorKind
 from leadthrough.drivers.ur_rtde.client import RtdeClient, RtdeState, ServoCommand
@@ -37,6 +36,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
+from wire_helpers import DIRECTION, POSE, hexbytes, min_jerk
 
 # ------------------------------------------------------------------ golden messages (by hand)
 # header: uint16 size (header included), uint8 type; big-endian

@@ -25,9 +25,9 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 import rtde_receive
-from wire_helpers import free_loopback_address, spawn_emulator
 
 from leadthrough.drivers.ur_rtde.client import RtdeClient
+from wire_helpers import free_loopback_address, spawn_emulator
 
 
 @pytest.fixture

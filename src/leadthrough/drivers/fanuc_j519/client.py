@@ -16,12 +16,12 @@ import socket
 import time
 from collections.abc import Sequence
 
+from leadthrough.drivers.fanuc_j519.limits import LimitKind
 from leadthrough.drivers.fanuc_j519.packets import (
     DEFAULT_PORT,
     CommandPacket,
     IoType,
     LimitAnswer,
-    LimitKind,
     LimitQuery,
     StartPacket,
     StatusPacket,

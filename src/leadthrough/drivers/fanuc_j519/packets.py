@@ -58,9 +58,10 @@ output, ...), and ``read_io_value`` carries 16 ports starting at ``read_io_index
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 
+from leadthrough.drivers.fanuc_j519.limits import ANSWER_SIZE, QUERY_SIZE, LimitAnswer, LimitQuery
 from leadthrough.drivers.wire import check_finite, check_length, check_uint, check_value
 from leadthrough.errors import DataError
 
@@ -71,7 +72,6 @@ __all__ = [
     "CommandPacket",
     "IoType",
     "LimitAnswer",
-    "LimitKind",
     "LimitQuery",
     "PacketType",
     "StartPacket",
@@ -85,7 +85,6 @@ __all__ = [
 DEFAULT_PORT = 60015
 VERSION = 1
 MAX_AXES = 9
-LIMIT_TABLE = 20
 
 
 class PacketType(IntEnum):
@@ -107,14 +106,6 @@ class StatusBits(IntFlag):
     IN_MOTION = 8
 
 
-class LimitKind(IntEnum):
-    """``threshold_type`` of a limit query."""
-
-    VELOCITY = 0      # deg/s
-    ACCELERATION = 1  # deg/s^2
-    JERK = 2          # deg/s^3
-
-
 class IoType(IntEnum):
     """I/O type codes (KAREL port codes; documented assumption, see the module doc)."""
 
@@ -126,8 +117,6 @@ class IoType(IntEnum):
 _HEAD = struct.Struct(">II")
 _STATUS = struct.Struct(">IIIBBHHHI9f9f9f")
 _COMMAND = struct.Struct(">IIIBBHHBBHHHH9f")
-_QUERY = struct.Struct(">IIII")
-_ANSWER = struct.Struct(">IIIIII20f20f")
 
 
 def _axes(values: tuple[float, ...] | list[float], source: str, name: str) -> tuple[float, ...]:
@@ -305,89 +294,6 @@ class CommandPacket:
                    write_io_value=v[11], positions=tuple(v[13:22]), version=v[1])
 
 
-@dataclass(frozen=True)
-class LimitQuery:
-    """Asks for one axis' limit table (device → robot, 16 bytes).
-
-    Attributes:
-        axis: Axis number 1-9.
-        kind: Which limit.
-    """
-
-    axis: int
-    kind: LimitKind
-    version: int = VERSION
-
-    def encode(self) -> bytes:
-        """The 16 bytes on the wire."""
-        check_value("J519 limit query", "axis_number", self.axis, range(1, MAX_AXES + 1))
-        return _QUERY.pack(PacketType.LIMITS, self.version, self.axis, int(self.kind))
-
-    @classmethod
-    def decode(cls, data: bytes) -> LimitQuery:
-        """Parse 16 bytes.
-
-        Raises:
-            DataError: Wrong size, type, version, axis or threshold type.
-        """
-        src = "J519 limit query"
-        check_length(src, data, _QUERY.size)
-        ptype, version, axis, kind = _QUERY.unpack(data)
-        check_value(src, "packet_type", ptype, (PacketType.LIMITS,))
-        _check_version(src, version)
-        check_value(src, "axis_number", axis, range(1, MAX_AXES + 1))
-        check_value(src, "threshold_type", kind, (0, 1, 2))
-        return cls(axis=axis, kind=LimitKind(kind), version=version)
-
-
-@dataclass(frozen=True)
-class LimitAnswer:
-    """One axis' limit table (robot → device, 184 bytes).
-
-    Attributes:
-        axis: Axis number 1-9.
-        kind: Which limit (units deg/s, deg/s², deg/s³).
-        max_cartesian_speed: TCP speed covered by the table [mm/s].
-        interval: TCP-speed step of the table [mm/s] (assumption, see the module doc).
-        no_payload: 20 limits without payload.
-        full_payload: 20 limits at full payload.
-    """
-
-    axis: int
-    kind: LimitKind
-    max_cartesian_speed: int
-    interval: int
-    no_payload: tuple[float, ...] = field(default=(0.0,) * LIMIT_TABLE)
-    full_payload: tuple[float, ...] = field(default=(0.0,) * LIMIT_TABLE)
-    version: int = VERSION
-
-    def encode(self) -> bytes:
-        """The 184 bytes on the wire."""
-        src = "J519 limit answer"
-        check_finite(src, "no_payload", self.no_payload, LIMIT_TABLE)
-        check_finite(src, "full_payload", self.full_payload, LIMIT_TABLE)
-        return _ANSWER.pack(PacketType.LIMITS, self.version, self.axis, int(self.kind),
-                            self.max_cartesian_speed, self.interval, *self.no_payload,
-                            *self.full_payload)
-
-    @classmethod
-    def decode(cls, data: bytes) -> LimitAnswer:
-        """Parse 184 bytes.
-
-        Raises:
-            DataError: Wrong size, type, version, axis or threshold type.
-        """
-        src = "J519 limit answer"
-        check_length(src, data, _ANSWER.size)
-        v = _ANSWER.unpack(data)
-        check_value(src, "packet_type", v[0], (PacketType.LIMITS,))
-        _check_version(src, v[1])
-        check_value(src, "axis_number", v[2], range(1, MAX_AXES + 1))
-        check_value(src, "threshold_type", v[3], (0, 1, 2))
-        return cls(axis=v[2], kind=LimitKind(v[3]), max_cartesian_speed=v[4], interval=v[5],
-                   no_payload=tuple(v[6:26]), full_payload=tuple(v[26:46]), version=v[1])
-
-
 def decode_robot_packet(data: bytes) -> StatusPacket | LimitAnswer:
     """Parse a packet sent by the controller (status or limit answer), told apart by size.
 
@@ -396,10 +302,10 @@ def decode_robot_packet(data: bytes) -> StatusPacket | LimitAnswer:
     """
     if len(data) == _STATUS.size:
         return StatusPacket.decode(data)
-    if len(data) == _ANSWER.size:
+    if len(data) == ANSWER_SIZE:
         return LimitAnswer.decode(data)
     raise DataError("wrong packet size", source="J519 packet from the robot", field="length",
-                    value=len(data), expected=f"{_STATUS.size} (status) or {_ANSWER.size} "
+                    value=len(data), expected=f"{_STATUS.size} (status) or {ANSWER_SIZE} "
                     "(limit answer) bytes")
 
 
@@ -417,8 +323,8 @@ def decode_client_packet(data: bytes) -> StartPacket | StopPacket | CommandPacke
         return StartPacket(version) if ptype == PacketType.START else StopPacket(version)
     if len(data) == _COMMAND.size:
         return CommandPacket.decode(data)
-    if len(data) == _QUERY.size:
+    if len(data) == QUERY_SIZE:
         return LimitQuery.decode(data)
     raise DataError("wrong packet size", source=src, field="length", value=len(data),
                     expected=f"{_HEAD.size} (start/stop), {_COMMAND.size} (command) or "
-                    f"{_QUERY.size} (limit query) bytes")
+                    f"{QUERY_SIZE} (limit query) bytes")

@@ -34,12 +34,12 @@ import socket
 
 import numpy as np
 
+from leadthrough.drivers.fanuc_j519.limits import LimitKind
 from leadthrough.drivers.fanuc_j519.packets import (
     DEFAULT_PORT,
     CommandPacket,
     IoType,
     LimitAnswer,
-    LimitKind,
     LimitQuery,
     StartPacket,
     StatusBits,
