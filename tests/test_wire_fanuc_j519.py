@@ -4,7 +4,6 @@ and our client against the emulated controller over loopback (trajectory, I/O, f
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -34,7 +33,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
-from wire_helpers import DIRECTION, POSE, hexbytes, min_jerk
+from wire_helpers import DIRECTION, POSE, exchange, hexbytes, min_jerk
 
 # ------------------------------------------------------------------ golden packets (by hand)
 # status: type 0, version 1, seq 300, status 0x0d (ready, SYSRDY, in motion), read I/O type 1
@@ -154,18 +153,13 @@ def _stream(client: StreamMotionClient, target: object, duration: float,
     ``t`` is the controller time of the status (sequence × 8 ms), as a J519 client keeps
     its trajectory on the controller's clock (wall-clock jitter would read as jerk).
     """
-    out: list[StatusPacket] = []
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < duration:
-        status = client.receive(0.1)
-        if status is None:
-            continue
-        out.append(status)
-        if send:
-            t = (status.sequence - out[0].sequence) * CYCLE
-            goal = target(t, out[0])  # type: ignore[operator]
-            client.send(client.make_command(list(goal)))
-    return out
+
+    def respond(status: StatusPacket, got: list[StatusPacket]) -> None:
+        t = (status.sequence - got[0].sequence) * CYCLE
+        goal = target(t, got[0])  # type: ignore[operator]
+        client.send(client.make_command(list(goal)))
+
+    return exchange(client.receive, duration, respond if send else None)
 
 
 def test_stream_follows_a_trajectory_and_reports_inputs(er20: Robot) -> None:

@@ -5,7 +5,6 @@ torque, inputs, late answers, correction monitoring, lost documents, NaN)."""
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -24,7 +23,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
-from wire_helpers import DIRECTION, POSE, min_jerk
+from wire_helpers import DIRECTION, POSE, exchange, min_jerk
 
 # ------------------------------------------------------------------ golden documents (by hand)
 # as the robot sends them (RSI manual style, one element per line)
@@ -123,22 +122,18 @@ def test_shipped_controller_files_agree() -> None:
 
 
 # ------------------------------------------------------------------- client vs emulator
-def _session(emulator: RunningEmulator | None, client: RsiClient, target: object,
-             duration: float, answer: object = None) -> list[RobotMessage]:
+def _session(client: RsiClient, target: object, duration: float,
+             answer: object = None) -> list[RobotMessage]:
     """Answer every document for ``duration`` s with corrections towards
     ``target(t, first)`` [deg]; ``answer(k)`` False skips the answer to document k."""
-    out: list[RobotMessage] = []
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < duration:
-        msg = client.receive(0.05)
-        if msg is None:
-            continue
-        out.append(msg)
-        if answer is not None and not answer(len(out)):  # type: ignore[operator]
-            continue
-        t = (msg.ipoc - out[0].ipoc) * 1e-3
-        client.send(client.correction_for(target(t, out[0])))  # type: ignore[operator]
-    return out
+
+    def respond(msg: RobotMessage, got: list[RobotMessage]) -> None:
+        if answer is not None and not answer(len(got)):  # type: ignore[operator]
+            return
+        t = (msg.ipoc - got[0].ipoc) * 1e-3
+        client.send(client.correction_for(target(t, got[0])))  # type: ignore[operator]
+
+    return exchange(client.receive, duration, respond)
 
 
 def _client() -> RsiClient:
@@ -157,7 +152,7 @@ def test_corrections_follow_a_trajectory_with_torque_and_inputs(er20: Robot) -> 
     inputs = InputSchedule(mark=(Window(0.2, 0.3),))
     with _start(er20, client, inputs=inputs) as emu:
         delta = np.degrees(0.05 * DIRECTION)
-        msgs = _session(emu, client, lambda t, f: min_jerk(np.array(f.axis_setpoint), delta,
+        msgs = _session(client, lambda t, f: min_jerk(np.array(f.axis_setpoint), delta,
                                                            t, 0.5), 0.8)
         report = emu.stop()
     client.close()
@@ -186,7 +181,7 @@ def test_gear_torque_is_the_measured_current_times_the_nominal_drive_factor(
 def test_late_answers_are_counted_then_rsi_stops(er20: Robot) -> None:
     client = _client()
     with _start(er20, client, watchdog=0.02) as emu:  # Timeout: 5 late answers in a row
-        msgs = _session(emu, client, lambda t, f: f.axis_setpoint, 0.6,
+        msgs = _session(client, lambda t, f: f.axis_setpoint, 0.6,
                         answer=lambda k: not (20 <= k < 23 or k > 60))
         silent = client.silent_for
         report = emu.stop()
@@ -208,7 +203,7 @@ def test_correction_monitor_stops_rsi(er20: Robot) -> None:
                                context=ctx)
     with RunningEmulator(emulator) as emu:
         ramp = np.array([10.0, 0, 0, 0, 0, 0])  # A1 at 10 deg/s: 1 deg after 0.1 s
-        _session(emu, client, lambda t, f: np.array(f.axis_setpoint) + ramp * t, 0.4)
+        _session(client, lambda t, f: np.array(f.axis_setpoint) + ramp * t, 0.4)
         report = emu.stop()
     client.close()
     assert report.stop_kind == "limit" and "AXISCORRMON: A1" in report.stop_reason
@@ -220,7 +215,7 @@ def test_lost_documents_and_nan_are_seen_for_what_they_are(er20: Robot) -> None:
                        close_at=0.5)
     client = _client()
     with _start(er20, client, faults=faults) as emu:
-        msgs = _session(emu, client, lambda t, f: f.axis_setpoint, 0.8)
+        msgs = _session(client, lambda t, f: f.axis_setpoint, 0.8)
         report = emu.stop()
     client.close()
     assert client.stats.gaps == 1 and client.stats.missed == 5 == report.dropped

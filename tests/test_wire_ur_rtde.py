@@ -5,7 +5,6 @@ loopback (trajectory, protective stop, watchdog, E-stop, closed socket, lost pac
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -36,7 +35,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
-from wire_helpers import DIRECTION, POSE, hexbytes, min_jerk
+from wire_helpers import DIRECTION, POSE, exchange, hexbytes, min_jerk
 
 # ------------------------------------------------------------------ golden messages (by hand)
 # header: uint16 size (header included), uint8 type; big-endian
@@ -153,19 +152,13 @@ def _emulator(robot: Robot, **kw: object) -> RunningEmulator:
 def _run(client: RtdeClient, target: object, duration: float, mode: int = 1,
          send: bool = True) -> list[RtdeState]:
     """Answer every data package for ``duration`` s with ``target(t, first)`` [rad]."""
-    out: list[RtdeState] = []
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < duration:
-        state = client.receive(0.1)
-        if state is None:
-            if client.error is not None:
-                break
-            continue
-        out.append(state)
-        if send:
-            q = target(state.timestamp - out[0].timestamp, out[0])  # type: ignore[operator]
-            client.send(ServoCommand(tuple(q), counter=len(out), mode=mode))
-    return out
+
+    def respond(state: RtdeState, got: list[RtdeState]) -> None:
+        q = target(state.timestamp - got[0].timestamp, got[0])  # type: ignore[operator]
+        client.send(ServoCommand(tuple(q), counter=len(got), mode=mode))
+
+    return exchange(client.receive, duration, respond if send else None,
+                    stop=lambda: client.error is not None)
 
 
 def test_servo_follows_a_trajectory(ur5: Robot) -> None:
@@ -198,6 +191,7 @@ def test_a_servoj_jump_triggers_a_protective_stop(ur5: Robot) -> None:
         report = emu.stop()
     assert not states[0].protective_stop and states[-1].protective_stop
     assert states[-1].values["safety_mode"] == 3 and states[-1].values["runtime_state"] == 1
+    assert states[-1].values["output_int_register_0"] == 1  # halted by the controller
     assert report.stop_kind == "protective" and "velocity" in report.stop_reason
     assert report.violations == ()
     assert np.abs(np.array(states[-1].q) - states[0].q).max() < 0.01  # never jumped

@@ -6,8 +6,12 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
+
+T = TypeVar("T")
 
 POSE = (0.3, -0.6, 0.4, 0.5, 0.8, 0.2)
 DIRECTION = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
@@ -17,6 +21,23 @@ def min_jerk(start: np.ndarray, delta: np.ndarray, t: float, duration: float) ->
     """Minimum-jerk interpolation from ``start`` by ``delta`` over ``duration`` at ``t``."""
     s = min(max(t / duration, 0.0), 1.0)
     return start + (10 * s**3 - 15 * s**4 + 6 * s**5) * delta
+
+
+def exchange(receive: Callable[[float], T | None], duration: float,
+             respond: Callable[[T, list[T]], None] | None = None,
+             stop: Callable[[], bool] = lambda: False) -> list[T]:
+    """Receive for ``duration`` s of wall time; answer each packet with ``respond(packet,
+    received so far)``; end early when ``stop()``. Returns the packets received."""
+    out: list[T] = []
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < duration and not stop():
+        packet = receive(0.1)
+        if packet is None:
+            continue
+        out.append(packet)
+        if respond is not None:
+            respond(packet, out)
+    return out
 
 
 def hexbytes(text: str) -> bytes:

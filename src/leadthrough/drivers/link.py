@@ -11,11 +11,17 @@ from __future__ import annotations
 
 import select
 import socket
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import TypeVar
+
+from leadthrough.errors import DataError
 
 __all__ = ["LinkError", "LinkErrorKind", "LinkStats", "LinkStatus", "SequenceTracker",
-           "drain_datagrams"]
+           "Transport", "decode_datagrams", "drain_datagrams"]
+
+P = TypeVar("P")
 
 
 class LinkErrorKind(StrEnum):
@@ -76,6 +82,23 @@ class LinkStatus:
         """Latch the first error (later ones are consequences)."""
         if self.error is None:
             self.error = LinkError(kind, detail)
+
+
+class Transport:
+    """Base of the client transports: their counters and latched link error."""
+
+    def __init__(self) -> None:
+        self._link = LinkStatus()
+
+    @property
+    def stats(self) -> LinkStats:
+        """Counters since ``open`` (``missed``: packets missing by sequence number)."""
+        return self._link.stats
+
+    @property
+    def error(self) -> LinkError | None:
+        """The link failure, if any (a closed port or connection, a socket error)."""
+        return self._link.error
 
 
 class SequenceTracker:
@@ -151,3 +174,25 @@ def drain_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
     except OSError as e:
         status.fail(LinkErrorKind.SOCKET, str(e))
         return out
+
+
+def decode_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
+                     decode: Callable[[bytes], P]) -> list[tuple[P, tuple[str, int]]]:
+    """:func:`drain_datagrams`, then decode each; malformed ones are counted and dropped.
+
+    Args:
+        sock: A UDP socket.
+        timeout: Longest wait for the first datagram [s].
+        status: Counters (``timeouts``, ``malformed``) and the latched error.
+        decode: The codec; raises :class:`~leadthrough.errors.DataError` on bad input.
+
+    Returns:
+        The decoded packets with their senders, oldest first.
+    """
+    out = []
+    for data, addr in drain_datagrams(sock, timeout, status):
+        try:
+            out.append((decode(data), addr))
+        except DataError:
+            status.stats.malformed += 1
+    return out

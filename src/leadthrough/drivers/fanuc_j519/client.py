@@ -29,19 +29,18 @@ from leadthrough.drivers.fanuc_j519.packets import (
     decode_robot_packet,
 )
 from leadthrough.drivers.link import (
-    LinkError,
     LinkErrorKind,
-    LinkStats,
     LinkStatus,
     SequenceTracker,
-    drain_datagrams,
+    Transport,
+    decode_datagrams,
 )
-from leadthrough.errors import ControlError, DataError
+from leadthrough.errors import ControlError
 
 __all__ = ["StreamMotionClient"]
 
 
-class StreamMotionClient:
+class StreamMotionClient(Transport):
     """The PC side of a J519 stream.
 
     Args:
@@ -53,25 +52,15 @@ class StreamMotionClient:
 
     def __init__(self, host: str, port: int = DEFAULT_PORT,
                  read_io: tuple[int, int, int] = (IoType.DI, 1, 0xFFFF)) -> None:
+        super().__init__()
         self.host, self.port = host, port
         self.read_io = read_io
         self._sock: socket.socket | None = None
-        self._link = LinkStatus()
         self._seq = SequenceTracker()
         self._last: StatusPacket | None = None
         self.limits: dict[tuple[int, LimitKind], LimitAnswer] = {}
 
     # ------------------------------------------------------------------------------ state
-    @property
-    def stats(self) -> LinkStats:
-        """Counters since :meth:`open`."""
-        return self._link.stats
-
-    @property
-    def error(self) -> LinkError | None:
-        """The link failure, if any (a closed controller port, a socket error)."""
-        return self._link.error
-
     @property
     def last_status(self) -> StatusPacket | None:
         """The newest status packet received."""
@@ -156,12 +145,7 @@ class StreamMotionClient:
             return None
         newest: StatusPacket | None = None
         stats = self._link.stats
-        for data, _ in drain_datagrams(self._sock, timeout, self._link):
-            try:
-                packet = decode_robot_packet(data)
-            except DataError:
-                stats.malformed += 1
-                continue
+        for packet, _ in decode_datagrams(self._sock, timeout, self._link, decode_robot_packet):
             if isinstance(packet, LimitAnswer):
                 self.limits[(packet.axis, packet.kind)] = packet
                 continue

@@ -20,21 +20,20 @@ from collections.abc import Sequence
 
 from leadthrough.drivers.kuka_rsi.messages import RobotMessage, SensorMessage
 from leadthrough.drivers.link import (
-    LinkError,
     LinkErrorKind,
-    LinkStats,
     LinkStatus,
     SequenceTracker,
-    drain_datagrams,
+    Transport,
+    decode_datagrams,
 )
-from leadthrough.errors import ControlError, DataError
+from leadthrough.errors import ControlError
 
 __all__ = ["DEFAULT_PORT", "RsiClient"]
 
 DEFAULT_PORT = 49152
 
 
-class RsiClient:
+class RsiClient(Transport):
     """The sensor-PC side of an RSI exchange.
 
     Args:
@@ -47,25 +46,15 @@ class RsiClient:
 
     def __init__(self, host: str = "0.0.0.0", port: int = DEFAULT_PORT,
                  sentype: str = "ImFree", precision: int = 6, cycle_ms: int = 4) -> None:
+        super().__init__()
         self.host, self.port = host, port
         self.sentype, self.precision, self.cycle_ms = sentype, precision, cycle_ms
         self._sock: socket.socket | None = None
-        self._link = LinkStatus()
         self._ipoc = SequenceTracker(step=cycle_ms, bits=64)
         self._last: RobotMessage | None = None
         self._robot: tuple[str, int] | None = None
         self._t_last = 0.0
         self.reference: tuple[float, ...] | None = None
-
-    @property
-    def stats(self) -> LinkStats:
-        """Counters since :meth:`open` (``missed``: documents missing by IPOC)."""
-        return self._link.stats
-
-    @property
-    def error(self) -> LinkError | None:
-        """The link failure, if any."""
-        return self._link.error
 
     @property
     def address(self) -> tuple[str, int]:
@@ -121,12 +110,8 @@ class RsiClient:
             return None
         newest: RobotMessage | None = None
         stats = self._link.stats
-        for data, addr in drain_datagrams(self._sock, timeout, self._link):
-            try:
-                msg = RobotMessage.decode(data)
-            except DataError:
-                stats.malformed += 1
-                continue
+        for msg, addr in decode_datagrams(self._sock, timeout, self._link,
+                                          RobotMessage.decode):
             self._ipoc.update(msg.ipoc, stats)
             stats.received += 1
             if newest is not None:

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from leadthrough.drivers.link import LinkError, LinkErrorKind, LinkStats, LinkStatus
+from leadthrough.drivers.link import LinkErrorKind, LinkStats, LinkStatus, Transport
 from leadthrough.drivers.ur_rtde.protocol import (
     DEFAULT_PORT,
     PROTOCOL_VERSION,
@@ -84,7 +84,7 @@ class ServoCommand:
     mode: int = 1
 
 
-class RtdeClient:
+class RtdeClient(Transport):
     """An RTDE connection set up for :class:`ServoCommand` s.
 
     Args:
@@ -99,6 +99,7 @@ class RtdeClient:
     def __init__(self, host: str, port: int = DEFAULT_PORT,
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, frequency: float | None = None,
                  register_offset: int = 0, timeout: float = 1.0) -> None:
+        super().__init__()
         self.host, self.port, self.timeout = host, port, timeout
         self.outputs = tuple(outputs)
         self.frequency = frequency
@@ -109,20 +110,9 @@ class RtdeClient:
         self.messages: list[TextMessage] = []
         self._sock: socket.socket | None = None
         self._reader = FrameReader()
-        self._link = LinkStatus()
         self._out: Recipe | None = None
         self._in: Recipe | None = None
         self._last_t: float | None = None
-
-    @property
-    def stats(self) -> LinkStats:
-        """Counters since :meth:`open` (``missed``: data packages missing by timestamp)."""
-        return self._link.stats
-
-    @property
-    def error(self) -> LinkError | None:
-        """The link failure, if any."""
-        return self._link.error
 
     # ------------------------------------------------------------------------- handshake
     def open(self) -> None:

@@ -13,6 +13,7 @@ import socket
 import threading
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -22,7 +23,7 @@ from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.arm import ArmPhase, EmulatedArm, MotionLimits, StopKind
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
-__all__ = ["EmulatedController", "EmulatorReport"]
+__all__ = ["EmulatedController", "EmulatorReport", "UdpController"]
 
 RESYNC_LAG = 0.25  # wall-clock lag [s] after which the loop stops trying to catch up
 
@@ -120,6 +121,14 @@ class EmulatedController(ABC):
     def inputs(self) -> dict[str, bool]:
         """Digital inputs now ({name: on})."""
         return self.options.inputs.state(self.t)
+
+    def datagrams(self, sock: socket.socket | None) -> Iterator[tuple[bytes, tuple[str, int]]]:
+        """Every datagram queued on a non-blocking UDP socket (none if it is closed)."""
+        while sock is not None:
+            try:
+                yield sock.recvfrom(4096)
+            except (BlockingIOError, ConnectionRefusedError):
+                return
 
     def transmit(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None) -> None:
         """Send a packet through the fault plan (dropped, delayed, or sent now).
@@ -233,3 +242,27 @@ class EmulatedController(ABC):
         """The arm stopped on a fault (or is stopping)."""
         return self.arm.phase in (ArmPhase.STOPPING, ArmPhase.FAULT) and (
             self.arm.stop_kind is not StopKind.REQUEST)
+
+
+class UdpController(EmulatedController):
+    """An emulated controller with one non-blocking UDP socket bound to :attr:`bind_port`."""
+
+    _sock: socket.socket | None = None
+
+    @property
+    def bind_port(self) -> int:
+        """Local port to bind (0: an ephemeral port)."""
+        return self.requested_port
+
+    def open(self) -> None:
+        """Bind the UDP socket on ``options.host``."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind((self.options.host, self.bind_port))
+        sock.setblocking(False)
+        self._sock = sock
+
+    def close_sockets(self) -> None:
+        """Close the socket."""
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None

@@ -30,7 +30,6 @@ The wire format is :mod:`leadthrough.drivers.fanuc_j519.packets` (sources cited 
 from __future__ import annotations
 
 import math
-import socket
 
 import numpy as np
 
@@ -50,7 +49,7 @@ from leadthrough.drivers.fanuc_j519.packets import (
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
-from leadthrough.sim.emulators.controller import EmulatedController
+from leadthrough.sim.emulators.controller import UdpController
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
 __all__ = ["FanucJ519Emulator"]
@@ -60,7 +59,7 @@ WATCHDOG_CYCLES = 4
 DI_INPUTS = {1: "enable", 2: "mark"}  # DI number -> input name
 
 
-class FanucJ519Emulator(EmulatedController):
+class FanucJ519Emulator(UdpController):
     """FANUC J519 controller (see the module doc)."""
 
     kind = "fanuc-j519"
@@ -71,7 +70,6 @@ class FanucJ519Emulator(EmulatedController):
         super().__init__(robot, seed, options, port)
         self.watchdog = (options.watchdog if options.watchdog is not None
                          else WATCHDOG_CYCLES * self.arm.cycle)
-        self._sock: socket.socket | None = None
         self.client: tuple[str, int] | None = None
         self.streaming = False
         self.sequence = 0
@@ -90,28 +88,10 @@ class FanucJ519Emulator(EmulatedController):
         """The bound UDP port."""
         return int(self._sock.getsockname()[1]) if self._sock is not None else self.requested_port
 
-    def open(self) -> None:
-        """Bind the UDP port."""
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.bind((self.options.host, self.requested_port))
-        sock.setblocking(False)
-        self._sock = sock
-
-    def close_sockets(self) -> None:
-        """Close the port."""
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
-
     # ---------------------------------------------------------------------------- input
     def poll(self, t: float) -> None:
         """Handle start, stop, command and limit-query packets."""
-        sock = self._sock
-        while sock is not None:
-            try:
-                data, addr = sock.recvfrom(2048)
-            except (BlockingIOError, ConnectionRefusedError):
-                return
+        for data, addr in self.datagrams(self._sock):
             try:
                 packet = decode_client_packet(data)
             except DataError:

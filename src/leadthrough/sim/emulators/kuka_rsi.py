@@ -32,7 +32,6 @@ Message format and configuration: :mod:`leadthrough.drivers.kuka_rsi.messages`,
 from __future__ import annotations
 
 import math
-import socket
 
 import numpy as np
 
@@ -42,7 +41,7 @@ from leadthrough.drivers.kuka_rsi.messages import RobotMessage, SensorMessage
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
-from leadthrough.sim.emulators.controller import EmulatedController
+from leadthrough.sim.emulators.controller import UdpController
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
 __all__ = ["KukaRsiEmulator"]
@@ -50,7 +49,7 @@ __all__ = ["KukaRsiEmulator"]
 IPOC_START = 1_000_000_000
 
 
-class KukaRsiEmulator(EmulatedController):
+class KukaRsiEmulator(UdpController):
     """KUKA robot with RSI (see the module doc).
 
     Args:
@@ -79,7 +78,6 @@ class KukaRsiEmulator(EmulatedController):
         self.late_total = self.late_run = self.stale_answers = self.malformed = 0
         self._awaiting: int | None = None
         self._answer: SensorMessage | None = None
-        self._sock: socket.socket | None = None
         self._tpa = robot.torque_per_amp
 
     def motion_limits(self, robot: Robot) -> MotionLimits:
@@ -91,26 +89,14 @@ class KukaRsiEmulator(EmulatedController):
         """The client's port the documents are sent to."""
         return self.requested_port
 
-    def open(self) -> None:
-        """Open the robot's UDP socket (an ephemeral source port)."""
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.bind((self.options.host, 0))
-        sock.setblocking(False)
-        self._sock = sock
-
-    def close_sockets(self) -> None:
-        """Close the socket."""
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
+    @property
+    def bind_port(self) -> int:
+        """The robot sends from an ephemeral port."""
+        return 0
 
     def poll(self, t: float) -> None:
         """Take the answers that arrived; keep the one for the awaited IPOC."""
-        while self._sock is not None:
-            try:
-                data, _ = self._sock.recvfrom(4096)
-            except (BlockingIOError, ConnectionRefusedError):
-                return
+        for data, _ in self.datagrams(self._sock):
             try:
                 answer = SensorMessage.decode(data)
             except DataError:

@@ -169,7 +169,7 @@ class UrRtdeEmulator(EmulatedController):
         if self.program is ScriptState.RUNNING:
             self._program_cycle(t)
         if self.faulted and self.program is ScriptState.RUNNING:
-            self._halt(ScriptState.STOPPED)
+            self._halt(ScriptState.STOPPED, write=False)  # the controller stopped it
         values: dict[str, Any] | None = None
         for s in self.sessions:
             if s.started and s.output is not None and self._cycles % s.divider == 0:
@@ -198,9 +198,11 @@ class UrRtdeEmulator(EmulatedController):
         else:
             self.arm.hold()
 
-    def _halt(self, state: ScriptState) -> None:
+    def _halt(self, state: ScriptState, write: bool = True) -> None:
+        """End the program; ``write``: it reports why in its output register."""
         self.program = state
-        self.out_int[self.offset] = int(state)
+        if write:
+            self.out_int[self.offset] = int(state)
 
     def _outputs(self, t: float) -> dict[str, Any]:
         fb, arm = self.arm.sample(), self.arm
