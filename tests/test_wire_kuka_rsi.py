@@ -23,6 +23,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
+from leadthrough.sim.emulators.kuka_rsi import IPOC_START
 from wire_helpers import DIRECTION, POSE, exchange, min_jerk
 
 # ------------------------------------------------------------------ golden documents (by hand)
@@ -220,5 +221,10 @@ def test_lost_documents_and_nan_are_seen_for_what_they_are(er20: Robot) -> None:
     client.close()
     assert client.stats.gaps == 1 and client.stats.missed == 5 == report.dropped
     assert any(all(math.isnan(a) for a in m.axis_actual) for m in msgs)
-    assert msgs[-1].delay == 5  # the robot counted the documents it lost as late answers
+    # the robot counts each document it lost as a late answer (a loaded machine may add late
+    # answers of its own, so only the lower bound is exact)
+    before = [m.delay for m in msgs if (m.ipoc - IPOC_START) * 1e-3 < 0.19]
+    after = [m.delay for m in msgs if (m.ipoc - IPOC_START) * 1e-3 > 0.23]
+    assert before[-1] is not None and after[0] is not None
+    assert after[0] - before[-1] >= 5
     assert client.silent_for > 0.2  # a closed robot socket is silence for the listener

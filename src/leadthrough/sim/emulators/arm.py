@@ -223,9 +223,12 @@ class EmulatedArm:
     def step(self) -> None:
         """Advance 1 ms: interpolate (or decelerate) the command, step the simulator."""
         if self.phase is ArmPhase.RUNNING:
-            self._k = min(self._k + 1, self.steps)
-            self._q[:] = self._from + (self._to - self._from) * (self._k / self.steps)
-            self._qd[:] = self._v  # velocity feed-forward of the cycle
+            if self._k >= self.steps:  # no target for this cycle: rest at the last one
+                self._qd[:] = 0.0
+            else:
+                self._k += 1
+                self._q[:] = self._from + (self._to - self._from) * (self._k / self.steps)
+                self._qd[:] = self._v  # velocity feed-forward of the cycle
         elif self.phase is ArmPhase.STOPPING:
             speed = np.maximum(np.abs(self._qd) - self._decel * self.dt, 0.0)
             self._qd[:] = np.sign(self._qd) * speed
