@@ -25,7 +25,7 @@ from leadthrough.drivers.ur_rtde.protocol import (
     frame,
 )
 from leadthrough.drivers.ur_rtde.script import ServoScriptParameters, servo_script
-from leadthrough.errors import ControlError, DataError
+from leadthrough.errors import DataError, DriverError
 from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.emulators import (
     EmulatorOptions,
@@ -228,13 +228,13 @@ def test_refused_setups_name_the_variable(ur5: Robot) -> None:
     with _emulator(ur5) as emu:
         bad = RtdeClient("127.0.0.1", emu.port, outputs=("timestamp", "actual_q",
                                                          "actual_current", "actual_TCP_pose"))
-        with pytest.raises(ControlError) as err:
+        with pytest.raises(DriverError) as err:
             bad.open()
         assert err.value.field == "actual_TCP_pose" and err.value.value == "NOT_FOUND"
         first = RtdeClient("127.0.0.1", emu.port)
         first.open()
         second = RtdeClient("127.0.0.1", emu.port)
-        with pytest.raises(ControlError) as err:
+        with pytest.raises(DriverError) as err:
             second.open()
         assert err.value.field == "input_double_register_0" and err.value.value == "IN_USE"
         first.close()

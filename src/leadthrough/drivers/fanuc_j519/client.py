@@ -35,7 +35,7 @@ from leadthrough.drivers.link import (
     Transport,
     decode_datagrams,
 )
-from leadthrough.errors import ControlError
+from leadthrough.errors import DriverError
 
 __all__ = ["StreamMotionClient"]
 
@@ -71,7 +71,7 @@ class StreamMotionClient(Transport):
         """Create the socket and send the start packet (the controller then streams status).
 
         Raises:
-            ControlError: The socket cannot be created or the start packet not sent.
+            DriverError: The socket cannot be created or the start packet not sent.
         """
         self.close()
         self._link, self._seq, self._last = LinkStatus(), SequenceTracker(), None
@@ -80,7 +80,7 @@ class StreamMotionClient(Transport):
             sock.connect((self.host, self.port))
             sock.send(StartPacket().encode())
         except OSError as e:
-            raise ControlError(f"cannot start the J519 stream: {e}", field="host:port",
+            raise DriverError(f"cannot start the J519 stream: {e}", field="host:port",
                                value=f"{self.host}:{self.port}",
                                expected="a reachable J519 controller") from e
         self._sock = sock
@@ -106,7 +106,7 @@ class StreamMotionClient(Transport):
             {(axis, kind): answer}; also kept in :attr:`limits`.
 
         Raises:
-            ControlError: Not open, or some answers did not arrive in time.
+            DriverError: Not open, or some answers did not arrive in time.
         """
         sock = self._require_open()
         wanted = {(a, k) for a in axes for k in LimitKind}
@@ -117,13 +117,13 @@ class StreamMotionClient(Transport):
             self.receive(deadline - time.monotonic())
         missing = sorted(wanted - self.limits.keys())
         if missing:
-            raise ControlError("no limit answer", field="axis/threshold_type", value=missing,
+            raise DriverError("no limit answer", field="axis/threshold_type", value=missing,
                                expected=f"answers within {timeout} s")
         return {key: self.limits[key] for key in sorted(wanted)}
 
     def _require_open(self) -> socket.socket:
         if self._sock is None:
-            raise ControlError("the J519 client is not open", field="state", value="closed",
+            raise DriverError("the J519 client is not open", field="state", value="closed",
                                expected="open() first")
         return self._sock
 
@@ -166,10 +166,10 @@ class StreamMotionClient(Transport):
             last: Mark the final command of the motion (``last_data``).
 
         Raises:
-            ControlError: No status packet received yet (no sequence number to answer).
+            DriverError: No status packet received yet (no sequence number to answer).
         """
         if self._last is None:
-            raise ControlError("no status packet yet", field="sequence_no",
+            raise DriverError("no status packet yet", field="sequence_no",
                                expected="receive() a status before commanding")
         io_type, io_index, io_mask = self.read_io
         return CommandPacket(sequence=self._last.sequence, positions=tuple(joints_deg),
@@ -186,7 +186,7 @@ class StreamMotionClient(Transport):
             True if sent; False if the link has failed (see :attr:`error`).
 
         Raises:
-            ControlError: Not open.
+            DriverError: Not open.
             DataError: The command cannot be encoded (nothing is sent).
         """
         sock = self._require_open()

@@ -26,7 +26,7 @@ from leadthrough.drivers.link import (
     Transport,
     decode_datagrams,
 )
-from leadthrough.errors import ControlError
+from leadthrough.errors import DriverError
 
 __all__ = ["DEFAULT_PORT", "RsiClient"]
 
@@ -78,7 +78,7 @@ class RsiClient(Transport):
         """Bind the UDP port.
 
         Raises:
-            ControlError: The port cannot be bound.
+            DriverError: The port cannot be bound.
         """
         self.close()
         self._link, self._last, self._robot, self.reference = LinkStatus(), None, None, None
@@ -87,7 +87,7 @@ class RsiClient(Transport):
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             sock.bind((self.host, self.port))
         except OSError as e:
-            raise ControlError(f"cannot bind the RSI port: {e}", field="host:port",
+            raise DriverError(f"cannot bind the RSI port: {e}", field="host:port",
                                value=f"{self.host}:{self.port}", expected="a free UDP port") from e
         self._sock = sock
 
@@ -128,10 +128,10 @@ class RsiClient(Transport):
         """Absolute corrections AK = target - reference [deg].
 
         Raises:
-            ControlError: No document received yet (no reference).
+            DriverError: No document received yet (no reference).
         """
         if self.reference is None:
-            raise ControlError("no reference yet", field="ASPos",
+            raise DriverError("no reference yet", field="ASPos",
                                expected="receive() the first <Rob> document first")
         return tuple(float(t) - r for t, r in zip(target_deg, self.reference, strict=True))
 
@@ -142,11 +142,11 @@ class RsiClient(Transport):
             True if sent; False if nothing to answer yet or the link failed.
 
         Raises:
-            ControlError: Not open.
+            DriverError: Not open.
             DataError: Not 6 finite corrections (nothing is sent).
         """
         if self._sock is None:
-            raise ControlError("the RSI client is not open", field="state", value="closed",
+            raise DriverError("the RSI client is not open", field="state", value="closed",
                                expected="open() first")
         if self._last is None or self._robot is None or self._link.error is not None:
             return False

@@ -37,7 +37,7 @@ from leadthrough.drivers.ur_rtde.protocol import (
     frame,
 )
 from leadthrough.drivers.wire import check_finite
-from leadthrough.errors import ControlError, DataError
+from leadthrough.errors import DataError, DriverError
 
 __all__ = ["DEFAULT_OUTPUTS", "RtdeClient", "RtdeState", "ServoCommand"]
 
@@ -119,7 +119,7 @@ class RtdeClient(Transport):
         """Connect and run the handshake; the controller then streams data packages.
 
         Raises:
-            ControlError: No connection, or the controller refused a request (naming the
+            DriverError: No connection, or the controller refused a request (naming the
                 variable it did not know or that another client writes).
         """
         self.close()
@@ -128,19 +128,19 @@ class RtdeClient(Transport):
             self._sock = socket.create_connection((self.host, self.port), self.timeout)
             self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except OSError as e:
-            raise ControlError(f"cannot connect to RTDE: {e}", field="host:port",
+            raise DriverError(f"cannot connect to RTDE: {e}", field="host:port",
                                value=f"{self.host}:{self.port}",
                                expected="a reachable UR controller") from e
         try:
             self._handshake()
-        except (ControlError, DataError):
+        except (DriverError, DataError):
             self.close()
             raise
 
     def _handshake(self) -> None:
         ok = self._request(MessageType.REQUEST_PROTOCOL_VERSION, encode_version_request())
         if not decode_accepted(ok, "RTDE protocol version reply"):
-            raise ControlError("protocol version refused", field="protocol_version",
+            raise DriverError("protocol version refused", field="protocol_version",
                                value=PROTOCOL_VERSION, expected="a controller speaking v2")
         version = ControllerVersion.decode(self._request(MessageType.GET_URCONTROL_VERSION))
         self.controller_version = version
@@ -152,18 +152,18 @@ class RtdeClient(Transport):
                                encode_setup_inputs(self.inputs))
         started = self._request(MessageType.CONTROL_PACKAGE_START)
         if not decode_accepted(started, "RTDE start reply"):
-            raise ControlError("start refused", field="state", value="setup",
+            raise DriverError("start refused", field="state", value="setup",
                                expected="the controller to start synchronisation")
 
     def _setup(self, mtype: MessageType, names: tuple[str, ...], payload: bytes) -> Recipe:
         recipe_id, types = decode_setup_reply(self._request(mtype, payload))
         for name, t in zip(names, types, strict=False):
             if t in ("NOT_FOUND", "IN_USE"):
-                raise ControlError(f"variable {t}", field=name, value=t,
+                raise DriverError(f"variable {t}", field=name, value=t,
                                    expected="a variable the controller offers and nobody "
                                    "else writes")
         if recipe_id == 0 or len(types) != len(names):
-            raise ControlError("recipe refused", field="recipe", value=(recipe_id, types),
+            raise DriverError("recipe refused", field="recipe", value=(recipe_id, types),
                                expected=f"an id > 0 and {len(names)} types")
         return Recipe(recipe_id, names, tuple(types))
 
@@ -182,7 +182,7 @@ class RtdeClient(Transport):
                 continue
             left = deadline - time.monotonic()
             if left <= 0 or not self._fill(left):
-                raise ControlError("no answer", field="request", value=mtype.name,
+                raise DriverError("no answer", field="request", value=mtype.name,
                                    expected=f"an answer within {self.timeout} s")
 
     def _fill(self, timeout: float) -> bool:
@@ -204,7 +204,7 @@ class RtdeClient(Transport):
 
     def _require_open(self) -> socket.socket:
         if self._sock is None:
-            raise ControlError("the RTDE client is not open", field="state", value="closed",
+            raise DriverError("the RTDE client is not open", field="state", value="closed",
                                expected="open() first")
         return self._sock
 
@@ -286,7 +286,7 @@ class RtdeClient(Transport):
             True if sent; False if the link has failed (see :attr:`error`).
 
         Raises:
-            ControlError: Not open.
+            DriverError: Not open.
             DataError: Not 6 finite targets, or a counter / mode outside int32 (nothing sent).
         """
         sock = self._require_open()
