@@ -24,7 +24,7 @@ from leadthrough.drivers.ur_rtde.protocol import (
     encode_version_request,
     frame,
 )
-from leadthrough.drivers.ur_rtde.script import ServoScriptParameters, servo_script
+from leadthrough.drivers.ur_rtde.script import ServoScriptParameters, servo_script, upload_script
 from leadthrough.errors import DataError, DriverError
 from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.emulators import (
@@ -149,6 +149,12 @@ def _emulator(robot: Robot, **kw: object) -> RunningEmulator:
                  options=EmulatorOptions(q0=POSE, **kw))  # type: ignore[arg-type]
 
 
+def _open(client: RtdeClient, emu: RunningEmulator) -> None:
+    """Connect, then load the servo program through the secondary interface."""
+    client.open()
+    upload_script("127.0.0.1", servo_script(), emu.emulator.script_port)  # type: ignore[attr-defined]
+
+
 def _run(client: RtdeClient, target: object, duration: float, mode: int = 1,
          send: bool = True) -> list[RtdeState]:
     """Answer every data package for ``duration`` s with ``target(t, first)`` [rad]."""
@@ -165,7 +171,7 @@ def test_servo_follows_a_trajectory(ur5: Robot) -> None:
     inputs = InputSchedule(enable=(Window(0.0),))
     with _emulator(ur5, inputs=inputs, watchdog=0.2) as emu:
         client = RtdeClient("127.0.0.1", emu.port)
-        client.open()
+        _open(client, emu)
         assert client.controller_version == ControllerVersion(5, 11, 6, 0)
         assert client.frequency == 500.0
         delta = 0.05 * DIRECTION
@@ -185,7 +191,7 @@ def test_servo_follows_a_trajectory(ur5: Robot) -> None:
 def test_a_servoj_jump_triggers_a_protective_stop(ur5: Robot) -> None:
     with _emulator(ur5, watchdog=0.2) as emu:
         client = RtdeClient("127.0.0.1", emu.port)
-        client.open()
+        _open(client, emu)
         states = _run(client, lambda t, f: np.array(f.q) + (0.1 if t > 0.1 else 0.0), 0.4)
         client.close()
         report = emu.stop()
@@ -200,7 +206,7 @@ def test_a_servoj_jump_triggers_a_protective_stop(ur5: Robot) -> None:
 def test_watchdog_stops_the_program_when_commands_stop(ur5: Robot) -> None:
     with _emulator(ur5) as emu:  # the script's watchdog: 0.05 s
         client = RtdeClient("127.0.0.1", emu.port)
-        client.open()
+        _open(client, emu)
         _run(client, lambda t, f: f.q, 0.2)
         after = _run(client, lambda t, f: f.q, 0.2, send=False)
         client.close()
@@ -214,7 +220,7 @@ def test_estop_loss_and_closed_socket_are_seen_for_what_they_are(ur5: Robot) -> 
     faults = FaultPlan(estop_at=0.3, loss_bursts=(Window(0.1, 0.12),), close_at=0.6)
     with _emulator(ur5, faults=faults, watchdog=0.5) as emu:
         client = RtdeClient("127.0.0.1", emu.port)
-        client.open()
+        _open(client, emu)
         states = _run(client, lambda t, f: f.q, 1.0)
         report = emu.stop()
     assert client.stats.gaps == 1 and client.stats.missed == 10 == report.dropped

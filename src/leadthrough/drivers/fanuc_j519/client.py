@@ -110,15 +110,24 @@ class StreamMotionClient(Transport):
         """
         sock = self._require_open()
         wanted = {(a, k) for a in axes for k in LimitKind}
-        for axis, kind in sorted(wanted):
-            sock.send(LimitQuery(axis, kind).encode())
+        try:
+            for axis, kind in sorted(wanted):
+                sock.send(LimitQuery(axis, kind).encode())
+        except OSError as e:
+            raise DriverError(f"cannot query the J519 limits: {e}", field="host:port",
+                              value=f"{self.host}:{self.port}",
+                              expected="a J519 controller listening there") from e
         deadline = time.monotonic() + timeout
         while not wanted <= self.limits.keys() and time.monotonic() < deadline:
             self.receive(deadline - time.monotonic())
+            if self._link.error is not None:
+                raise DriverError(f"J519 controller unreachable: {self._link.error.detail}",
+                                  field="host:port", value=f"{self.host}:{self.port}",
+                                  expected="a J519 controller listening there")
         missing = sorted(wanted - self.limits.keys())
         if missing:
             raise DriverError("no limit answer", field="axis/threshold_type", value=missing,
-                               expected=f"answers within {timeout} s")
+                              expected=f"answers within {timeout} s")
         return {key: self.limits[key] for key in sorted(wanted)}
 
     def _require_open(self) -> socket.socket:

@@ -5,8 +5,13 @@ The program (``data/leadthrough_servo.script``) reads six joint targets from
 mode from ``input_int_register_{R+1}`` (0 hold, 1 servo, 2 stop), and reports its state in
 ``output_int_register_{R}`` (1 running, 2 stopped on request, 3 stopped by the watchdog);
 R is the register offset (0, or 24 for the upper range). Each cycle it calls
-``servoj(q, 0, 0, period, lookahead_time, gain)``. When the counter has not changed for
-``watchdog_timeout`` it decelerates with ``stopj`` and halts.
+``servoj(q, 0, 0, period, lookahead_time, gain)``. Once the client has changed the counter,
+when the counter then has not changed for ``watchdog_timeout`` it decelerates with ``stopj``
+and halts (before the first change it idles in hold, so the client may load the program and
+finish its set-up before commanding).
+
+:func:`upload_script` sends the program to the controller's secondary interface (TCP 30002),
+which runs a URScript program it receives (the robot must be in remote control on e-Series).
 
 :func:`servo_script` fills in the parameters after checking them against the ranges of the
 URScript manual (``servoj``: lookahead_time 0.03-0.2 s, gain 100-2000).
@@ -14,21 +19,26 @@ URScript manual (``servoj``: lookahead_time 0.03-0.2 s, gain 100-2000).
 Sources: Universal Robots, URScript manual (``servoj``, ``stopj``, ``read_input_float_register``,
 ``read_input_integer_register``, ``write_output_integer_register``, ``halt``) and RTDE guide
 (general-purpose registers 0-47, 24-47 being the upper range used by external tools); SDU's
-``ur_rtde`` control script for the register-mailbox pattern.
+``ur_rtde`` control script for the register-mailbox pattern; Universal Robots, "Remote
+control via TCP/IP" support article (the client interfaces: primary 30001 and secondary 30002
+run the URScript they receive).
 """
 
 from __future__ import annotations
 
 import math
+import socket
 from dataclasses import dataclass
 from enum import IntEnum
 from importlib import resources
 
-from leadthrough.errors import check_fields
+from leadthrough.errors import DriverError, check_fields
 
-__all__ = ["Mode", "ScriptState", "ServoScriptParameters", "servo_script"]
+__all__ = ["SECONDARY_PORT", "Mode", "ScriptState", "ServoScriptParameters", "servo_script",
+           "upload_script"]
 
 SCRIPT_NAME = "leadthrough_servo.script"
+SECONDARY_PORT = 30002
 
 
 class Mode(IntEnum):
@@ -103,3 +113,26 @@ def servo_script(params: ServoScriptParameters | None = None) -> str:
     for name, value in values.items():
         text = text.replace("{{" + name + "}}", repr(value))
     return text
+
+
+def upload_script(host: str, program: str, port: int = SECONDARY_PORT,
+                  timeout: float = 2.0) -> None:
+    """Send a URScript program to the controller's secondary interface, which runs it.
+
+    Args:
+        host: Controller address.
+        program: URScript source (e.g. :func:`servo_script`).
+        port: Secondary interface port (30002).
+        timeout: Connection timeout [s].
+
+    Raises:
+        DriverError: The interface cannot be reached or the program not sent.
+    """
+    try:
+        with socket.create_connection((host, port), timeout) as sock:
+            sock.sendall(program.encode("utf-8"))
+    except OSError as e:
+        raise DriverError(f"cannot send the servo program: {e}", field="host:script_port",
+                          value=f"{host}:{port}",
+                          expected="a UR controller's secondary interface (remote control "
+                          "on e-Series)") from e

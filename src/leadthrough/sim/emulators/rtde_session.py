@@ -75,24 +75,28 @@ class RtdeSession:
                 del self.owners[name]
 
     def receive(self) -> None:
-        """Read what arrived and answer every complete request."""
+        """Read what arrived and answer every complete request (the requests that arrived
+        before the client closed the connection included)."""
+        gone = False
         while self.open:
             try:
                 data = self.sock.recv(65536)
             except BlockingIOError:
                 break
             except OSError:
-                self.close()
-                return
+                gone = True
+                break
             if not data:
-                self.close()
-                return
+                gone = True
+                break
             self.reader.feed(data)
         try:
             while self.open and (msg := self.reader.next()) is not None:
                 self._handle(*msg)
         except DataError as e:
             self._text(f"protocol error: {e}", level=0)
+            self.close()
+        if gone:
             self.close()
 
     def _reply(self, mtype: int, payload: bytes = b"") -> None:

@@ -6,14 +6,17 @@ version 5.11) or 125 Hz (``generation="cb3"``, version 3.15), accepts several co
 (:mod:`~leadthrough.sim.emulators.rtde_session`) and sends each started one a data package of
 its output recipe every ``rate / frequency`` cycles.
 
-It behaves as if ``leadthrough_servo.script`` were loaded: the program starts with the first
-input data package (as when the driver sends the script once its stream is up), then every
+Its secondary interface (:mod:`~leadthrough.sim.emulators.ur_secondary`) listens 2 below the
+RTDE port (30002 for 30004, as on a UR controller; an ephemeral port when the RTDE port is)
+and runs ``leadthrough_servo.script`` when it receives it, with the received program's
+watchdog time and register offset: the program writes 1 to its state register, then every
 cycle reads the registers: mode 1 servos to the six targets (``servoj``, modelled by the
 arm's per-cycle interpolation; lookahead and gain are not modelled), mode 0 holds, mode 2
-stops the arm and halts the program (state 2). When the watchdog counter has not changed
-for the watchdog time (the script's 0.05 s unless ``options.watchdog``), the program stops
-the arm at its deceleration and halts (state 3, ``runtime_state`` STOPPED). A target whose
-step from the previous one exceeds the joint speed limit triggers a protective stop
+stops the arm and halts the program (state 2). Once the watchdog counter has changed, when
+it then does not change for the watchdog time (the program's, unless ``options.watchdog``),
+the program stops the arm at its deceleration and halts (state 3, ``runtime_state``
+STOPPED). Receiving the program again restarts it (after a watchdog or requested stop).
+A target whose step from the previous one exceeds the joint speed limit triggers a protective stop
 (``safety_mode`` 3, bit 2 of ``safety_status_bits``), as the controller does on a servoj jump;
 the program halts. E-stop: ``safety_mode`` 7 (robot emergency stop), bits 6, 7 and 10,
 ``robot_mode`` POWER_OFF once stopped. Digital inputs: standard DI0 = enabling device, DI1 =
@@ -37,6 +40,7 @@ from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
 from leadthrough.sim.emulators.controller import EmulatedController
 from leadthrough.sim.emulators.rtde_session import RtdeSession
 from leadthrough.sim.emulators.scenario import EmulatorOptions
+from leadthrough.sim.emulators.ur_secondary import ReceivedProgram, ScriptListener
 
 __all__ = ["PRODUCED_OUTPUTS", "UrRtdeEmulator"]
 
@@ -98,9 +102,12 @@ class UrRtdeEmulator(EmulatedController):
         self.registers: dict[str, Any] = {}
         self.out_int = [0] * 48
         self.program = ScriptState.NOT_RUNNING
+        self.programs_received = 0
         self._counter: int | None = None
+        self._armed = False
         self._silent = 0.0
         self._listener: socket.socket | None = None
+        self._secondary: ScriptListener | None = None
         self.sessions: list[RtdeSession] = []
         self._owners: dict[str, RtdeSession] = {}
         self._cycles = 0
@@ -117,23 +124,38 @@ class UrRtdeEmulator(EmulatedController):
             return self.requested_port
         return int(self._listener.getsockname()[1])
 
+    @property
+    def script_port(self) -> int:
+        """The secondary interface's port (URScript programs)."""
+        if self._secondary is not None:
+            return self._secondary.port
+        return self.requested_port - 2 if self.requested_port else 0
+
     def open(self) -> None:
-        """Listen on the RTDE port."""
+        """Listen on the RTDE port and the secondary interface."""
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((self.options.host, self.requested_port))
         sock.listen(8)
         sock.setblocking(False)
         self._listener = sock
+        try:
+            self._secondary = ScriptListener(self.options.host, self.script_port)
+        except OSError:
+            self.close_sockets()
+            raise
 
     def close_sockets(self) -> None:
-        """Close every connection and the listening socket."""
+        """Close every connection and the listening sockets."""
         for s in self.sessions:
             s.close()
         self.sessions.clear()
         if self._listener is not None:
             self._listener.close()
             self._listener = None
+        if self._secondary is not None:
+            self._secondary.close()
+            self._secondary = None
 
     def on_send_error(self, sock: socket.socket) -> None:
         """Drop the session whose socket failed."""
@@ -156,12 +178,30 @@ class UrRtdeEmulator(EmulatedController):
         for s in self.sessions:
             s.receive()
         self.sessions = [s for s in self.sessions if s.open]
+        if self._secondary is not None:
+            for program in self._secondary.poll():
+                self._start_program(program)
 
     def _write(self, values: dict[str, Any]) -> None:
         self.registers.update(values)
-        if self.program is ScriptState.NOT_RUNNING:
-            self.program = ScriptState.RUNNING
-            self.out_int[self.offset] = ScriptState.RUNNING
+
+    def _start_program(self, program: ReceivedProgram) -> None:
+        """Run a received servo program (restarts it; refused while the arm is stopping or
+        in a safety stop, as a controller in a safety stop runs no program)."""
+        self.programs_received += 1
+        arm = self.arm
+        if arm.phase is ArmPhase.STOPPING or (self.faulted and arm.stop_kind not in (
+                StopKind.WATCHDOG, StopKind.REQUEST)):
+            return
+        if arm.phase is ArmPhase.FAULT or arm.stop_kind is StopKind.REQUEST:
+            arm.reset()
+        if self.options.watchdog is None:
+            self.watchdog = program.watchdog_timeout
+        self.offset = program.register_offset
+        self.program = ScriptState.RUNNING
+        self.out_int[self.offset] = int(ScriptState.RUNNING)
+        self._counter = int(self._register("int", 0))
+        self._armed, self._silent = False, 0.0
 
     # ---------------------------------------------------------------------------- cycle
     def on_cycle(self, t: float) -> None:
@@ -184,8 +224,9 @@ class UrRtdeEmulator(EmulatedController):
         counter, mode = int(self._register("int", 0)), int(self._register("int", 1))
         fresh = counter != self._counter
         self._counter = counter
+        self._armed = self._armed or fresh
         self._silent = 0.0 if fresh else self._silent + self.arm.cycle
-        if self._silent > self.watchdog + 1e-9:
+        if self._armed and self._silent > self.watchdog + 1e-9:
             self.arm.stop(StopKind.WATCHDOG, f"script watchdog: counter unchanged for "
                           f"{self._silent:.3f} s")
             self._halt(ScriptState.WATCHDOG)
