@@ -5,7 +5,7 @@ What ur_rtde needs to connect (found by running it against the emulator):
 
 * port 30004: ``RTDEReceiveInterface`` has no port argument, so the emulator listens on
   30004 of a free 127.x.y.z address (no clash with other sessions on the machine);
-* a separate process: its constructor holds the GIL while it waits for the handshake
+* a separate process (``leadthrough emulate``): its constructor holds the GIL while it waits for the handshake
   answers, so an emulator thread of the same interpreter could not answer;
 * protocol version 2, GET_URCONTROL_VERSION (major 5: it asks for 500 Hz), an output
   recipe whose names end with a trailing comma (the emulator accepts it), START;
@@ -18,7 +18,6 @@ The package is a test dependency (``test`` extra): if it is missing this test fa
 
 from __future__ import annotations
 
-import subprocess
 import time
 from collections.abc import Iterator
 
@@ -27,7 +26,7 @@ import pytest
 import rtde_receive
 
 from leadthrough.drivers.ur_rtde.client import RtdeClient
-from wire_helpers import free_loopback_address, spawn_emulator
+from wire_helpers import free_loopback_address, spawn_emulator, stop_process
 
 
 @pytest.fixture
@@ -37,12 +36,7 @@ def emulator_host() -> Iterator[str]:
     try:
         yield host
     finally:
-        proc.terminate()
-        try:
-            proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
+        stop_process(proc)
 
 
 def test_ur_rtde_reads_actual_q_and_current(emulator_host: str) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import select
 import socket
 import subprocess
 import sys
@@ -45,28 +46,35 @@ def hexbytes(text: str) -> bytes:
     return bytes.fromhex("".join(text.split()))
 
 
-def spawn_emulator(kind: str, robot: str, host: str, port: int) -> subprocess.Popen[str]:
-    """Start ``python -m leadthrough.sim.emulators`` in a subprocess and wait for its port.
+def spawn_emulator(kind: str, robot: str, host: str, port: int,
+                   *extra: str) -> subprocess.Popen[str]:
+    """Start ``leadthrough emulate`` in its own process and wait for its ready line.
 
     Raises:
-        RuntimeError: The port did not open within 30 s (the process is killed).
+        RuntimeError: No ready line within 60 s (the process is killed).
     """
     proc = subprocess.Popen(
-        [sys.executable, "-m", "leadthrough.sim.emulators", kind, "--robot", robot,
-         "--host", host, "--port", str(port)],
+        [sys.executable, "-m", "leadthrough", "emulate", kind, "--robot", robot,
+         "--host", host, "--port", str(port), *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 30.0
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"emulator exited: {proc.communicate()}")
-        try:
-            socket.create_connection((host, port), 0.2).close()
-            return proc
-        except OSError:
-            time.sleep(0.05)
-    proc.kill()
-    proc.communicate()
-    raise RuntimeError(f"emulator {kind} did not open {host}:{port}")
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], 60.0)
+    line = proc.stdout.readline() if ready else ""
+    if not line.startswith("leadthrough: emulating"):
+        proc.kill()
+        raise RuntimeError(f"emulator {kind} did not start: {line!r} {proc.communicate()}")
+    return proc
+
+
+def stop_process(proc: subprocess.Popen[str]) -> str:
+    """SIGTERM a spawned emulator; returns what it printed (its report)."""
+    proc.terminate()
+    try:
+        out, _ = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return out
 
 
 def free_loopback_address(port: int) -> str:

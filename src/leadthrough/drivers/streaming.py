@@ -156,7 +156,8 @@ class StreamingDriver(ABC, Generic[S]):
             DriverError: The controller cannot be reached, refuses the stream, sends nothing
                 within ``connect_timeout``, or reports joints that do not fit the robot file.
         """
-        self.close()
+        if self.opened:
+            self.close()
         self._connect()
         try:
             first = self._first_packet()

@@ -65,6 +65,11 @@ class RsiClient(Transport):
         return (str(host), int(port))
 
     @property
+    def bound(self) -> bool:
+        """Whether the port is bound (``open`` was called and not closed since)."""
+        return self._sock is not None
+
+    @property
     def last_message(self) -> RobotMessage | None:
         """The newest ``<Rob>`` document received."""
         return self._last

@@ -3,7 +3,8 @@ shipped controller configuration (:mod:`leadthrough.drivers.kuka_rsi.config`).
 
 Here the robot sends first: :meth:`KukaRsiDriver.open` binds the UDP port of the Ethernet
 configuration (49152) and waits up to ``connect_timeout`` for the first ``<Rob>`` document
-(start ``leadthrough_rsi.src`` on the robot once the driver listens), answers it at once with
+(start ``leadthrough_rsi.src`` on the robot once the driver listens; ``listen`` binds the
+port beforehand), answers it at once with
 zero motion and takes its ``ASPos`` (the axis setpoints at ``RSI_ON``) as the reference of the
 absolute corrections (``RSI_ON(#ABSOLUTE)``: target = reference + AK).
 
@@ -105,8 +106,15 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         """The newest ``<Rob>`` document."""
         return self.client.last_message
 
+    def listen(self) -> tuple[str, int]:
+        """Bind the UDP port now (``open`` then waits on it); returns the bound address, the
+        real port when 0 was asked (for a robot or emulator to be pointed at)."""
+        if not self.client.bound:
+            self.client.open()
+        return self.client.address
+
     def _connect(self) -> None:
-        self.client.open()
+        self.listen()
         self._delay = None
 
     def _disconnect(self) -> None:

@@ -11,8 +11,8 @@ Each steps a :class:`~leadthrough.sim.robot.SimRobot` at 1 ms in real time behin
 controller cycle, with the controller's watchdog, limit checks, E-stop and protective stop,
 digital inputs (:class:`InputSchedule`) and injectable faults (:class:`FaultPlan`); it logs
 every command and :meth:`EmulatedController.report` confirms that nothing non-finite or beyond
-the limits was executed. Run one with :func:`serve` (blocking; the CLI's ``leadthrough
-emulate``) or :func:`start` (background thread), or ``python -m leadthrough.sim.emulators``.
+the limits was executed. Run one with :func:`serve` (blocking), :func:`start` (background
+thread) or the CLI's ``leadthrough emulate`` (its own process).
 """
 
 from leadthrough.sim.emulators.arm import (

@@ -1,9 +1,9 @@
 """Starting an emulated controller: :func:`serve` (blocking, for the CLI) and
 :func:`start` (a background thread, for tests and scripts).
 
-The CLI entry point ``leadthrough emulate {fanuc-j519,ur-rtde,kuka-rsi} --robot R --seed N
-[--port P]`` maps onto ``serve(kind, robot, seed, port, options, stop_event)``; until it is
-wired, ``python -m leadthrough.sim.emulators`` takes the same arguments.
+The CLI's ``leadthrough emulate {fanuc-j519,ur-rtde,kuka-rsi} --robot R --seed N [--port P]``
+(:mod:`leadthrough.cli.emulate_cmd`) builds one with :func:`make_emulator` and runs it in its
+own process.
 """
 
 from __future__ import annotations
