@@ -5,8 +5,8 @@ What ur_rtde needs to connect (found by running it against the emulator):
 
 * port 30004: ``RTDEReceiveInterface`` has no port argument, so the emulator listens on
   30004 of a free 127.x.y.z address (no clash with other sessions on the machine);
-* a separate process (``leadthrough emulate``): its constructor holds the GIL while it waits for the handshake
-  answers, so an emulator thread of the same interpreter could not answer;
+* a separate process (``leadthrough emulate``): its constructor holds the GIL while it waits
+  for the handshake answers, so an emulator thread of the same interpreter could not answer;
 * protocol version 2, GET_URCONTROL_VERSION (major 5: it asks for 500 Hz), an output
   recipe whose names end with a trailing comma (the emulator accepts it), START;
 * an explicit variable list: without one it asks for ~60 outputs (TCP pose, forces,

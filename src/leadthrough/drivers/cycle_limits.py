@@ -142,6 +142,28 @@ class CycleLimiter:
             lo, hi = np.clip(lo, lo_j, hi_j), np.clip(hi, lo_j, hi_j)
         return lo, hi
 
+    def skip(self, cycles: int, extrapolate: bool = False) -> None:
+        """Cycles the controller ran without a new target from us (lost or late packets).
+
+        Most controllers hold the last target then (a UR program's ``servoj`` repeats it, RSI
+        keeps the last correction with ``HOLDON``); with ``extrapolate`` the first missed
+        cycle continues at the last velocity (the J519 emulator's documented assumption).
+        The limiter's state follows, so the next target is judged against what the
+        controller did.
+
+        Args:
+            cycles: Cycles without a target (0: none).
+            extrapolate: Whether the first one continued at the last velocity.
+        """
+        T = self.cycle
+        for k in range(min(cycles, 3)):  # after two held cycles the state is at rest
+            if k == 0 and extrapolate:
+                self._q += self._v * T
+                self._a[:] = 0.0
+            else:
+                self._a[:] = -self._v / T
+                self._v[:] = 0.0
+
     def limit(self, q: Array) -> Array:
         """The target to send for ``q`` [rad], shape (n,) (finite: the caller checks).
 

@@ -13,9 +13,12 @@ cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
   controller state and digital inputs included;
 * :meth:`~StreamingDriver.write` answers the newest packet, once: the target passes the
   :class:`~leadthrough.drivers.cycle_limits.CycleLimiter` (the controller refuses targets
-  beyond its limits), then goes out in the controller's units. A write with no new packet to
-  answer sends nothing (``unanswered`` counts it): the controller is waiting for its next
-  cycle, not for a second answer.
+  beyond its limits), then goes out in the controller's units. Cycles whose packets were
+  lost or came too late went by without a target from us; the limiter is told
+  (:meth:`~leadthrough.drivers.cycle_limits.CycleLimiter.skip`), so the next target is judged
+  against what the controller did meanwhile. A write with no new packet to answer sends
+  nothing (``unanswered`` counts it): the controller is waiting for its next cycle, not for
+  a second answer.
 
 :meth:`~StreamingDriver.open` connects, runs the protocol's handshake and waits for the first
 packet, checking it against the robot file (joint count, and every joint inside its limits,
@@ -75,7 +78,9 @@ class StreamingDriver(ABC, Generic[S]):
         self.limiter: CycleLimiter | None = None
         self.opened = False
         self.unanswered = 0
-        self._sample: S | None = None
+        self._sample: S | None = None   # received, not yet read
+        self._newest: S | None = None   # the packet the next write answers
+        self._answered: int | None = None  # sequence number of the last packet answered
         self._answer_due = False
 
     # --------------------------------------------------------------------------- protocol
@@ -93,6 +98,10 @@ class StreamingDriver(ABC, Generic[S]):
     def simulated(self) -> bool:
         """False: :meth:`step` waits for the controller."""
         return False
+
+    extrapolates = False
+    """Whether the controller continues at the last velocity for one cycle without a target
+    (else it holds the last target); see :meth:`CycleLimiter.skip`."""
 
     reports_torque = False
     """Whether the controller reports joint torque (``make_feedback`` then has a torque
@@ -117,7 +126,7 @@ class StreamingDriver(ABC, Generic[S]):
         if sample is None:
             self._raise_if_broken()
             return
-        self._sample = sample
+        self._sample = self._newest = sample
         self._answer_due = True
 
     def read(self, fb: DriverFeedback) -> bool:
@@ -142,10 +151,14 @@ class StreamingDriver(ABC, Generic[S]):
             raise DriverError("command not sent: wrong shape or not finite", field="cmd.q",
                               value=np.asarray(q).tolist(),
                               expected=f"{self._n} finite joint positions [rad]")
-        if not self._answer_due or self.limiter is None:
+        if not self._answer_due or self.limiter is None or self._newest is None:
             self.unanswered += 1
             return
         self._answer_due = False
+        sequence = self._sequence(self._newest)
+        if self._answered is not None:
+            self.limiter.skip(sequence - self._answered - 1, self.extrapolates)
+        self._answered = sequence
         self._send(self.limiter.limit(q))
 
     # ------------------------------------------------------------------------ connection
@@ -170,7 +183,8 @@ class StreamingDriver(ABC, Generic[S]):
             self._disconnect()
             raise
         self.opened, self.unanswered = True, 0
-        self._sample, self._answer_due = None, False
+        self._sample, self._newest, self._answer_due = None, first, False
+        self._answered = self._sequence(first)
 
     def close(self) -> None:
         """End the stream (the controller's own way) and close the connection."""
@@ -248,6 +262,10 @@ class StreamingDriver(ABC, Generic[S]):
     @abstractmethod
     def _positions(self, sample: S) -> Array:
         """The packet's joint positions [rad], shape (n,)."""
+
+    @abstractmethod
+    def _sequence(self, sample: S) -> int:
+        """The packet's cycle number (+1 per controller cycle)."""
 
     @abstractmethod
     def _fill(self, fb: DriverFeedback, sample: S) -> None:

@@ -13,7 +13,9 @@ status packet (8 ms, or 4 ms where the controller runs that cycle) is a feedback
 * ``read_io_value`` → ``inputs`` (bit k = DI[``input_index`` + k]) once the controller echoes
   the digital-input read that every command requests.
 
-Each command answers the newest status with its sequence number; the targets pass a
+Each command answers the newest status with its sequence number, and only a status that
+reports the controller ready (bits 0 and 2, as FANUC's sample client requires) is answered
+(``withheld`` counts the others); the targets pass a
 :class:`~leadthrough.drivers.cycle_limits.CycleLimiter` set to the most restrictive entry of
 each limit table (no payload and full payload, every TCP-speed step) and the robot file's own
 velocity and acceleration limits, scaled by ``margin``: the controller rejects a command beyond
@@ -60,6 +62,7 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
     """
 
     controller = "FANUC J519"
+    extrapolates = True  # one cycle at the last velocity (the emulator's assumption)
 
     def __init__(self, robot: Robot, host: str, port: int = DEFAULT_PORT, *,
                  cycle: float = 0.008, input_index: int = 1, timeout: float | None = None,
@@ -70,6 +73,7 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
         super().__init__(robot, cycle, timeout, connect_timeout, margin)
         self.client = StreamMotionClient(host, port, read_io=(IoType.DI, input_index, 0xFFFF))
         self.controller_limits: dict[LimitKind, Array] = {}
+        self.withheld = 0  # commands not sent because the controller was not ready
 
     @property
     def stats(self) -> LinkStats:
@@ -132,6 +136,9 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
     def _positions(self, sample: StatusPacket) -> Array:
         return np.radians(sample.joints[:self._n])
 
+    def _sequence(self, sample: StatusPacket) -> int:
+        return sample.sequence
+
     def _fill(self, fb: DriverFeedback, sample: StatusPacket) -> None:
         n = self._n
         fb.t = sample.timestamp * 1e-3
@@ -143,6 +150,10 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
         fb.inputs = sample.read_io_value if fb.inputs_read else 0
 
     def _send(self, q: Array) -> None:
+        last = self.client.last_status
+        if last is not None and not last.ready:  # FANUC's sample client: status & 5 == 5
+            self.withheld += 1
+            return
         self.client.send(self.client.make_command(np.degrees(q).tolist()))
 
     def _no_data_hint(self) -> str:

@@ -138,9 +138,12 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     def _limits(self) -> CycleLimits:
         return CycleLimits(self.robot.velocity_limit.copy(), self.robot.acceleration_limit.copy())
 
+    def _sequence(self, sample: RobotMessage) -> int:
+        return (sample.ipoc - self._ipoc0) // self.client.cycle_ms
+
     def _fill(self, fb: DriverFeedback, sample: RobotMessage) -> None:
         fb.t = sample.ipoc * 1e-3
-        fb.sequence = (sample.ipoc - self._ipoc0) // self.client.cycle_ms
+        fb.sequence = self._sequence(sample)
         fb.q[:] = np.radians(sample.axis_actual)
         if sample.gear_torque is not None:
             torque = np.array(sample.gear_torque)

@@ -12,7 +12,7 @@ watchdog stops the arm when commands stop for ``watchdog_timeout``.
 Every data package (500 Hz e-Series, 125 Hz CB3) is a feedback sample:
 
 * ``actual_q`` [rad] → ``q``, ``actual_current`` [A] → ``current``, ``timestamp`` [s] → ``t``
-  and ``sequence`` (timestamp / period, so a lost package is a jump);
+  and ``sequence`` (periods since the first package, so a lost package is a jump);
 * ``actual_digital_input_bits`` → ``inputs`` (bit k = DI k: 0-7 standard, 8-15
   configurable, 16-17 tool);
 * ``safety_mode`` 6 or 7 (system / robot emergency stop) → ``ESTOP``; 3, 5, 12 or 13
@@ -23,8 +23,9 @@ Every data package (500 Hz e-Series, 125 Hz CB3) is a feedback sample:
 
 Commands write the six targets, a watchdog counter (+1 per command) and mode 1 (servo) into
 the input registers; targets pass a :class:`~leadthrough.drivers.cycle_limits.CycleLimiter`
-with the robot file's velocity and acceleration limits (a ``servoj`` target too far from the
-last one makes the controller stop with a protective stop). :meth:`UrRtdeDriver.close` writes
+with the robot file's joint speed limits (a ``servoj`` target too far from the last one makes
+the controller stop with a protective stop; ``servoj`` smooths the targets itself, so their
+acceleration is not limited here). :meth:`UrRtdeDriver.close` writes
 mode 2 (the program stops the arm with ``stopj`` and halts), then pauses and disconnects.
 
 Mode, safety and runtime codes: Universal Robots' RTDE guide (output table) and the
@@ -125,6 +126,7 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self._register = outputs[-1]
         self._counter = 0
         self._last: RtdeState | None = None
+        self._t0: float | None = None
 
     @property
     def stats(self) -> LinkStats:
@@ -146,7 +148,7 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self._dt = 1.0 / float(self.client.frequency or 500.0)
         if not self._fixed_timeout:
             self.timeout = 3.0 * self._dt
-        self._counter = 0
+        self._counter, self._t0 = 0, None
         if self.script_port is None:
             return
         try:
@@ -174,7 +176,9 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
             state = got if got is not None else state
 
     def _limits(self) -> CycleLimits:
-        return CycleLimits(self.robot.velocity_limit.copy(), self.robot.acceleration_limit.copy())
+        # the controller checks the joint speed of servoj targets (a faster step is a
+        # protective stop) and smooths them itself (lookahead_time, gain): speed only here
+        return CycleLimits(self.robot.velocity_limit.copy())
 
     def _disconnect(self) -> None:
         if self.opened and self.client.error is None:
@@ -191,10 +195,15 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
     def _positions(self, sample: RtdeState) -> Array:
         return np.array(sample.q, dtype=float)
 
+    def _sequence(self, sample: RtdeState) -> int:
+        if self._t0 is None:  # periods since the first package (its phase is arbitrary)
+            self._t0 = sample.timestamp
+        return round((sample.timestamp - self._t0) / self._dt)
+
     def _fill(self, fb: DriverFeedback, sample: RtdeState) -> None:
         v = sample.values
         fb.t = sample.timestamp
-        fb.sequence = round(sample.timestamp / self._dt)
+        fb.sequence = self._sequence(sample)
         fb.q[:] = sample.q
         fb.current[:] = sample.current
         fb.state = int(controller_state(v, self._register))
