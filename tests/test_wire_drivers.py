@@ -32,7 +32,14 @@ from leadthrough.sim.emulators import (
     start,
 )
 from leadthrough.sim.emulators.kuka_rsi import IPOC_START
-from wire_helpers import DIRECTION, POSE, min_jerk
+from wire_helpers import (
+    DIRECTION,
+    POSE,
+    free_loopback_address,
+    min_jerk,
+    spawn_emulator,
+    stop_process,
+)
 
 KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
 ROBOT = {"fanuc-j519": "er20", "ur-rtde": "ur5", "kuka-rsi": "er20"}
@@ -303,3 +310,32 @@ def test_the_ur_controller_refusing_the_stream(robots: dict[str, Robot]) -> None
             driver.open()
         assert "program is not running" in str(err.value) and "safety_mode 3" in str(err.value)
     assert not math.isnan(emu.emulator.t)
+
+
+# ---------------------------------------------------------- the emulator in its own process
+@pytest.mark.parametrize("kind", KINDS)
+def test_leadthrough_emulate_in_its_own_process(kind: str, robots: dict[str, Robot]) -> None:
+    """``leadthrough emulate`` on its default port (of a free 127.x address; RSI: sending to
+    the port the driver listens on), our driver streaming to it for 2 s."""
+    robot = robots[ROBOT[kind]]
+    pose = ["--q0", *(str(q) for q in POSE), "--enable", "0.5:"]
+    driver: StreamingDriver  # type: ignore[type-arg]
+    if kind == "kuka-rsi":
+        driver = KukaRsiDriver(robot, "127.0.0.1", 0, connect_timeout=60.0)
+        host, port = "127.0.0.1", driver.listen()[1]
+    else:
+        port = {"fanuc-j519": 60015, "ur-rtde": 30004}[kind]
+        host = free_loopback_address(port)
+        driver = (FanucJ519Driver(robot, host) if kind == "fanuc-j519"
+                  else UrRtdeDriver(robot, host))  # default ports: 60015, 30004 and 30002
+    proc = spawn_emulator(kind, ROBOT[kind], host, port, "--seed", "3", *pose)
+    try:
+        with driver:
+            delta = 0.2 * DIRECTION
+            trace = _stream(kind, driver, 2.0, lambda t, q0: min_jerk(q0, delta, t, 1.0))
+    finally:
+        printed = stop_process(proc)
+    assert trace.error is None and trace.flags() & ~ControllerState.COMMAND_REJECTED == 0
+    assert np.abs(trace.q[-1] - (np.array(POSE) + delta)).max() < 2e-4
+    assert trace.inputs[-1] & 1  # the enabling device, held from 0.5 s
+    assert "violations: ()" in printed and "refused: 0" in printed
