@@ -1,9 +1,11 @@
 """Cost of the real-controller wire codecs and round trips over loopback.
 
 Per packet: encode / decode time of each codec (median of repeated runs), and for each
-protocol a short session of our client against the emulated controller: the time from a
-status packet's arrival to the command leaving (client side), the emulator's largest lag
-behind the wall clock, and lost / late counts.
+protocol a short session of our driver against the emulated controller (a thread of the same
+process, so both share one interpreter lock: the figures are pessimistic): the time of a
+driver ``write`` (limiter, encoding, send), the stale steps (no packet within 3 cycles),
+packets superseded before they were read, lost and unanswered packets, the emulator's largest
+lag behind the wall clock, and what it refused.
 
     python benchmarks/wire_protocols.py [--seconds 2]
 """
@@ -17,9 +19,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from leadthrough.drivers.fanuc_j519 import CommandPacket, StatusPacket, StreamMotionClient
-from leadthrough.drivers.kuka_rsi import RobotMessage, RsiClient, SensorMessage
-from leadthrough.drivers.ur_rtde import Recipe, RtdeClient, ServoCommand
+from leadthrough.drivers.fanuc_j519 import CommandPacket, FanucJ519Driver, StatusPacket
+from leadthrough.drivers.kuka_rsi import KukaRsiDriver, RobotMessage, SensorMessage
+from leadthrough.drivers.streaming import StreamingDriver
+from leadthrough.drivers.ur_rtde import Recipe, UrRtdeDriver
 from leadthrough.robot import load_robot
 from leadthrough.sim.emulators import EmulatorOptions, start
 
@@ -74,52 +77,41 @@ def codecs() -> None:
 
 
 def session(kind: str, seconds: float) -> None:
+    """Our driver against the emulator (a thread of this process) for ``seconds``: the loop's
+    write + step + read; the write (limiter, encoding, send) timed."""
     robot = load_robot("ur5" if kind == "ur-rtde" else "er20")
-    turnaround: list[float] = []
+    options = EmulatorOptions(q0=POSE)
+    driver: StreamingDriver  # type: ignore[type-arg]
     if kind == "kuka-rsi":
-        rsi = RsiClient("127.0.0.1", 0)
-        rsi.open()
-        emu = start(kind, robot, 1, rsi.address[1], EmulatorOptions(q0=POSE))
-        stats = rsi.stats
+        driver = KukaRsiDriver(robot, "127.0.0.1", 0)
+        emu = start(kind, robot, 1, driver.listen()[1], options)
+    else:
+        emu = start(kind, robot, 1, 0, options)
+        driver = (FanucJ519Driver(robot, "127.0.0.1", emu.port) if kind == "fanuc-j519" else
+                  UrRtdeDriver(robot, "127.0.0.1", emu.port,
+                               script_port=emu.emulator.script_port))  # type: ignore[attr-defined]
+    write_us: list[float] = []
+    with driver:
+        fb, cmd = driver.make_feedback(), driver.make_command()
+        driver.step()
+        driver.read(fb)
+        cmd.q[:] = fb.q
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
-            if (msg := rsi.receive(0.1)) is not None:
-                t0 = time.perf_counter()
-                rsi.send(rsi.correction_for(msg.axis_setpoint or msg.axis_actual))
-                turnaround.append(time.perf_counter() - t0)
-        report = emu.stop()
-        rsi.close()
-    else:
-        emu = start(kind, robot, 1, 0, EmulatorOptions(q0=POSE, watchdog=0.5))
-        if kind == "fanuc-j519":
-            j519 = StreamMotionClient("127.0.0.1", emu.port)
-            j519.open()
-            stats = j519.stats
-            deadline = time.monotonic() + seconds
-            while time.monotonic() < deadline:
-                if (status := j519.receive(0.1)) is not None:
-                    t0 = time.perf_counter()
-                    j519.send(j519.make_command(list(status.joints[:6])))
-                    turnaround.append(time.perf_counter() - t0)
-            j519.close()
-        else:
-            rtde = RtdeClient("127.0.0.1", emu.port)
-            rtde.open()
-            stats = rtde.stats
-            deadline, k = time.monotonic() + seconds, 0
-            while time.monotonic() < deadline:
-                if (state := rtde.receive(0.1)) is not None:
-                    t0 = time.perf_counter()
-                    k += 1
-                    rtde.send(ServoCommand(tuple(state.q), k))
-                    turnaround.append(time.perf_counter() - t0)
-            rtde.close()
-        report = emu.stop()
-    us = np.array(turnaround) * 1e6
-    print(f"  {kind:11s} packets {stats.received:5d}  send p50 {np.median(us):5.1f} µs "
-          f"p99 {np.percentile(us, 99):6.1f} µs  lost {stats.missed:3d}  emulator max lag "
-          f"{report.max_lag * 1e3:5.2f} ms  refused {report.refused}  violations "
-          f"{len(report.violations)}")
+            t0 = time.perf_counter()
+            driver.write(cmd)
+            write_us.append((time.perf_counter() - t0) * 1e6)
+            driver.step()
+            driver.read(fb)
+        report = emu.emulator.report()
+        stats = driver.stats
+    emu.stop()
+    us = np.array(write_us)
+    print(f"  {kind:11s} cycle {driver.dt * 1e3:3.0f} ms  packets {stats.received:5d}  write "
+          f"p50 {np.median(us):5.1f} µs p99 {np.percentile(us, 99):6.1f} µs  stale "
+          f"{stats.timeouts:3d}  superseded {stats.skipped:3d}  lost {stats.missed:3d}  "
+          f"unanswered {driver.unanswered:3d}  emulator max lag {report.max_lag * 1e3:5.2f} ms"
+          f"  refused {report.refused}  violations {len(report.violations)}")
 
 
 def main() -> None:
@@ -128,7 +120,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=2.0)
     args = parser.parse_args()
     codecs()
-    print(f"loopback sessions ({args.seconds:g} s each, client and emulator in one process)")
+    print(f"loopback sessions ({args.seconds:g} s each, driver and emulator in one process)")
     for kind in ("fanuc-j519", "ur-rtde", "kuka-rsi"):
         session(kind, args.seconds)
 
