@@ -47,12 +47,14 @@ Sources:
       ``max_cartesian_speed / 20`` steps, and the later packet versions (types 200-205, not
       implemented here).
     * G.A. vd. Hoorn's FANUC Stream Motion ROS driver (reference for the same v1 layout).
+    * Valstad Shipworks' ``fanuc_ucl`` (``src/stmo/proto.rs``, Rust): the same status and
+      command layouts field by field, the status bits (ready for commands, command received,
+      SYSRDY, in motion) and the I/O type codes (0 none, 1 DI, 2 DO, 8 RI, 9 RO, ...).
 
 Documented assumptions (the manual itself, B-84904EN, is not public): ``time_stamp`` is the
 controller clock in milliseconds; ``interval`` in the limit answer is the table's TCP-speed
-step [mm/s]; the read/write I/O type codes are KAREL's port codes (1 digital input, 2 digital
-output, ...), and ``read_io_value`` carries 16 ports starting at ``read_io_index`` masked by
-``read_io_mask``.
+step [mm/s]; ``read_io_value`` carries 16 ports starting at ``read_io_index`` (bit 0) masked
+by ``read_io_mask``.
 """
 
 from __future__ import annotations
@@ -107,7 +109,7 @@ class StatusBits(IntFlag):
 
 
 class IoType(IntEnum):
-    """I/O type codes (KAREL port codes; documented assumption, see the module doc)."""
+    """I/O type codes (KAREL port codes, as ``fanuc_ucl`` has them; see the module doc)."""
 
     NONE = 0
     DI = 1
