@@ -76,9 +76,12 @@ def _sim_time(kind: str, t: float) -> float:
 
 
 @contextmanager
-def _session(kind: str, robot: Robot, **options: object
+def _session(kind: str, robot: Robot, watchdog: float | None = 0.2, **options: object
              ) -> Iterator[tuple[StreamingDriver, RunningEmulator]]:  # type: ignore[type-arg]
-    opts = EmulatorOptions(q0=POSE, **options)  # type: ignore[arg-type]
+    """A driver opened on an emulator; the controller's watchdog 0.2 s (its own default with
+    ``watchdog=None``), so that a loaded machine's hiccup does not stop a test of something
+    else."""
+    opts = EmulatorOptions(q0=POSE, watchdog=watchdog, **options)  # type: ignore[arg-type]
     driver: StreamingDriver  # type: ignore[type-arg]
     if kind == "kuka-rsi":
         driver = KukaRsiDriver(robot, "127.0.0.1", 0, connect_timeout=5.0)
@@ -98,15 +101,20 @@ def _session(kind: str, robot: Robot, **options: object
 
 def _stream(kind: str, driver: StreamingDriver, duration: float,  # type: ignore[type-arg]
             target: Target) -> Trace:
-    """The loop every guiding session runs, for ``duration`` s of wall time; ``target(t,
-    q0)`` [rad] on the controller's clock (sequence × cycle since the first sample)."""
+    """The loop every guiding session runs, until the controller's clock reaches ``duration``
+    [s] (or 1.5 × that + 0.5 s of wall time pass: a silent controller, or an emulator slowed
+    by a loaded machine); ``target(t, q0)`` [rad] on the controller's clock (sequence × cycle
+    since the first sample)."""
     fb, cmd, trace = driver.make_feedback(), driver.make_command(), Trace()
-    driver.step()
-    assert driver.read(fb)
+    for _ in range(50):  # the first packet (a loaded machine may miss a step's timeout)
+        driver.step()
+        if driver.read(fb):
+            break
+    assert fb.sequence >= 0
     q0, seq0 = fb.q.copy(), fb.sequence
     cmd.q[:] = q0
-    end = time.monotonic() + duration
-    while time.monotonic() < end:
+    end = time.monotonic() + 1.5 * duration + 0.5
+    while time.monotonic() < end and not (trace.t and trace.t[-1] >= duration):
         try:
             driver.write(cmd)
             driver.step()
@@ -155,8 +163,12 @@ def test_positions_follow_and_inputs_are_read(kind: str, robots: dict[str, Robot
     assert trace.error is None and report.violations == () and report.refused == 0
     assert report.stop_kind is None and report.accepted > 0.8 * len(trace.t)
     assert np.abs(trace.q[-1] - (np.array(POSE) + delta)).max() < 2e-4  # rad, settled
-    assert driver.limiter is not None and driver.limiter.limited == 0  # feasible: untouched
-    assert driver.stats.missed == 0 and trace.flags(after=0.1) == 0
+    # a feasible stream passes untouched, unless cycles went by without our target (a loaded
+    # machine): the controller held the last one, and the catch-up is limited
+    assert driver.limiter is not None
+    assert driver.limiter.limited <= 20 * driver.skipped_cycles
+    late = ControllerState.COMMAND_REJECTED  # answers a loaded machine sent too late
+    assert driver.stats.missed == 0 and trace.flags(after=0.1) & ~late == 0
     t, bits = np.array(trace.t), np.array(trace.inputs)
     read = bits >= 0
     assert read.mean() > 0.9
@@ -170,7 +182,7 @@ def test_a_jump_is_limited_and_never_refused(kind: str, robots: dict[str, Robot]
     robot = robots[ROBOT[kind]]
     jump = 0.3 * DIRECTION
     with _session(kind, robot) as (driver, emu):
-        trace = _stream(kind, driver, 1.5, lambda t, q0: q0 + (jump if t > 0.1 else 0.0))
+        trace = _stream(kind, driver, 2.0, lambda t, q0: q0 + (jump if t > 0.1 else 0.0))
         report = _report(emu)
         with pytest.raises(DriverError) as err:  # nothing non-finite reaches the wire
             cmd = driver.make_command()
@@ -185,17 +197,18 @@ def test_a_jump_is_limited_and_never_refused(kind: str, robots: dict[str, Robot]
 # --------------------------------------------------------------------------------- faults
 # what each controller does about 1 % loss and a 100 ms burst of lost packets: J519 and the
 # UR program stop on their watchdogs (no command can answer a packet that never came), RSI
-# counts the 25 documents as late answers (below its Timeout of 100) and carries on
+# counts the 25 documents as late answers (below its Timeout of 100) and carries on; the
+# driver knows those 25 were never received, so they are not answers of ours it rejected
 LOSS_OUTCOME = {"fanuc-j519": ("watchdog", ControllerState.NOT_READY),
                 "ur-rtde": ("watchdog", ControllerState.NOT_READY),
-                "kuka-rsi": (None, ControllerState.COMMAND_REJECTED)}
+                "kuka-rsi": (None, ControllerState.NORMAL)}
 
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_packet_loss_shows_as_gaps_and_the_controllers_own_stop(
         kind: str, robots: dict[str, Robot]) -> None:
     faults = FaultPlan(loss_rate=0.01, loss_bursts=(Window(0.5, 0.6),))
-    with _session(kind, robots[ROBOT[kind]], faults=faults) as (driver, emu):
+    with _session(kind, robots[ROBOT[kind]], None, faults=faults) as (driver, emu):
         trace = _stream(kind, driver, 1.2, _hold)
         report = _report(emu)
     stop, flag = LOSS_OUTCOME[kind]
@@ -205,14 +218,16 @@ def test_packet_loss_shows_as_gaps_and_the_controllers_own_stop(
     jumps = np.diff(trace.sequence)
     assert jumps.max() >= burst - 1 and jumps.min() >= 1
     assert report.stop_kind == stop and report.violations == () and not _limit_refusals(emu)
-    assert trace.flags(after=0.6) & flag
+    late = ControllerState.COMMAND_REJECTED  # a loaded machine's late answers
+    assert trace.flags(after=0.6) & flag == flag and not trace.flags() & ~(flag | late) & ~(
+        ControllerState.NOT_READY if stop else 0)
     assert not trace.flags() & (ControllerState.ESTOP | ControllerState.PROTECTIVE_STOP)
 
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_late_replies_leave_the_feedback_stale(kind: str, robots: dict[str, Robot]) -> None:
     faults = FaultPlan(late=(Window(0.5, 0.7),), late_by=0.1)
-    with _session(kind, robots[ROBOT[kind]], faults=faults) as (driver, emu):
+    with _session(kind, robots[ROBOT[kind]], None, faults=faults) as (driver, emu):
         trace = _stream(kind, driver, 1.2, _hold)
         report = _report(emu)
     assert trace.error is None and driver.stats.timeouts >= 3 and trace.stale >= 3
@@ -240,7 +255,8 @@ def test_estop_and_protective_stop_reach_the_feedback(kind: str, stop: str,
         trace = _stream(kind, driver, 1.0, lambda t, q0: q0 + 0.05 * DIRECTION * t)
         report = _report(emu)
     assert report.stop_kind == stop and report.violations == ()
-    assert trace.error is None and trace.flags(after=0.1, before=0.5) == 0
+    late = ControllerState.COMMAND_REJECTED  # a loaded machine's late answers (RSI)
+    assert trace.error is None and trace.flags(after=0.1, before=0.5) & ~late == 0
     if kind == "kuka-rsi":  # RSI has no state to report: the robot goes silent
         assert max(trace.t) < 0.52 and trace.stale > 0.3 / driver.timeout
     else:
@@ -318,7 +334,7 @@ def test_leadthrough_emulate_in_its_own_process(kind: str, robots: dict[str, Rob
     """``leadthrough emulate`` on its default port (of a free 127.x address; RSI: sending to
     the port the driver listens on), our driver streaming to it for 2 s."""
     robot = robots[ROBOT[kind]]
-    pose = ["--q0", *(str(q) for q in POSE), "--enable", "0.5:"]
+    pose = ["--q0", *(str(q) for q in POSE), "--enable", "0.5:", "--watchdog", "0.2"]
     driver: StreamingDriver  # type: ignore[type-arg]
     if kind == "kuka-rsi":
         driver = KukaRsiDriver(robot, "127.0.0.1", 0, connect_timeout=60.0)
@@ -335,7 +351,9 @@ def test_leadthrough_emulate_in_its_own_process(kind: str, robots: dict[str, Rob
             trace = _stream(kind, driver, 2.0, lambda t, q0: min_jerk(q0, delta, t, 1.0))
     finally:
         printed = stop_process(proc)
-    assert trace.error is None and trace.flags() & ~ControllerState.COMMAND_REJECTED == 0
+    flagged = [(t, s) for t, s in zip(trace.t, trace.state, strict=True) if s][:5]
+    late = ControllerState.COMMAND_REJECTED  # answers a loaded machine sent too late
+    assert trace.error is None and trace.flags() & ~late == 0, (flagged, printed)
     assert np.abs(trace.q[-1] - (np.array(POSE) + delta)).max() < 2e-4
     assert trace.inputs[-1] & 1  # the enabling device, held from 0.5 s
     assert "violations: ()" in printed and "refused: 0" in printed

@@ -110,6 +110,7 @@ class CycleLimiter:
         self._v = np.zeros(n)
         self._a = np.zeros(n)
         self._out = np.zeros(n)
+        self._before = np.zeros((3, n))  # q, v, a before the last target
         self.limited = 0     # targets changed so far
         self.last_limited = False
 
@@ -124,6 +125,7 @@ class CycleLimiter:
         self._target[:] = q
         self._v[:] = 0.0
         self._a[:] = 0.0
+        self._before[0], self._before[1], self._before[2] = q, 0.0, 0.0
 
     def _bounds(self) -> tuple[Array, Array]:
         """The acceleration interval of this cycle, velocity and acceleration bounds first,
@@ -146,23 +148,32 @@ class CycleLimiter:
         """Cycles the controller ran without a new target from us (lost or late packets).
 
         Most controllers hold the last target then (a UR program's ``servoj`` repeats it, RSI
-        keeps the last correction with ``HOLDON``); with ``extrapolate`` the first missed
-        cycle continues at the last velocity (the J519 emulator's documented assumption).
+        keeps the last correction with ``HOLDON``); with ``extrapolate`` the target moves on
+        at the last velocity (the J519 emulator's documented assumption, until its watchdog).
         The limiter's state follows, so the next target is judged against what the
         controller did.
 
         Args:
             cycles: Cycles without a target (0: none).
-            extrapolate: Whether the first one continued at the last velocity.
+            extrapolate: Whether the controller went on at the last velocity.
         """
-        T = self.cycle
-        for k in range(min(cycles, 3)):  # after two held cycles the state is at rest
-            if k == 0 and extrapolate:
-                self._q += self._v * T
-                self._a[:] = 0.0
-            else:
-                self._a[:] = -self._v / T
-                self._v[:] = 0.0
+        if cycles <= 0:
+            return
+        if extrapolate:
+            self._q += self._v * (self.cycle * cycles)
+            self._a[:] = 0.0
+        elif cycles == 1:
+            self._a[:] = -self._v / self.cycle
+            self._v[:] = 0.0
+        else:  # two held cycles or more: at rest
+            self._v[:] = 0.0
+            self._a[:] = 0.0
+
+    def retract(self, extrapolate: bool = False) -> None:
+        """The controller did not take the last target (it came too late): back to the state
+        before it, then one cycle without a target (see :meth:`skip`)."""
+        self._q[:], self._v[:], self._a[:] = self._before
+        self.skip(1, extrapolate)
 
     def limit(self, q: Array) -> Array:
         """The target to send for ``q`` [rad], shape (n,) (finite: the caller checks).
@@ -172,6 +183,7 @@ class CycleLimiter:
             target (an internal array, valid until the next call).
         """
         T = self.cycle
+        self._before[0], self._before[1], self._before[2] = self._q, self._v, self._a
         v = (q - self._q) / T
         a = (v - self._v) / T
         lo, hi = self._bounds()

@@ -16,7 +16,9 @@ cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
   beyond its limits), then goes out in the controller's units. Cycles whose packets were
   lost or came too late went by without a target from us; the limiter is told
   (:meth:`~leadthrough.drivers.cycle_limits.CycleLimiter.skip`), so the next target is judged
-  against what the controller did meanwhile. A write with no new packet to answer sends
+  against what the controller did meanwhile; so is an answer the controller reports it did
+  not take in time (J519's "command received" bit, RSI's late-answer count), which also sets
+  ``COMMAND_REJECTED`` in the feedback. A write with no new packet to answer sends
   nothing (``unanswered`` counts it): the controller is waiting for its next cycle, not for
   a second answer.
 
@@ -38,8 +40,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.drivers.cycle_limits import CycleLimiter, CycleLimits
-from leadthrough.drivers.link import LinkError, LinkStats
-from leadthrough.drivers.protocol import DriverFeedback, JointCommand
+from leadthrough.drivers.link import LinkError, LinkStats, Transport
+from leadthrough.drivers.protocol import ControllerState, DriverFeedback, JointCommand
 from leadthrough.errors import DriverError
 from leadthrough.robot.description import Robot
 
@@ -67,6 +69,9 @@ class StreamingDriver(ABC, Generic[S]):
     controller = ""
     """Name of the controller interface, for messages."""
 
+    client: Transport
+    """The protocol's transport (set by the subclass)."""
+
     def __init__(self, robot: Robot, cycle: float, timeout: float | None,
                  connect_timeout: float, margin: float) -> None:
         self.robot = robot
@@ -78,6 +83,9 @@ class StreamingDriver(ABC, Generic[S]):
         self.limiter: CycleLimiter | None = None
         self.opened = False
         self.unanswered = 0
+        self.skipped_cycles = 0  # controller cycles that went by without our target
+        self.late_answers = 0    # answers the controller reported as not taken in time
+        self._sample_late = False
         self._sample: S | None = None   # received, not yet read
         self._newest: S | None = None   # the packet the next write answers
         self._answered: int | None = None  # sequence number of the last packet answered
@@ -126,7 +134,11 @@ class StreamingDriver(ABC, Generic[S]):
         if sample is None:
             self._raise_if_broken()
             return
-        self._sample = self._newest = sample
+        late = self._answer_late(sample)
+        if late and self.limiter is not None:
+            self.limiter.retract(self.extrapolates)
+            self.late_answers += 1
+        self._sample, self._newest, self._sample_late = sample, sample, late
         self._answer_due = True
 
     def read(self, fb: DriverFeedback) -> bool:
@@ -136,6 +148,8 @@ class StreamingDriver(ABC, Generic[S]):
             return False
         self._sample = None
         self._fill(fb, sample)
+        if self._sample_late:
+            fb.state |= ControllerState.COMMAND_REJECTED
         return True
 
     def write(self, cmd: JointCommand) -> None:
@@ -156,7 +170,8 @@ class StreamingDriver(ABC, Generic[S]):
             return
         self._answer_due = False
         sequence = self._sequence(self._newest)
-        if self._answered is not None:
+        if self._answered is not None and sequence - self._answered > 1:
+            self.skipped_cycles += sequence - self._answered - 1
             self.limiter.skip(sequence - self._answered - 1, self.extrapolates)
         self._answered = sequence
         self._send(self.limiter.limit(q))
@@ -178,13 +193,13 @@ class StreamingDriver(ABC, Generic[S]):
             self._check_positions(q)
             self.limiter = CycleLimiter(self._limits(), self._dt, self.margin)
             self.limiter.reset(self._start_target(first))
+            self._answered = None
             self._started(first)
         except BaseException:
             self._disconnect()
             raise
-        self.opened, self.unanswered = True, 0
+        self.opened, self.unanswered, self.skipped_cycles, self.late_answers = True, 0, 0, 0
         self._sample, self._newest, self._answer_due = None, first, False
-        self._answered = self._sequence(first)
 
     def close(self) -> None:
         """End the stream (the controller's own way) and close the connection."""
@@ -236,16 +251,18 @@ class StreamingDriver(ABC, Generic[S]):
             raise DriverError(f"{self.controller} link lost: {err.detail}", field="link",
                               value=err.kind.value, expected="a live connection")
 
-    # ----------------------------------------------------------------- protocol specifics
     @property
-    @abstractmethod
     def stats(self) -> LinkStats:
-        """Counters of the transport (received, timeouts, lost packets, ...)."""
+        """Counters of the transport (received, timeouts, packets superseded before they were
+        read, lost packets by sequence number, ...)."""
+        return self.client.stats
 
     @property
-    @abstractmethod
     def link_error(self) -> LinkError | None:
-        """The link failure, if any."""
+        """The link failure, if any (closed connection or port, socket error, refusal)."""
+        return self.client.error
+
+    # ----------------------------------------------------------------- protocol specifics
 
     @abstractmethod
     def _connect(self) -> None:
@@ -282,6 +299,15 @@ class StreamingDriver(ABC, Generic[S]):
     def _start_target(self, first: S) -> Array:
         """The controller's target when the stream starts [rad] (default: the positions)."""
         return self._positions(first)
+
+    def _answer_late(self, sample: S) -> bool:
+        """Whether ``sample`` reports that the controller did not take our answer to the
+        packet before it in time (default: the protocol does not tell)."""
+        return False
+
+    def _answered_previous(self, sample: S) -> bool:
+        """Whether our last answer was to the packet just before ``sample``."""
+        return self._answered is not None and self._sequence(sample) - self._answered == 1
 
     def _started(self, first: S) -> None:
         """Called once the first packet is checked (e.g. to answer it at once)."""

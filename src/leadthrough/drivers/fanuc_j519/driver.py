@@ -9,7 +9,9 @@ status packet (8 ms, or 4 ms where the controller runs that cycle) is a feedback
 * joint angles [deg] → ``q`` [rad], motor currents [A] → ``current``, ``sequence_no`` →
   ``sequence``, ``time_stamp`` [ms] → ``t`` [s];
 * status bits 0 (ready for commands) and 2 (SYSRDY) not both set → ``NOT_READY`` (J519 does
-  not tell an E-stop from an alarm or servo power off: each clears SYSRDY);
+  not tell an E-stop from an alarm or servo power off: each clears SYSRDY); bit 1 (command
+  received) clear after we answered the previous status → ``COMMAND_REJECTED`` (our answer
+  came too late: the controller ran that cycle without it);
 * ``read_io_value`` → ``inputs`` (bit k = DI[``input_index`` + k]) once the controller echoes
   the digital-input read that every command requests.
 
@@ -31,8 +33,13 @@ import numpy as np
 from leadthrough.drivers.cycle_limits import CycleLimits
 from leadthrough.drivers.fanuc_j519.client import StreamMotionClient
 from leadthrough.drivers.fanuc_j519.limits import LimitAnswer, LimitKind
-from leadthrough.drivers.fanuc_j519.packets import DEFAULT_PORT, MAX_AXES, IoType, StatusPacket
-from leadthrough.drivers.link import LinkError, LinkStats
+from leadthrough.drivers.fanuc_j519.packets import (
+    DEFAULT_PORT,
+    MAX_AXES,
+    IoType,
+    StatusBits,
+    StatusPacket,
+)
 from leadthrough.drivers.protocol import ControllerState, DriverFeedback
 from leadthrough.drivers.streaming import Array, StreamingDriver
 from leadthrough.errors import DriverError
@@ -62,7 +69,8 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
     """
 
     controller = "FANUC J519"
-    extrapolates = True  # one cycle at the last velocity (the emulator's assumption)
+    client: StreamMotionClient
+    extrapolates = True  # missed cycles go on at the last velocity (the emulator's assumption)
 
     def __init__(self, robot: Robot, host: str, port: int = DEFAULT_PORT, *,
                  cycle: float = 0.008, input_index: int = 1, timeout: float | None = None,
@@ -74,16 +82,6 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
         self.client = StreamMotionClient(host, port, read_io=(IoType.DI, input_index, 0xFFFF))
         self.controller_limits: dict[LimitKind, Array] = {}
         self.withheld = 0  # commands not sent because the controller was not ready
-
-    @property
-    def stats(self) -> LinkStats:
-        """Transport counters (``missed``: status packets lost by sequence number)."""
-        return self.client.stats
-
-    @property
-    def link_error(self) -> LinkError | None:
-        """The link failure, if any (a closed controller port: ICMP port unreachable)."""
-        return self.client.error
 
     @property
     def last_status(self) -> StatusPacket | None:
@@ -138,6 +136,13 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
 
     def _sequence(self, sample: StatusPacket) -> int:
         return sample.sequence
+
+    def _answer_late(self, sample: StatusPacket) -> bool:
+        # the emulator's documented reading of bit 1: set when the command answering the
+        # previous status arrived within the cycle (a controller that keeps it set once a
+        # command came, as some clients read it, never reports a late answer this way)
+        return (self._answered_previous(sample) and sample.ready
+                and not sample.status & StatusBits.COMMAND_RECEIVED)
 
     def _fill(self, fb: DriverFeedback, sample: StatusPacket) -> None:
         n = self._n

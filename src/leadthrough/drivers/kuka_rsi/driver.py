@@ -17,15 +17,19 @@ Every document (4 ms) is a feedback sample:
   ``current`` = torque / (R·Kt) of the robot file: the motor current that torque stands for,
   so that what takes currents (the estimator, identification) works unchanged;
 * ``DiL`` → ``inputs`` (bit k = ``$IN[k+1]``);
-* ``Delay`` grown since the previous document (the robot counted an answer of ours as late)
-  → ``COMMAND_REJECTED``. RSI reports no E-stop or protective stop: the robot stops sending
-  (after an E-stop, a stop of the KRL program, or ``Timeout`` late answers in a row), which
-  the driver sees as silence: ``read`` returns False, and the caller stops on stale feedback.
+* ``Delay`` grown by more than the documents we never received (the robot counted an answer
+  of ours as late) → ``COMMAND_REJECTED``. RSI reports no E-stop or protective stop: the
+  robot stops sending (after an E-stop, a stop of the KRL program, or ``Timeout`` late
+  answers in a row), which the driver sees as silence: ``read`` returns False, and the caller
+  stops on stale feedback.
 
 Answers carry the document's IPOC and AK = target - reference [deg]; targets pass a
-:class:`~leadthrough.drivers.cycle_limits.CycleLimiter` with the robot file's velocity and
-acceleration limits, then the corrections are clipped to the context's AXISCORR range and
-within ``margin`` of AXISCORRMON's maximum (a larger correction stops RSI).
+:class:`~leadthrough.drivers.cycle_limits.CycleLimiter` with the robot file's joint speed
+limits (the robot's speed monitoring stops a faster setpoint; its acceleration is left to the
+loop's interpolator: a limit on it here would turn every cycle the robot held for a late
+answer into a lag of millimetres that takes a fifth of a second to make up), then the
+corrections are clipped to the context's AXISCORR range and within ``margin`` of
+AXISCORRMON's maximum (a larger correction stops RSI).
 
 Message format and sources: :mod:`leadthrough.drivers.kuka_rsi.messages`.
 """
@@ -38,7 +42,6 @@ from leadthrough.drivers.cycle_limits import CycleLimits
 from leadthrough.drivers.kuka_rsi.client import DEFAULT_PORT, RsiClient
 from leadthrough.drivers.kuka_rsi.config import EthernetConfig, RsiContext
 from leadthrough.drivers.kuka_rsi.messages import RobotMessage
-from leadthrough.drivers.link import LinkError, LinkStats
 from leadthrough.drivers.protocol import ControllerState, DriverFeedback
 from leadthrough.drivers.streaming import Array, StreamingDriver
 from leadthrough.errors import DriverError
@@ -63,6 +66,7 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     """
 
     controller = "KUKA RSI"
+    client: RsiClient
     reports_torque = True
 
     def __init__(self, robot: Robot, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
@@ -84,17 +88,8 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         self._ak_hi = np.minimum(np.array(ctx.upper), bound)
         self._ipoc0 = 0
         self._delay: int | None = None
+        self._seen = 0  # sequence of the newest document received
         self.corrections_clipped = 0
-
-    @property
-    def stats(self) -> LinkStats:
-        """Transport counters (``missed``: documents lost, by IPOC)."""
-        return self.client.stats
-
-    @property
-    def link_error(self) -> LinkError | None:
-        """The link failure, if any (a socket error)."""
-        return self.client.error
 
     @property
     def address(self) -> tuple[str, int]:
@@ -131,15 +126,26 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
 
     def _started(self, first: RobotMessage) -> None:
         self._ipoc0 = first.ipoc
-        self._delay = first.delay
-        if self.limiter is not None:
+        self._delay, self._seen = first.delay, 0
+        if self.limiter is not None:  # answered at once: zero motion
             self._send(self.limiter.limit(self._start_target(first)))
+            self._answered = 0
 
     def _limits(self) -> CycleLimits:
-        return CycleLimits(self.robot.velocity_limit.copy(), self.robot.acceleration_limit.copy())
+        # the robot's monitoring checks the joint speed of the corrected setpoints
+        return CycleLimits(self.robot.velocity_limit.copy())
 
     def _sequence(self, sample: RobotMessage) -> int:
         return (sample.ipoc - self._ipoc0) // self.client.cycle_ms
+
+    def _answer_late(self, sample: RobotMessage) -> bool:
+        """The robot counted more late answers than documents we never saw."""
+        counted = (sample.delay - self._delay if sample.delay is not None
+                   and self._delay is not None else 0)
+        self._delay = sample.delay if sample.delay is not None else self._delay
+        unseen = self._sequence(sample) - self._seen - 1
+        self._seen = self._sequence(sample)
+        return counted > max(unseen, 0)
 
     def _fill(self, fb: DriverFeedback, sample: RobotMessage) -> None:
         fb.t = sample.ipoc * 1e-3
@@ -154,10 +160,7 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
             fb.current[:] = np.nan
             if fb.torque is not None:
                 fb.torque[:] = np.nan
-        late = (sample.delay is not None and self._delay is not None
-                and sample.delay > self._delay)
-        self._delay = sample.delay
-        fb.state = int(ControllerState.COMMAND_REJECTED if late else ControllerState.NORMAL)
+        fb.state = int(ControllerState.NORMAL)
         fb.inputs_read = sample.digital_inputs is not None
         fb.inputs = sample.digital_inputs or 0
 

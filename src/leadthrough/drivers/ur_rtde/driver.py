@@ -40,7 +40,6 @@ import time
 import numpy as np
 
 from leadthrough.drivers.cycle_limits import CycleLimits
-from leadthrough.drivers.link import LinkError, LinkStats
 from leadthrough.drivers.protocol import ControllerState, DriverFeedback
 from leadthrough.drivers.streaming import Array, StreamingDriver
 from leadthrough.drivers.ur_rtde.client import DEFAULT_OUTPUTS, RtdeClient, RtdeState, ServoCommand
@@ -105,6 +104,7 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
     """
 
     controller = "UR RTDE"
+    client: RtdeClient
 
     def __init__(self, robot: Robot, host: str, port: int = DEFAULT_PORT, *,
                  script_port: int | None = SECONDARY_PORT, frequency: float | None = None,
@@ -127,16 +127,6 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self._counter = 0
         self._last: RtdeState | None = None
         self._t0: float | None = None
-
-    @property
-    def stats(self) -> LinkStats:
-        """Transport counters (``missed``: data packages lost, by time stamp)."""
-        return self.client.stats
-
-    @property
-    def link_error(self) -> LinkError | None:
-        """The link failure, if any (the controller closed the connection, ...)."""
-        return self.client.error
 
     @property
     def last_state(self) -> RtdeState | None:

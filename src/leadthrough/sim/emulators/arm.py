@@ -189,10 +189,12 @@ class EmulatedArm:
         self.stop(StopKind.LIMIT, reason)
 
     def hold(self, extrapolate: bool = False) -> None:
-        """No target this cycle: keep the last one, or continue at the last velocity."""
+        """No target this cycle: keep the last one, or continue at the last velocity (the
+        controller's own motion: only the position limits apply, its zero acceleration is
+        what the next target's checks start from)."""
         if self.phase is ArmPhase.RUNNING:
             q = self._to + self._v * self.cycle if extrapolate else self._to.copy()
-            if self.check(q):
+            if np.any(q < self.robot.lower_limits) or np.any(q > self.robot.upper_limits):
                 q = self._to.copy()
             self._advance(q)
 

@@ -25,7 +25,6 @@ from leadthrough.sim.emulators.scenario import EmulatorOptions
 
 __all__ = ["EmulatedController", "EmulatorReport", "UdpController"]
 
-RESYNC_LAG = 0.25  # wall-clock lag [s] after which the loop stops trying to catch up
 
 
 @dataclass(frozen=True)
@@ -42,7 +41,8 @@ class EmulatorReport:
         stop_reason: Detail of the stop.
         sent, dropped, delayed: Outgoing packets sent, dropped and delayed by faults.
         max_lag: Largest lag of the loop behind the wall clock [s].
-        resyncs: Times the loop gave up catching up (lag > 0.25 s).
+        resyncs: Times the loop dropped a lag of more than one controller cycle instead of
+            catching it up (a real controller never sends a burst of cycles).
     """
 
     kind: str
@@ -215,11 +215,11 @@ class EmulatedController(ABC):
                 lag = time.monotonic() - (t0 + k * dt)
                 if lag < 0:
                     time.sleep(-lag)
-                elif lag > RESYNC_LAG:
+                    continue
+                self.max_lag = max(self.max_lag, lag)
+                if lag > self.arm.cycle:  # late by a cycle: carry on from now, no burst
                     self.resyncs += 1
                     t0 += lag
-                else:
-                    self.max_lag = max(self.max_lag, lag)
         finally:
             if not self.closed:
                 self.close_sockets()

@@ -10,9 +10,11 @@ joint targets of the next cycle. Its behaviour:
   the cycle, as the controller rejects commands beyond its velocity, acceleration and jerk
   limits); a refused target starts a controlled stop and latches a fault (status bits 0 and
   2 cleared), as the controller's alarm does;
-* missing commands: one missed cycle continues at the last velocity (assumption: the manual
-  is not public); when no command has come for the watchdog time (default 4 cycles) the arm
-  makes a controlled stop at its deceleration limit, then faults;
+* missing commands: a cycle without a command (none came, or it answered an older status)
+  continues at the last velocity (assumption: the manual is not public); when no command has
+  come for the watchdog time (default 4 cycles) the arm makes a controlled stop at its
+  deceleration limit, then faults. Status bit 1 (command received) tells whether the command
+  answering the previous status arrived in time (assumption, as above);
 * ``last_data``: the motion ends at that target (no watchdog afterwards); a stop packet ends
   the stream;
 * limit queries (any time) are answered with 20-entry tables holding the same limits (deg/s,
