@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from leadthrough.drivers.link import LinkErrorKind
+from leadthrough.drivers.protocol import ControllerState
 from leadthrough.drivers.ur_rtde.client import RtdeClient, RtdeState, ServoCommand
+from leadthrough.drivers.ur_rtde.driver import controller_state
 from leadthrough.drivers.ur_rtde.protocol import (
     ControllerVersion,
     FrameReader,
@@ -246,3 +248,25 @@ def test_refused_setups_name_the_variable(ur5: Robot) -> None:
         first.close()
         emu.stop()
     assert math.isfinite(emu.emulator.t)
+
+
+# the RTDE guide's codes: safety_mode 1 NORMAL, 3 PROTECTIVE_STOP, 5 SAFEGUARD_STOP, 6 SYSTEM_
+# EMERGENCY_STOP, 7 ROBOT_EMERGENCY_STOP, 9 FAULT, 13 THREE_POSITION_ENABLING_STOP; robot_mode
+# 7 RUNNING, 3 POWER_OFF; runtime_state 2 PLAYING, 1 STOPPED
+@pytest.mark.parametrize(("safety", "robot", "runtime", "program", "expected"), [
+    (1, 7, 2, 1, ControllerState.NORMAL),
+    (3, 7, 2, 1, ControllerState.PROTECTIVE_STOP),
+    (5, 7, 2, 1, ControllerState.PROTECTIVE_STOP),
+    (13, 7, 2, 1, ControllerState.PROTECTIVE_STOP),
+    (6, 7, 2, 1, ControllerState.ESTOP),
+    (7, 3, 1, 1, ControllerState.ESTOP | ControllerState.NOT_READY),
+    (9, 7, 2, 1, ControllerState.NOT_READY),
+    (1, 3, 2, 1, ControllerState.NOT_READY),
+    (1, 7, 1, 1, ControllerState.NOT_READY),
+    (1, 7, 2, 3, ControllerState.NOT_READY),  # the program stopped by its watchdog
+])
+def test_controller_state_from_the_rtde_codes(safety: int, robot: int, runtime: int,
+                                              program: int, expected: ControllerState) -> None:
+    values = {"safety_mode": safety, "robot_mode": robot, "runtime_state": runtime,
+              "output_int_register_24": program}
+    assert controller_state(values, "output_int_register_24") == expected
