@@ -16,6 +16,7 @@ from leadthrough import __version__
 from leadthrough.cli import (
     calibration_cmds,
     demo_cmd,
+    emulate_cmd,
     guide_cmd,
     payload_cmd,
     robots_cmd,
@@ -36,6 +37,7 @@ _EPILOG = """examples:
   leadthrough payload loaded.parquet --robot er20 --params params.toml
   leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
+  leadthrough emulate ur-rtde --robot ur5 --seed 1   an emulated controller on its real protocol
 """
 
 
@@ -65,6 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     guide_cmd.register(sub)
     teach_cmd.register(sub)
     demo_cmd.register(sub)
+    emulate_cmd.register(sub)
     return parser
 
 
