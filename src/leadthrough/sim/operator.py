@@ -20,7 +20,8 @@ from numpy.typing import ArrayLike, NDArray
 from leadthrough.errors import SimulationError
 from leadthrough.session.record import Mark
 
-__all__ = ["ConstantWrench", "Mark", "NoOperator", "Operator", "ScriptedOperator", "vector3"]
+__all__ = ["ConstantWrench", "HandPush", "Mark", "NoOperator", "Operator", "ScriptedOperator",
+           "vector3"]
 
 Array = NDArray[np.float64]
 
@@ -93,6 +94,45 @@ class ConstantWrench:
     def wrench(self, t: float, tcp_position_base: Array) -> Array:
         """The wrench while t_start <= t < t_end, else zero."""
         return self._w if self.t_start <= t < self.t_end else np.zeros(6)
+
+
+class HandPush:
+    """A force on the tool that changes while the simulation runs: a person pushing with the
+    mouse on a pendant (:mod:`leadthrough.pendant`).
+
+    :meth:`push` may be called from any thread. It builds a new wrench and swaps the reference,
+    which the simulator reads whole each step (a reference assignment is atomic in CPython):
+    no step sees half a force, and the simulation never waits for the caller.
+    """
+
+    def __init__(self) -> None:
+        self._w: Array = np.zeros(6)
+
+    def push(self, force_base: ArrayLike) -> None:
+        """Apply a force at the TCP from the next physics step on.
+
+        Args:
+            force_base: [Fx, Fy, Fz] in the base frame [N].
+
+        Raises:
+            SimulationError: Not 3 finite numbers.
+        """
+        w = np.zeros(6)
+        w[:3] = vector3(force_base, "force_base")
+        self._w = w
+
+    def release(self) -> None:
+        """Let go: no force from the next step on."""
+        self._w = np.zeros(6)
+
+    @property
+    def force_base(self) -> Array:
+        """The force applied now [N], shape (3,) (a copy)."""
+        return self._w[:3].copy()
+
+    def wrench(self, t: float, tcp_position_base: Array) -> Array:
+        """The pushed wrench at the TCP, base frame [N, N·m], shape (6,)."""
+        return self._w
 
 
 def vector3(value: ArrayLike, name: str) -> Array:
