@@ -18,6 +18,7 @@ from leadthrough.cli import (
     demo_cmd,
     guide_cmd,
     payload_cmd,
+    pendant_cmd,
     robots_cmd,
     teach_cmd,
 )
@@ -36,6 +37,7 @@ _EPILOG = """examples:
   leadthrough payload loaded.parquet --robot er20 --params params.toml
   leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
+  leadthrough pendant                   the live browser pendant on the simulated robot
 """
 
 
@@ -64,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     payload_cmd.register(sub)
     guide_cmd.register(sub)
     teach_cmd.register(sub)
+    pendant_cmd.register(sub)
     demo_cmd.register(sub)
     return parser
 

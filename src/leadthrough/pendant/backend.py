@@ -167,16 +167,30 @@ class LoopSnapshot:
         return float(np.linalg.norm(self.twist_base[:3]))
 
 
+#: How a fault's value and index read (:class:`~leadthrough.control.safety_states.Fault`).
+_FAULT_UNITS: dict[Fault, str] = {
+    Fault.POSITION_RANGE: "rad", Fault.CURRENT_RANGE: "A", Fault.FOLLOWING_ERROR: "rad",
+    Fault.JOINT_LIMIT: "rad", Fault.WORKSPACE: "m", Fault.SINGULARITY: "μ",
+    Fault.TRACKING: "m+rad"}
+
+
 def describe(event: Event | None) -> str:
-    """A transition in words: ``"DEADMAN_RELEASED"``, ``"FOLLOWING_ERROR (joint 3, 0.051)"``."""
+    """A transition in words: ``"DEADMAN_RELEASED"``, ``"FOLLOWING_ERROR: joint 3, 0.0512
+    rad"``, ``"COLLISION: force 163 N"``."""
     if event is None:
         return ""
-    if event.fault == Fault.NONE:
+    fault = event.fault
+    if fault == Fault.NONE:
         return event.cause.name
-    where = f"joint {event.index + 1}, " if event.index >= 0 else ""
-    value = "" if math.isnan(event.value) else f"{event.value:.4g}"
-    detail = f" ({where}{value})" if where or value else ""
-    return f"{event.fault.name}{detail}"
+    value = "" if math.isnan(event.value) else f"{event.value:.3g}"
+    if fault == Fault.COLLISION:
+        what = ("force", "N") if event.index == 0 else ("torque", "N·m")
+        return f"{fault.name}: {what[0]} {value} {what[1]}"
+    unit = _FAULT_UNITS.get(fault)
+    if unit is None or not value:
+        return fault.name
+    where = f"joint {event.index + 1}, " if event.index >= 0 and unit in ("rad", "A") else ""
+    return f"{fault.name}: {where}{value} {unit}"
 
 
 @dataclass
