@@ -11,11 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from leadthrough.drivers.protocol import Driver
-from leadthrough.errors import ControlError
+from leadthrough.errors import ControlError, LeadthroughError
 from leadthrough.identification.params_file import load_params
-from leadthrough.pendant.app import Pendant
 from leadthrough.pendant.backend import LiveSession
-from leadthrough.pendant.simulated import simulated_session
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.session.loop_config import LoopConfig, build_loop
 
@@ -92,6 +90,13 @@ def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession,
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough pendant``."""
+    try:  # the web stack is an extra: the rest of the CLI works without it
+        from leadthrough.pendant.app import Pendant
+        from leadthrough.pendant.simulated import simulated_session
+    except ImportError as e:
+        raise LeadthroughError(f"the pendant's web stack is not installed ({e.name})",
+                               field="extra", value="pendant",
+                               expected="pip install 'leadthrough[pendant]'") from e
     robot = load_robot(args.robot)
     hand = None
     if args.driver is not None:

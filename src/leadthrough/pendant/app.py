@@ -188,8 +188,8 @@ class Pendant:
             self.controls.status.content = status_html(snap, extras)
             if snap is None:
                 return
-            tcp = self.scene.update(snap.q, snap.wrench_base[:3], extras.push_n)
-            self._push_from_handle(tcp)
+            self.scene.update(snap.q, snap.wrench_base[:3], extras.push_n)
+            self._push_from_handle(snap.settings.virtual_friction.mass[0])
             self.controls.sync(snap.settings, extras.armed, extras.device)
             if self.points.sync(snap.marks):
                 self._show_points()
@@ -199,12 +199,13 @@ class Pendant:
                     self._notices.append(f"{notice.level}: {notice.text}")
             self.controls.messages.content = "\n\n".join(self._notices)
 
-    def _push_from_handle(self, tcp: np.ndarray) -> None:
+    def _push_from_handle(self, mass_kg: float) -> None:
+        """While the handle is dragged the hand holds it through the spring; let go after."""
         if self.hand is None:
             return
         dragging, ended, handle = self.scene.drag_state()
         if dragging:
-            self.hand.push(self.spring.force(handle, tcp))
+            self.spring.hold(self.hand, handle, mass_kg)
         elif ended:
             self.hand.release()
 

@@ -1,11 +1,14 @@
-"""Pushing the simulated robot with the mouse: a spring from the tool to a handle.
+"""Pushing the simulated robot with the mouse: a hand holding the tool through a spring.
 
 The pendant shows a handle (a translation gizmo) at the tool. Dragging it away stretches a
-spring between the handle and the TCP: the force on the tool is ``k·(p_handle − p_tcp)``,
-``k`` in N per cm, its magnitude capped. As the arm follows, the TCP closes on the handle and the
-force falls, until the virtual friction holds (eq. 33: δ/k short of the handle, 1.5 cm with
-15 N and 10 N/cm), the way a hand pulling on a tool would feel. The force goes into the
-simulated plant at the TCP (:class:`~leadthrough.sim.operator.HandPush`); the estimator sees it
+spring and a damper between the handle and the TCP: the force on the tool is
+``k·(p_handle − p_tcp) − c·ṗ_tcp``, ``k`` in N per cm, its magnitude capped. The simulated hand
+(:class:`~leadthrough.sim.operator.HandPush`) evaluates it every physics step (1 kHz); the page
+only moves the handle. As the arm follows, the TCP closes on the handle and the force falls
+until the virtual friction holds (eq. 33: δ/k short of the handle, 1.5 cm with 15 N and
+10 N/cm), the way a hand pulling on a tool feels. The damper is set for a damping ratio ζ with
+the virtual mass in force, ``c = 2ζ·√(k·M)``: a spring on a mass alone would carry the arm past
+the handle and back. The force goes into the simulated plant at the TCP; the estimator sees it
 only through the motor currents.
 
 The cap (80 N by default) stays below the controller's collision threshold (150 N,
@@ -32,7 +35,13 @@ class Hand(Protocol):
     """What pushes the simulated tool (:class:`leadthrough.sim.operator.HandPush`)."""
 
     def push(self, force_base: ArrayLike) -> None:
-        """Apply ``force_base`` [N], shape (3,), at the TCP from the next step on."""
+        """A constant force [N], shape (3,), at the TCP from the next step on."""
+        ...
+
+    def hold(self, handle_base: ArrayLike, stiffness: float, damping: float,
+             max_force: float) -> None:
+        """Grip the tool through a spring (k [N/m]) and a damper (c [N·s/m]) on a handle
+        [m], the force capped [N]."""
         ...
 
     def release(self) -> None:
@@ -47,15 +56,17 @@ class Hand(Protocol):
 
 @dataclass(frozen=True)
 class PushSpring:
-    """The spring between the mouse's handle and the tool.
+    """The spring and damper between the mouse's handle and the tool.
 
     Attributes:
         newton_per_cm: Stiffness k [N/cm].
         max_force_n: Cap on the force's magnitude [N].
+        damping_ratio: ζ of the spring on the virtual mass.
     """
 
     newton_per_cm: float = 10.0
     max_force_n: float = 80.0
+    damping_ratio: float = 0.7
 
     def __post_init__(self) -> None:
         check_fields("push", self, [
@@ -63,17 +74,20 @@ class PushSpring:
              "finite and > 0 N/cm"),
             ("max_force_n", math.isfinite(self.max_force_n) and self.max_force_n > 0,
              "finite and > 0 N"),
+            ("damping_ratio", math.isfinite(self.damping_ratio) and self.damping_ratio >= 0,
+             "finite and >= 0"),
         ], ControlError)
 
-    def force(self, handle_m: ArrayLike, tcp_m: ArrayLike) -> Array:
-        """The force on the tool [N], shape (3,), base frame.
+    @property
+    def stiffness(self) -> float:
+        """k [N/m]."""
+        return 100.0 * self.newton_per_cm
 
-        Args:
-            handle_m: Handle position [m], shape (3,).
-            tcp_m: TCP position [m], shape (3,).
-        """
-        f = 100.0 * self.newton_per_cm * (np.asarray(handle_m, float) - np.asarray(tcp_m, float))
-        norm = float(np.linalg.norm(f))
-        if not math.isfinite(norm):
-            return np.zeros(3)
-        return f * (self.max_force_n / norm) if norm > self.max_force_n else f
+    def damping(self, mass_kg: float) -> float:
+        """c = 2ζ·√(k·M) for the virtual mass ``mass_kg`` [kg] [N·s/m]."""
+        return 2.0 * self.damping_ratio * math.sqrt(self.stiffness * max(mass_kg, 0.0))
+
+    def hold(self, hand: Hand, handle_m: ArrayLike, mass_kg: float) -> None:
+        """Grip ``hand`` on the handle at ``handle_m`` [m] with this spring."""
+        hand.hold(np.asarray(handle_m, dtype=float), self.stiffness, self.damping(mass_kg),
+                  self.max_force_n)

@@ -65,21 +65,15 @@ class SceneView:
             self.handle = scene.add_transform_controls(
                 "/push_handle", scale=0.2, line_width=4.0, disable_rotations=True,
                 depth_test=False)
-            self.handle.on_drag_start(lambda _: self._drag(True))
-            self.handle.on_drag_end(lambda _: self._drag(False))
-            self.handle.on_update(lambda _: self._moved())
+            self.handle.on_update(self._dragged)
 
-    def _drag(self, on: bool) -> None:
+    async def _dragged(self, event: Any) -> None:
+        """A drag's start, moves and end, in order (viser awaits ``async`` callbacks on its
+        event loop, one after the other; plain ones may run out of order on a pool)."""
         with self._lock:
-            self.dragging = on
-            self._ended = self._ended or not on
-            if on and self.handle is not None:
-                self.handle_m = np.asarray(self.handle.position, dtype=float)
-
-    def _moved(self) -> None:
-        if self.handle is not None:
-            with self._lock:
-                self.handle_m = np.asarray(self.handle.position, dtype=float)
+            self.dragging = event.phase != "end"
+            self._ended = self._ended or event.phase == "end"
+            self.handle_m = np.asarray(event.target.position, dtype=float)
 
     def drag_state(self) -> tuple[bool, bool, Array]:
         """(dragging, a drag ended since the last call, handle position [m]) as of now."""
@@ -117,7 +111,7 @@ class SceneView:
         if len(self._path) >= 2 and count != len(self._path) and now - sent_at >= 1 / PATH_HZ:
             pts = np.asarray(self._path)
             self._scene.add_line_segments("/tcp_path", np.stack([pts[:-1], pts[1:]], axis=1),
-                                          _PATH, line_width=3.0)
+                                          _PATH, thickness=0.004)
             self._path_sent = (len(self._path), now)
 
     def show_points(self, points: Sequence[MarkedPoint]) -> None:
@@ -137,7 +131,7 @@ class SceneView:
         if "P1" in ends and "P2" in ends:
             line = np.stack([ends["P1"], ends["P2"]])[None]
             self._points.append(self._scene.add_line_segments("/points/line", line, _GREEN,
-                                                              line_width=5.0))
+                                                              thickness=0.008))
 
 
 def _arrow(start: Array, force_n: Array) -> Array:

@@ -48,7 +48,8 @@ class SimulatedPendantSession(NamedTuple):
 def simulated_session(robot: Robot, params: ParamsFile | None = None, *,
                       seed: int | None = None, mass_kg: float = PUSH_MASS_KG,
                       guiding: GuidingConfig | None = None,
-                      record_s: float = 600.0) -> SimulatedPendantSession:
+                      record_s: float = 600.0,
+                      paced: bool = True) -> SimulatedPendantSession:
     """A live session on the simulated robot.
 
     Args:
@@ -59,6 +60,7 @@ def simulated_session(robot: Robot, params: ParamsFile | None = None, *,
         mass_kg: Translational virtual mass [kg] (clamped to the operator limits later on).
         guiding: Controller settings (default: Table IV's with ``mass_kg``).
         record_s: Length of the recording kept for the export [s].
+        paced: Run in real time (False: as fast as the machine allows, for tests).
 
     Raises:
         DataError: No shipped parameters for this robot, or a ``seed`` other than the
@@ -82,5 +84,6 @@ def simulated_session(robot: Robot, params: ParamsFile | None = None, *,
                                    "params_method": params.method,
                                    "controller": parts.controller.config.controller}
     live = LiveSession(driver, parts, robot, record_s=record_s,
-                       applied_wrench=lambda: sim.applied_wrench, settings=settings)
+                       applied_wrench=lambda: sim.applied_wrench, settings=settings,
+                       paced=paced)
     return SimulatedPendantSession(live, hand, params, note or params.method)
