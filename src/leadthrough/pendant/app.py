@@ -67,8 +67,8 @@ class Pendant:
         self.server = viser.ViserServer(host=bind, port=port, verbose=False)
         self.server.gui.configure_theme(control_width="large", show_logo=False,
                                         show_share_button=False, brand_color=(236, 112, 20))
-        self.server.initial_camera.position = (1.9, -1.7, 1.35)
-        self.server.initial_camera.look_at = (0.55, 0.0, 0.6)
+        self.server.initial_camera.position = (1.95, -0.6, 1.3)
+        self.server.initial_camera.look_at = (0.55, 0.12, 0.6)
         self.scene = SceneView(self.server, self.robot, hand is not None)
         self.controls = Controls(self.server.gui, self, live.parts.controller.config,
                                  hand is not None)
