@@ -166,7 +166,9 @@ def test_snapshots_are_copies(sim: SimulatedPendantSession) -> None:
     sim.live.send(SetEnable(True))
     until(sim.live, lambda s: s.speed > 0.0, 3.0, "motion")
     assert np.array_equal(snap.q, q)
-    assert sim.live.period_us().size > 0
+    times = sim.live.period_times(50)
+    assert times.work_us.size == 50 and times.controller_cycle.sum() == 5
+    assert np.isnan(times.done_us).all()          # not paced
 
 
 # --------------------------------------------------------------------- the recording ring

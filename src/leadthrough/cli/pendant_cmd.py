@@ -66,6 +66,9 @@ def register(sub: Any) -> None:
                    help="folder of the exports (default: leadthrough-pendant)")
     p.add_argument("--record-s", type=float, default=600.0, metavar="S",
                    help="seconds of the session kept for the export (default 600)")
+    p.add_argument("--rt-priority", type=int, default=None, metavar="P",
+                   help="run the loop's thread under SCHED_FIFO at priority P (1-99; Linux, "
+                        "needs root or CAP_SYS_NICE); see the README on the loop's isolation")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)
@@ -85,7 +88,8 @@ def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession,
     params = load_params(args.params, robot)
     driver = factory(robot, args.host)
     parts = build_loop(robot, params, LoopConfig(), driver.dt)
-    return LiveSession(driver, parts, robot), f"{args.params} ({params.method})"
+    return (LiveSession(driver, parts, robot, rt_priority=args.rt_priority),
+            f"{args.params} ({params.method})")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -103,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
         live, note = _robot_session(args, robot)
     else:
         params = None if args.params is None else load_params(args.params, robot)
-        sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s)
+        sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
+                                rt_priority=args.rt_priority)
         live, hand, note = sim.live, sim.hand, sim.params_note
     print("starting the loop (loading the compiled code) ...", flush=True)
     live.start()

@@ -30,8 +30,16 @@ from typing import Any
 import numpy as np
 import viser
 
+from leadthrough.control.safety import State
 from leadthrough.errors import LeadthroughError
-from leadthrough.pendant.backend import Adjust, ClearFault, LiveSession, MarkPoint, SetEnable
+from leadthrough.pendant.backend import (
+    Adjust,
+    ClearFault,
+    LiveSession,
+    LoopSnapshot,
+    MarkPoint,
+    SetEnable,
+)
 from leadthrough.pendant.controls import Controls
 from leadthrough.pendant.export import export_taught
 from leadthrough.pendant.push import Hand, PushSpring
@@ -39,10 +47,12 @@ from leadthrough.pendant.scene_view import SceneView
 from leadthrough.pendant.status_view import StatusExtras, status_html
 from leadthrough.pendant.taught_points import TaughtPoints
 
-__all__ = ["UI_HZ", "Pendant"]
+__all__ = ["PANEL_HZ", "UI_HZ", "Pendant", "wait_for_clients"]
 
-#: Page updates per second.
+#: Updates of the 3D view per second.
 UI_HZ = 20.0
+#: Updates of the panels (status, controls, messages) per second, besides changes of state.
+PANEL_HZ = 5.0
 
 
 class Pendant:
@@ -77,6 +87,8 @@ class Pendant:
         self._lock = threading.Lock()
         self._notices: deque[str] = deque(maxlen=6)
         self._seen_notice = 0
+        self._panels_at = 0.0
+        self._panels_state: tuple[State, str | None] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._refresh_loop, name="leadthrough-pendant",
                                         daemon=True)
@@ -181,23 +193,39 @@ class Pendant:
 
     def refresh(self) -> None:
         """Bring the page up to the loop's latest snapshot (called :data:`UI_HZ` times a
-        second by the pendant's thread)."""
+        second by the pendant's thread): the 3D view every time, the panels at
+        :data:`PANEL_HZ` or on a change of state. Nothing is done while no browser is
+        connected (the pendant's work shares the interpreter with the loop's thread)."""
+        if not self.server.get_clients():
+            return
         snap = self.live.snapshot()
         extras = self._extras()
+        now = time.monotonic()
+        state = None if snap is None else (snap.state, snap.error)
+        panels = now - self._panels_at >= 1.0 / PANEL_HZ or state != self._panels_state
         with self.server.atomic():
-            self.controls.status.content = status_html(snap, extras)
+            if panels:
+                self._panels_at, self._panels_state = now, state
+                self.controls.status.content = status_html(snap, extras)
             if snap is None:
                 return
             self.scene.update(snap.q, snap.wrench_base[:3], extras.push_n)
             self._push_from_handle(snap.settings.virtual_friction.mass[0])
-            self.controls.sync(snap.settings, extras.armed, extras.device)
             if self.points.sync(snap.marks):
                 self._show_points()
-            for notice in snap.notices:
-                if notice.number > self._seen_notice:
-                    self._seen_notice = notice.number
-                    self._notices.append(f"{notice.level}: {notice.text}")
-            self.controls.messages.content = "\n\n".join(self._notices)
+            if panels:
+                self.controls.sync(snap.settings, extras.armed, extras.device)
+                self._show_notices(snap)
+
+    def _show_notices(self, snap: LoopSnapshot) -> None:
+        """The loop's new notices and the page's own, latest last."""
+        for notice in snap.notices:
+            if notice.number > self._seen_notice:
+                self._seen_notice = notice.number
+                self._notices.append(f"{notice.level}: {notice.text}")
+        text = "\n\n".join(self._notices)
+        if self.controls.messages.content != text:
+            self.controls.messages.content = text
 
     def _push_from_handle(self, mass_kg: float) -> None:
         """While the handle is dragged the hand holds it through the spring; let go after."""
@@ -215,7 +243,7 @@ class Pendant:
         self.scene.show_points(points)
 
     def _extras(self) -> StatusExtras:
-        periods = self.live.period_us()
+        periods = self.live.period_times().work_us
         stats = (float(np.median(periods)), float(periods.max())) if periods.size else (0., 0.)
         return StatusExtras(armed=self._armed, device=self._device,
                             push_n=None if self.hand is None else self.hand.force_base,

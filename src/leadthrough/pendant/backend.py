@@ -30,11 +30,13 @@ This module stands in for the loop's own request channel (issue 26: ``LoopReques
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,12 +53,10 @@ from leadthrough.session.loop_config import LoopParts
 from leadthrough.session.record import SessionLog
 
 __all__ = ["Adjust", "ClearFault", "LiveSession", "LoopSnapshot", "MarkPoint", "MarkedPoint",
-           "Notice", "Request", "SetEnable"]
+           "Notice", "PeriodTimes", "Request", "SetEnable"]
 
 Array = NDArray[np.float64]
 
-#: Servo periods whose compute time :meth:`LiveSession.period_us` returns.
-PERIOD_WINDOW = 1000
 #: How far a simulated loop may fall behind the wall clock before it stops catching up [s].
 MAX_LAG_S = 0.05
 
@@ -93,6 +93,23 @@ class Adjust:
 
 #: What the interface may ask of the loop.
 Request = SetEnable | ClearFault | MarkPoint | Adjust
+
+
+class PeriodTimes(NamedTuple):
+    """Timing of consecutive servo periods of a live loop.
+
+    Attributes:
+        work_us: The loop's work of each period [µs]: estimator, controller cycle (every
+            ``every``-th period) and interpolation, as ``run_session`` measures it.
+        done_us: From the period's scheduled start (the paced loop's deadline) to the end of
+            its work [µs]: the wake-up, the driver's step and read, and the work; NaN when the
+            loop is not paced.
+        controller_cycle: Whether the period ran the controller cycle.
+    """
+
+    work_us: NDArray[np.float64]
+    done_us: NDArray[np.float64]
+    controller_cycle: NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -216,11 +233,17 @@ class LiveSession:
         settings: Recorded in the session file.
         paced: Pace to the wall clock; default: when the driver is simulated (a real driver's
             ``step`` waits for the robot).
+        timing_window: Servo periods whose timing is kept (:meth:`period_times`).
+        rt_priority: Run the loop's thread under ``SCHED_FIFO`` at this priority (1–99; Linux,
+            needs the privilege to, e.g. root or ``CAP_SYS_NICE``): the operating system then
+            runs it before any ordinary process or thread. None: ordinary scheduling. If the
+            system refuses, the loop runs anyway and says so in a notice.
     """
 
     def __init__(self, driver: Driver, parts: LoopParts, robot: Robot, *,
                  record_s: float = 600.0, applied_wrench: Callable[[], Array] | None = None,
-                 settings: dict[str, object] | None = None, paced: bool | None = None) -> None:
+                 settings: dict[str, object] | None = None, paced: bool | None = None,
+                 timing_window: int = 1000, rt_priority: int | None = None) -> None:
         self.robot, self.driver, self.parts = robot, driver, parts
         every = round(parts.controller.config.dt / driver.dt)
         if every < 1 or abs(every * driver.dt - parts.controller.config.dt) > 1e-9:
@@ -229,6 +252,7 @@ class LiveSession:
                                expected=f"k × {driver.dt} s")
         self.every = every
         self.paced = driver.simulated if paced is None else paced
+        self.rt_priority = rt_priority
         self.settings = dict(settings or {})
         self._loop = ServoPeriods(driver, parts.estimator, parts.controller,
                                   parts.interpolator, every, self._deadman, applied_wrench)
@@ -242,7 +266,8 @@ class LiveSession:
         self._snapshot: LoopSnapshot | None = None
         self._thread = threading.Thread(target=self._run, name="leadthrough-loop", daemon=True)
         self._error: str | None = None
-        self._period_us = np.zeros(PERIOD_WINDOW)
+        self._work_us = np.zeros(max(1, timing_window))
+        self._done_us = np.full(max(1, timing_window), np.nan)
         #: Servo periods run so far.
         self.periods_run = 0
 
@@ -277,10 +302,14 @@ class LiveSession:
         """Queue a request; the loop applies it at its next controller cycle."""
         self._requests.append(request)
 
-    def period_us(self) -> NDArray[np.float64]:
-        """Compute times of the last (up to) :data:`PERIOD_WINDOW` servo periods [µs] (a
-        copy; estimator, controller cycle and interpolation, as ``run_session`` measures)."""
-        return self._period_us[:min(self.periods_run, PERIOD_WINDOW)].copy()
+    def period_times(self, last: int | None = None) -> PeriodTimes:
+        """Timing of the last ``last`` servo periods (default and at most: the timing window),
+        oldest first (copies; the newest period may be missing, being written)."""
+        run, size = self.periods_run, self._work_us.size
+        count = min(run, size) if last is None else min(run, size, last)
+        idx = np.arange(run - count, run)
+        k = idx % size
+        return PeriodTimes(self._work_us[k], self._done_us[k], idx % self.every == 0)
 
     def snapshot(self) -> LoopSnapshot | None:
         """The latest snapshot (None before the first controller cycle)."""
@@ -301,6 +330,7 @@ class LiveSession:
 
     def _run(self) -> None:
         try:
+            self._schedule()
             self._periods()
         except LeadthroughError as e:
             self._error = str(e)
@@ -310,6 +340,19 @@ class LiveSession:
             self._started.set()
             if self._snapshot is not None:
                 self._snapshot = _with_error(self._snapshot, self._error)
+
+    def _schedule(self) -> None:
+        """Real-time scheduling of this thread, if asked for (see ``rt_priority``)."""
+        if self.rt_priority is None:
+            return
+        try:  # on Linux, pid 0 is the calling thread
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
+        except (AttributeError, OSError, ValueError) as e:
+            self._notice("warning", f"no real-time priority for the loop ({e}); it runs "
+                                    "with ordinary scheduling")
+        else:
+            self._notice("info", f"the loop runs under SCHED_FIFO, priority "
+                                 f"{self.rt_priority}")
 
     def _periods(self) -> None:
         """The loop: periods until stopped (and then at rest), requests at cycle starts."""
@@ -330,7 +373,11 @@ class LiveSession:
             cycle = i % every == 0
             if cycle and self._requests:
                 self._apply_requests(t_loop)
-            self._period_us[i % self._period_us.size] = loop.period(i, t_loop, deadline)
+            work = loop.period(i, t_loop, deadline)
+            k = i % self._work_us.size
+            self._work_us[k] = work
+            if deadline is not None:
+                self._done_us[k] = (time.perf_counter() - deadline) * 1e6
             self.periods_run = i + 1
             if cycle:
                 self.recording.store(t_loop)

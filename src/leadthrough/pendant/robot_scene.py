@@ -35,6 +35,8 @@ __all__ = ["LinkMesh", "RobotScene", "link_meshes"]
 
 Array = NDArray[np.float64]
 
+#: Joint motion below which the drawn robot is not moved again [rad] (0.01 mm at 1 m).
+SAME_Q_RAD = 1e-5
 #: Colour of generated links (RGBA 0–255): an industrial orange, and dark joint housings.
 _LINK_RGBA = (236, 112, 20, 255)
 _JOINT_RGBA = (60, 60, 64, 255)
@@ -168,6 +170,7 @@ class RobotScene:
         self._model = robot.model
         self._data = robot.model.createData()
         self._nodes = []
+        self._shown: Array | None = None
         for part in link_meshes(robot):
             node = scene.add_mesh_trimesh(f"{root}/{part.link}", part.mesh)
             self._nodes.append((self._model.getFrameId(part.link, pin.BODY), node))
@@ -177,8 +180,14 @@ class RobotScene:
 
         Returns:
             The TCP pose, shape (4, 4) [m] (Pinocchio's forward kinematics of ``q``).
+
+        The scene is only sent new poses when a joint moved by :data:`SAME_Q_RAD` or more
+        since the last ones (every update is Python work in the loop's process).
         """
         pin.framesForwardKinematics(self._model, self._data, q)
+        if self._shown is not None and np.max(np.abs(q - self._shown)) < SAME_Q_RAD:
+            return np.asarray(self._data.oMf[self.robot.tcp_frame_id].homogeneous)
+        self._shown = np.array(q, dtype=float)
         for frame_id, node in self._nodes:
             placement = self._data.oMf[frame_id]
             quat = pin.Quaternion(placement.rotation)

@@ -28,6 +28,9 @@ Array = NDArray[np.float64]
 
 #: Length of the force arrows per newton [m/N] (100 N: 0.4 m).
 FORCE_M_PER_N = 0.004
+#: Changes below which nothing is sent again: TCP position [m], forces [N] (the page's
+#: updates are Python work in the loop's process).
+SAME_M, SAME_N = 1e-4, 0.5
 #: Largest rate at which the TCP path is re-sent [Hz].
 PATH_HZ = 4.0
 #: TCP positions kept for the path (the oldest dropped), and the spacing that adds one [m].
@@ -59,7 +62,8 @@ class SceneView:
         self._lock = threading.Lock()
         #: Whether the push handle is being dragged, and its position then [m].
         self.dragging, self.handle_m, self._ended = False, np.zeros(3), False
-        self.tcp_m = np.zeros(3)
+        self.tcp_m = np.full(3, np.inf)
+        self._forces = np.full(6, np.inf)
         self.handle = None
         if simulated:
             self.handle = scene.add_transform_controls(
@@ -93,11 +97,15 @@ class SceneView:
             The TCP position [m], shape (3,).
         """
         tcp = self.robot_view.show(q)[:3, 3].copy()
+        moved = np.linalg.norm(tcp - self.tcp_m) >= SAME_M
         self.tcp_m = tcp
-        self._force.points = _arrow(tcp, force_n)
-        if self._push is not None and push_n is not None:
-            self._push.points = _arrow(tcp, push_n)
-        if self.handle is not None and not self.dragging:
+        forces = np.concatenate([force_n, push_n if push_n is not None else np.zeros(3)])
+        if moved or np.max(np.abs(forces - self._forces)) >= SAME_N:
+            self._forces = forces
+            self._force.points = _arrow(tcp, force_n)
+            if self._push is not None and push_n is not None:
+                self._push.points = _arrow(tcp, push_n)
+        if self.handle is not None and not self.dragging and moved:
             self.handle.position = tcp
         self._extend_path(tcp)
         return tcp

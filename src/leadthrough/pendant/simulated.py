@@ -49,7 +49,8 @@ def simulated_session(robot: Robot, params: ParamsFile | None = None, *,
                       seed: int | None = None, mass_kg: float = PUSH_MASS_KG,
                       guiding: GuidingConfig | None = None,
                       record_s: float = 600.0,
-                      paced: bool = True) -> SimulatedPendantSession:
+                      paced: bool = True, timing_window: int = 1000,
+                      rt_priority: int | None = None) -> SimulatedPendantSession:
     """A live session on the simulated robot.
 
     Args:
@@ -61,6 +62,8 @@ def simulated_session(robot: Robot, params: ParamsFile | None = None, *,
         guiding: Controller settings (default: Table IV's with ``mass_kg``).
         record_s: Length of the recording kept for the export [s].
         paced: Run in real time (False: as fast as the machine allows, for tests).
+        timing_window: Servo periods whose timing the session keeps.
+        rt_priority: Real-time priority of the loop's thread (see :class:`LiveSession`).
 
     Raises:
         DataError: No shipped parameters for this robot, or a ``seed`` other than the
@@ -85,5 +88,5 @@ def simulated_session(robot: Robot, params: ParamsFile | None = None, *,
                                    "controller": parts.controller.config.controller}
     live = LiveSession(driver, parts, robot, record_s=record_s,
                        applied_wrench=lambda: sim.applied_wrench, settings=settings,
-                       paced=paced)
+                       paced=paced, timing_window=timing_window, rt_priority=rt_priority)
     return SimulatedPendantSession(live, hand, params, note or params.method)
