@@ -20,9 +20,10 @@ Per phase it prints, for every servo period and for the controller-cycle periods
 period **work** (estimator + controller cycle + interpolation, as ``run_session`` measures it)
 median / p99 / p99.9 / max [µs], and **done**: from the period's scheduled start to the end of its
 work (waking up, the simulated robot's step, the work: where a held interpreter lock or a busy
-CPU would show) median / p99 / max [µs], with periods later than one period. Noise: the two loop-only
-phases are cut into 1 s blocks; a phase differs "beyond noise" when its work median, work p99,
-done p99 or share of late periods lies outside the range of that figure over those blocks.
+CPU would show) median / p99 / max [µs], with periods later than one period. Noise: the two
+loop-only phases are cut into 1 s blocks; a phase differs "beyond noise" when its work median,
+work p99, done p99 or share of late periods lies outside the range of that figure over those
+blocks.
 The machine's load and the process's memory are printed too (a frozen browser must not make the
 server hoard messages without bound).
 
