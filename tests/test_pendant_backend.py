@@ -25,12 +25,12 @@ from leadthrough.pendant.backend import (
     MarkedPoint,
     MarkPoint,
     SetEnable,
-    describe,
 )
 from leadthrough.pendant.export import POINTS_FORMAT, export_taught
 from leadthrough.pendant.live_recording import LiveRecording
 from leadthrough.pendant.simulated import SimulatedPendantSession, simulated_session
 from leadthrough.pendant.taught_points import TaughtPoints
+from leadthrough.pendant.transitions import describe
 from leadthrough.robot import Robot
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.record import load_session

@@ -29,7 +29,6 @@ This module stands in for the loop's own request channel (issue 26: ``LoopReques
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
@@ -42,11 +41,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig
-from leadthrough.control.safety import Event, Fault, State
+from leadthrough.control.safety import Fault, State
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError, LeadthroughError
 from leadthrough.estimation.estimator import EstimatorStatus
 from leadthrough.pendant.live_recording import LiveRecording
+from leadthrough.pendant.transitions import describe
 from leadthrough.robot.description import Robot
 from leadthrough.session.loop import ServoPeriods
 from leadthrough.session.loop_config import LoopParts
@@ -182,32 +182,6 @@ class LoopSnapshot:
     def speed(self) -> float:
         """Commanded TCP speed ‖v‖ [m/s]."""
         return float(np.linalg.norm(self.twist_base[:3]))
-
-
-#: How a fault's value and index read (:class:`~leadthrough.control.safety_states.Fault`).
-_FAULT_UNITS: dict[Fault, str] = {
-    Fault.POSITION_RANGE: "rad", Fault.CURRENT_RANGE: "A", Fault.FOLLOWING_ERROR: "rad",
-    Fault.JOINT_LIMIT: "rad", Fault.WORKSPACE: "m", Fault.SINGULARITY: "μ",
-    Fault.TRACKING: "m+rad"}
-
-
-def describe(event: Event | None) -> str:
-    """A transition in words: ``"DEADMAN_RELEASED"``, ``"FOLLOWING_ERROR: joint 3, 0.0512
-    rad"``, ``"COLLISION: force 163 N"``."""
-    if event is None:
-        return ""
-    fault = event.fault
-    if fault == Fault.NONE:
-        return event.cause.name
-    value = "" if math.isnan(event.value) else f"{event.value:.3g}"
-    if fault == Fault.COLLISION:
-        what = ("force", "N") if event.index == 0 else ("torque", "N·m")
-        return f"{fault.name}: {what[0]} {value} {what[1]}"
-    unit = _FAULT_UNITS.get(fault)
-    if unit is None or not value:
-        return fault.name
-    where = f"joint {event.index + 1}, " if event.index >= 0 and unit in ("rad", "A") else ""
-    return f"{fault.name}: {where}{value} {unit}"
 
 
 @dataclass

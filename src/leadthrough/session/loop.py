@@ -312,9 +312,8 @@ class _Buffers:
 
 
 #: One servo period at a time, the preallocated recording and the transition events of
-#: :func:`run_session`, for a
-#: runner that drives the periods itself (the pendant's live session,
-#: :mod:`leadthrough.pendant.backend`).
+#: :func:`run_session`, for a runner that drives the periods itself (the pendant's live
+#: session, :mod:`leadthrough.pendant.backend`).
 ServoPeriods = _Loop
 SessionBuffers = _Buffers
 transition_event = _transition
