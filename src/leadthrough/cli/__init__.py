@@ -19,6 +19,7 @@ from leadthrough.cli import (
     emulate_cmd,
     guide_cmd,
     payload_cmd,
+    pendant_cmd,
     robots_cmd,
     teach_cmd,
 )
@@ -38,6 +39,7 @@ _EPILOG = """examples:
   leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
   leadthrough emulate ur-rtde --robot ur5 --seed 1   an emulated controller on its real protocol
+  leadthrough pendant                   the live browser pendant on the simulated robot
 """
 
 
@@ -66,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     payload_cmd.register(sub)
     guide_cmd.register(sub)
     teach_cmd.register(sub)
+    pendant_cmd.register(sub)
     demo_cmd.register(sub)
     emulate_cmd.register(sub)
     return parser
