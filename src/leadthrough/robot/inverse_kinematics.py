@@ -159,8 +159,8 @@ def _seeds(robot: Robot, target: pin.SE3, box: tuple[Array, Array],
 
 
 def solve_pose(robot: Robot, target: pin.SE3, box: tuple[Array, Array],
-               accept: Callable[[Array], bool], *, starts: int = 6, samples: int = 400,
-               seed: int = 0) -> list[Array]:
+               accept: Callable[[Array], bool], *, starts: int = 6, max_starts: int = 30,
+               samples: int = 400, seed: int = 0) -> list[Array]:
     """Every distinct joint solution of a pose that ``accept`` takes, found from seeds.
 
     Args:
@@ -170,7 +170,8 @@ def solve_pose(robot: Robot, target: pin.SE3, box: tuple[Array, Array],
             with the turn windows of the configuration (a solution is moved by whole turns
             into it).
         accept: Predicate on joint positions: the configuration matches.
-        starts: Newton runs (from the best seeds).
+        starts: Newton runs (from the best seeds) when one of them finds a solution.
+        max_starts: Newton runs at most, while none has found one.
         samples: Candidate seeds drawn from the box.
         seed: Random seed (the search is deterministic for a given seed).
 
@@ -182,7 +183,9 @@ def solve_pose(robot: Robot, target: pin.SE3, box: tuple[Array, Array],
     found: list[Array] = []
     data = robot.model.createData()
     mid = 0.5 * (lo + hi)
-    for q0 in _seeds(robot, target, (lo, hi), accept, rng, starts, samples):
+    for run, q0 in enumerate(_seeds(robot, target, (lo, hi), accept, rng, max_starts, samples)):
+        if run >= starts and found:
+            break
         res = newton_pose(robot, target, q0, data=data)
         if not res.converged:
             continue

@@ -31,7 +31,9 @@ from leadthrough.teach.programs.targets import (
     APPROACH_PERCENT,
     ProgramOptions,
     ProgramTarget,
-    degrees,
+    axis_merge,
+    axis_split,
+    canonical_deg,
     fmt,
     joint_percent,
     tool_from_xyzabc,
@@ -43,16 +45,18 @@ __all__ = ["parse_tp", "render_tp"]
 
 def _wpr(p: pin.SE3) -> tuple[float, ...]:
     w, pp, r = Rotation.from_matrix(p.rotation).as_euler("xyz", degrees=True)
-    return (*(1e3 * p.translation), float(w), float(pp), float(r))
+    return (*(1e3 * p.translation), *(canonical_deg(float(v)) for v in (w, pp, r)))
 
 
 def _pos_block(i: int, t: ProgramTarget, cfg: FanucConfig | None) -> list[str]:
     lines = [f"P[{i}]{{", "   GP1:"]
     if cfg is None:
-        j = [f"{fmt(v, 3):>9}" for v in degrees(t.q)]
+        main, extra = axis_split(t.q, "FANUC")
+        j = [f"{fmt(v, 3):>9}" for v in main]
+        e = "".join(f",\n\tE{i + 1}= {fmt(v, 3):>9} deg" for i, v in enumerate(extra))
         lines += ["\tUF : 0, UT : 1,",
                   f"\tJ1= {j[0]} deg,\tJ2= {j[1]} deg,\tJ3= {j[2]} deg,",
-                  f"\tJ4= {j[3]} deg,\tJ5= {j[4]} deg,\tJ6= {j[5]} deg"]
+                  f"\tJ4= {j[3]} deg,\tJ5= {j[4]} deg,\tJ6= {j[5]} deg{e}"]
     else:
         v = [f"{fmt(x, 3):>9}" for x in _wpr(t.pose)]
         lines += [f"\tUF : 0, UT : 1,\t\tCONFIG : '{cfg.text()}',",
@@ -74,9 +78,6 @@ def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
     Returns:
         ``{".ls": text}``.
     """
-    if targets[0].q.size != 6:
-        raise TeachError("FANUC joint positions hold six robot axes here", field="robot",
-                         value=f"{targets[0].q.size} joints", expected="6 joints for FANUC TP")
     tool = [fmt(v, 3) for v in xyzabc(options.tool)]
     comments = [*header, f"UT1 XYZ mm {' '.join(tool[:3])}", f"UT1 ABC deg {' '.join(tool[3:])}"]
     mn = [f"! {c} ;" for c in comments] + ["UFRAME_NUM=0 ;", "UTOOL_NUM=1 ;"]
@@ -159,5 +160,6 @@ def parse_tp(files: dict[str, str]) -> ParsedProgram:
                                     config=_config(block)))
         else:
             names = tuple(f"J{i}" for i in range(1, 7))
-            moves.append(ParsedMove(q_deg=tuple(_named(block, names))))
+            extra = _named(block, ("E1",)) if re.search(r"\bE1\s*=", block) else []
+            moves.append(ParsedMove(q_deg=axis_merge(_named(block, names), extra)))
     return ParsedProgram(tuple(moves), tool)

@@ -31,7 +31,8 @@ from leadthrough.teach.programs.targets import (
     APPROACH_PERCENT,
     ProgramOptions,
     ProgramTarget,
-    degrees,
+    axis_merge,
+    axis_split,
     fmt,
     joint_percent,
     tool_from_xyzabc,
@@ -47,7 +48,9 @@ def _frame(values: tuple[float, ...]) -> str:
 
 
 def _axis(q: np.ndarray) -> str:
-    return ",".join(f"A{i + 1} {fmt(v, 4)}" for i, v in enumerate(degrees(q)))
+    main, extra = axis_split(q, "KRL")
+    return ",".join([*(f"A{i + 1} {fmt(v, 4)}" for i, v in enumerate(main)),
+                     *(f"E{i + 1} {fmt(v, 4)}" for i, v in enumerate(extra))])
 
 
 def render_krl(targets: list[ProgramTarget], configs: list[KukaConfig | None],
@@ -133,7 +136,8 @@ def parse_krl(files: dict[str, str]) -> ParsedProgram:
                              expected="a point declared in the .dat")
         kind, f = points[m.group(2)]
         if kind == "E6AXIS":
-            moves.append(ParsedMove(q_deg=tuple(f[f"A{i}"] for i in range(1, 7))))
+            extra = [f["E1"]] if "E1" in f else []
+            moves.append(ParsedMove(q_deg=axis_merge([f[f"A{i}"] for i in range(1, 7)], extra)))
         else:
             pose = tool_from_xyzabc([f[k] for k in ("X", "Y", "Z", "A", "B", "C")])
             moves.append(ParsedMove(pose=pose, config=KukaConfig(int(f["S"]), int(f["T"]))))

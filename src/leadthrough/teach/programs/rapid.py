@@ -25,7 +25,14 @@ import pinocchio as pin
 from leadthrough.errors import TeachError
 from leadthrough.teach.programs.configuration import AbbConfig
 from leadthrough.teach.programs.parsed import ParsedMove, ParsedProgram
-from leadthrough.teach.programs.targets import ProgramOptions, ProgramTarget, degrees, fmt
+from leadthrough.teach.programs.targets import (
+    ProgramOptions,
+    ProgramTarget,
+    axis_merge,
+    axis_split,
+    canonical_sign,
+    fmt,
+)
 
 __all__ = ["parse_rapid", "render_rapid"]
 
@@ -34,13 +41,15 @@ _EXT = "[9E9,9E9,9E9,9E9,9E9,9E9]"
 
 def _pose(p: pin.SE3) -> str:
     x, y, z, w = pin.Quaternion(p.rotation).coeffs()
-    quat = np.array([w, x, y, z]) * (1.0 if w >= 0.0 else -1.0)
+    quat = canonical_sign(np.array([w, x, y, z]))  # q1 ≥ 0; at q1 = 0 the first non-zero > 0
     pos = ",".join(fmt(v, 4) for v in 1e3 * p.translation)
     return f"[{pos}],[{','.join(fmt(v, 8) for v in quat)}]"
 
 
 def _joints(q: np.ndarray) -> str:
-    return f"[[{','.join(fmt(v, 4) for v in degrees(q))}],{_EXT}]"
+    main, extra = axis_split(q, "RAPID")
+    ext = [fmt(v, 4) for v in extra] + ["9E9"] * (6 - len(extra))
+    return f"[[{','.join(fmt(v, 4) for v in main)}],[{','.join(ext)}]]"
 
 
 def _tool(options: ProgramOptions) -> tuple[str, list[str]]:
@@ -65,9 +74,6 @@ def render_rapid(targets: list[ProgramTarget], configs: list[AbbConfig | None],
     Returns:
         ``{".mod": text}``.
     """
-    if targets[0].q.size != 6:
-        raise TeachError("a RAPID jointtarget holds six robot axes here", field="robot",
-                         value=f"{targets[0].q.size} joints", expected="6 joints for RAPID")
     tool, decl = _tool(options)
     r = options.zone_mm
     v_ori = fmt(np.degrees(options.orientation_speed_rad_s), 3)
@@ -125,7 +131,8 @@ def parse_rapid(files: dict[str, str]) -> ParsedProgram:
     for m in re.finditer(r"^\s*(MoveL|MoveAbsJ)\s+(\w+)", text, flags=re.MULTILINE):
         name = m.group(2)
         if m.group(1) == "MoveAbsJ" and name in joint:
-            moves.append(ParsedMove(q_deg=tuple(joint[name][:6])))
+            ext = [v for v in joint[name][6:7] if abs(v) < 9e8]
+            moves.append(ParsedMove(q_deg=axis_merge(joint[name][:6], ext)))
         elif m.group(1) == "MoveL" and name in robt and len(robt[name]) >= 11:
             v = robt[name]
             cfg = AbbConfig(*(int(c) for c in v[7:11]))

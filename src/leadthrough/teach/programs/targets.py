@@ -32,8 +32,8 @@ from leadthrough.teach.line_fit import WeldingLine
 from leadthrough.teach.program import TaughtProgram
 
 __all__ = ["APPROACH_JOINT_SPEED", "APPROACH_PERCENT", "ProgramOptions", "ProgramTarget",
-           "degrees", "fmt", "joint_percent", "program_name", "program_targets",
-           "tool_from_xyzabc", "xyzabc"]
+           "axis_merge", "axis_split", "canonical_deg", "canonical_sign", "degrees", "fmt",
+           "joint_percent", "program_name", "program_targets", "tool_from_xyzabc", "xyzabc"]
 
 Array = NDArray[np.float64]
 
@@ -91,10 +91,21 @@ def fmt(x: float, decimals: int) -> str:
     return text[1:] if text.startswith("-") and float(text) == 0.0 else text
 
 
+def canonical_deg(angle: float) -> float:
+    """An angle [deg] in (−180°, 180°] (−180° written as 180°)."""
+    return angle + 360.0 if angle <= -180.0 + 1e-9 else angle
+
+
 def xyzabc(pose: pin.SE3) -> tuple[float, ...]:
     """X, Y, Z [mm] and KUKA A, B, C [deg]: R = Rz(A)·Ry(B)·Rx(C)."""
     a, b, c = Rotation.from_matrix(pose.rotation).as_euler("ZYX", degrees=True)
-    return (*(1e3 * pose.translation), float(a), float(b), float(c))
+    return (*(1e3 * pose.translation), *(canonical_deg(float(v)) for v in (a, b, c)))
+
+
+def canonical_sign(v: Array) -> Array:
+    """``v`` or ``−v``, whichever has its first entry of magnitude > 1e-12 positive."""
+    nz = np.flatnonzero(np.abs(v) > 1e-12)
+    return -v if nz.size and v[nz[0]] < 0.0 else v
 
 
 def tool_from_xyzabc(values: tuple[float, ...] | list[float]) -> pin.SE3:
@@ -203,3 +214,28 @@ def joint_percent(ratio: float) -> int:
 def degrees(q: Array) -> list[float]:
     """Joint angles [deg]."""
     return [math.degrees(float(v)) for v in q]
+
+
+def axis_split(q: Array, language: str) -> tuple[list[float], list[float]]:
+    """Joint angles [deg] as robot axes 1–6 and extended axes (``E1`` …) of a joint target.
+
+    A 7-axis arm's third joint (the redundant one) is the first extended axis, as KUKA carries an
+    LBR's joint 3 as ``E1`` on a KR C controller and ABB carries the IRB 14000's third joint in
+    ``eax_a``; the other six are axes 1–6.
+
+    Raises:
+        TeachError: Fewer than 6 or more than 7 joints.
+    """
+    deg = degrees(q)
+    if len(deg) == 6:
+        return deg, []
+    if len(deg) == 7:
+        return [deg[0], deg[1], *deg[3:]], [deg[2]]
+    raise TeachError(f"a {language} joint target holds 6 robot axes (+ the redundant joint of a "
+                     "7-axis arm)", field="robot", value=f"{len(deg)} joints",
+                     expected="6 or 7 joints")
+
+
+def axis_merge(main: list[float], extra: list[float]) -> tuple[float, ...]:
+    """Inverse of :func:`axis_split`: joint angles [deg] in the robot's joint order."""
+    return tuple(main) if not extra else (main[0], main[1], extra[0], *main[2:])

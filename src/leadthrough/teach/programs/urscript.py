@@ -25,6 +25,7 @@ from leadthrough.teach.programs.targets import (
     APPROACH_JOINT_SPEED,
     ProgramOptions,
     ProgramTarget,
+    canonical_sign,
     fmt,
 )
 
@@ -36,6 +37,8 @@ _ACC_JOINT = 1.4  # [rad/s²] UR's default joint acceleration
 
 def _pose(p: pin.SE3) -> str:
     rv = Rotation.from_matrix(p.rotation).as_rotvec()
+    if abs(float(np.linalg.norm(rv)) - np.pi) < 1e-9:  # a half turn: r and −r are the same
+        rv = canonical_sign(rv)
     return "p[" + ", ".join(fmt(v, 6) for v in (*p.translation, *rv)) + "]"
 
 
@@ -61,6 +64,8 @@ def render_urscript(targets: list[ProgramTarget], options: ProgramOptions,
     lines = [f"# {h}" for h in header]
     lines.append(f"def {options.name}():")
     lines.append(f"  set_tcp({_pose(options.tool)})")
+    if targets[0].label:
+        lines.append(f"  # {targets[0].label}")
     lines.append(f"  movej({_joints(targets[0].q)}, a={_ACC_JOINT}, v={APPROACH_JOINT_SPEED})")
     blend = 1e-3 * options.zone_mm
     for t in targets[1:]:
