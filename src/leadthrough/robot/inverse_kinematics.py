@@ -34,6 +34,8 @@ Array = NDArray[np.float64]
 TOLERANCE = 1e-10  # ‖log6‖ at convergence [m, rad]
 _MAX_ITER = 80
 _DISTINCT = 1e-6  # [rad] two solutions closer than this are the same
+BOX_SLACK = 1e-6  # [rad] a solution this far outside its box (a joint taught at exactly 0° and
+# solved at −1e-11 rad, against a window [0°, 90°)) still counts as inside
 
 
 class IkResult(NamedTuple):
@@ -114,7 +116,7 @@ def _nearest_turn(q: Array, q_ref: Array, lo: Array, hi: Array) -> Array:
     for j in range(q.size):
         k0 = round((q_ref[j] - q[j]) / (2.0 * math.pi))
         options = [q[j] + 2.0 * math.pi * k for k in (k0 - 1, k0, k0 + 1)]
-        inside = [v for v in options if lo[j] - 1e-9 <= v <= hi[j] + 1e-9] or options
+        inside = [v for v in options if lo[j] - BOX_SLACK <= v <= hi[j] + BOX_SLACK] or options
         ref = float(q_ref[j])
         out[j] = min(inside, key=lambda v: abs(v - ref))
     return out
@@ -190,7 +192,7 @@ def solve_pose(robot: Robot, target: pin.SE3, box: tuple[Array, Array],
         if not res.converged:
             continue
         q = _nearest_turn(res.q, mid, lo, hi)
-        inside = bool(np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9))
+        inside = bool(np.all(q >= lo - BOX_SLACK) and np.all(q <= hi + BOX_SLACK))
         if inside and accept(q) and all(np.max(np.abs(q - f)) > _DISTINCT for f in found):
             found.append(q)
     return found

@@ -92,8 +92,9 @@ def fmt(x: float, decimals: int) -> str:
 
 
 def canonical_deg(angle: float) -> float:
-    """An angle [deg] in (−180°, 180°] (−180° written as 180°)."""
-    return angle + 360.0 if angle <= -180.0 + 1e-9 else angle
+    """An angle [deg] in (−180°, 180°] (−180° ± 1e-6° written as 180°, below every file's
+    decimals)."""
+    return angle + 360.0 if angle <= -180.0 + 1e-6 else angle
 
 
 def xyzabc(pose: pin.SE3) -> tuple[float, ...]:
@@ -103,8 +104,8 @@ def xyzabc(pose: pin.SE3) -> tuple[float, ...]:
 
 
 def canonical_sign(v: Array) -> Array:
-    """``v`` or ``−v``, whichever has its first entry of magnitude > 1e-12 positive."""
-    nz = np.flatnonzero(np.abs(v) > 1e-12)
+    """``v`` or ``−v``, whichever has its first entry of magnitude > 1e-9 positive."""
+    nz = np.flatnonzero(np.abs(v) > 1e-9)
     return -v if nz.size and v[nz[0]] < 0.0 else v
 
 
