@@ -10,8 +10,9 @@ decimals, as the controller lists them. Loading an ``.LS`` on a controller needs
 upload option (or ROBOGUIDE's MakeTP to compile a ``.TP``).
 
 The user frame is UF 0 (the robot's world = base frame) and the tool UT 1: the controller's tool
-frame 1 must hold the TCP this program states in its remarks ``UT1 XYZ mm`` and ``UT1 ABC deg``
-(X, Y, Z and KUKA-style A, B, C = rotations about z, y, x; FANUC's W, P, R = C, B, A). Joint
+frame 1 must hold the TCP this program states in its remarks ``UT1 X = … mm`` … ``UT1 C = … deg``
+(X, Y, Z and KUKA-style A, B, C = rotations about z, y, x; FANUC's W, P, R = C, B, A). Remarks
+have at most 32 characters and no ``;``. Joint
 angles are the robot file's; on a FANUC arm the controller counts J3 relative to the horizontal
 (the J2/J3 interaction), which a robot file does not model.
 """
@@ -19,6 +20,7 @@ angles are the robot file's; on a FANUC arm the controller counts J3 relative to
 from __future__ import annotations
 
 import re
+import textwrap
 
 import numpy as np
 import pinocchio as pin
@@ -65,6 +67,14 @@ def _pos_block(i: int, t: ProgramTarget, cfg: FanucConfig | None) -> list[str]:
     return [*lines, "};"]
 
 
+def _remarks(lines: list[str]) -> list[str]:
+    """Remark texts: no ``;`` (it ends a TP statement), at most 32 characters each."""
+    out: list[str] = []
+    for line in lines:
+        out += textwrap.wrap(line.replace(";", ","), 32) or [""]
+    return out
+
+
 def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
               options: ProgramOptions, header: list[str]) -> dict[str, str]:
     """The ``.LS`` text.
@@ -79,8 +89,10 @@ def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
         ``{".ls": text}``.
     """
     tool = [fmt(v, 3) for v in xyzabc(options.tool)]
-    comments = [*header, f"UT1 XYZ mm {' '.join(tool[:3])}", f"UT1 ABC deg {' '.join(tool[3:])}"]
-    mn = [f"! {c} ;" for c in comments] + ["UFRAME_NUM=0 ;", "UTOOL_NUM=1 ;"]
+    units = ("mm", "mm", "mm", "deg", "deg", "deg")
+    tool_lines = [f"UT1 {k} = {v} {u}" for k, v, u in zip("XYZABC", tool, units, strict=True)]
+    mn = [f"! {c} ;" for c in [*_remarks(header), *tool_lines]]
+    mn += ["UFRAME_NUM=0 ;", "UTOOL_NUM=1 ;"]
     pos: list[str] = []
     speed = fmt(1e3 * options.speed_m_s, 0)
     for i, (t, cfg) in enumerate(zip(targets, configs, strict=True), start=1):
@@ -145,10 +157,9 @@ def parse_tp(files: dict[str, str]) -> ParsedProgram:
     blocks = {int(m.group(1)): m.group(2)
               for m in re.finditer(r"P\[(\d+)\]\s*\{(.*?)\};", text, flags=re.DOTALL)}
     tool = pin.SE3.Identity()
-    xyz = re.search(rf"! UT1 XYZ mm ({_NUM}) ({_NUM}) ({_NUM}) ;", text)
-    abc = re.search(rf"! UT1 ABC deg ({_NUM}) ({_NUM}) ({_NUM}) ;", text)
-    if xyz and abc:
-        tool = tool_from_xyzabc([float(v) for v in (*xyz.groups(), *abc.groups())])
+    found = [re.search(rf"! UT1 {k} = ({_NUM}) (?:mm|deg) ;", text) for k in "XYZABC"]
+    if all(found):
+        tool = tool_from_xyzabc([float(m.group(1)) for m in found if m])
     moves = []
     for m in re.finditer(r"^\s*\d+:\s*([JL])\s+P\[(\d+)\]", text, flags=re.MULTILINE):
         block = blocks.get(int(m.group(2)))

@@ -5,7 +5,7 @@ COMMENT		= "leadthrough SEAM";
 PROG_SIZE	= 0;
 FILE_NAME	= SEAM;
 VERSION		= 0;
-LINE_COUNT	= 10;
+LINE_COUNT	= 14;
 MEMORY_SIZE	= 0;
 PROTECT		= READ_WRITE;
 TCD:  STACK_SIZE	= 0,
@@ -18,15 +18,19 @@ DEFAULT_GROUP	= 1,*,*,*,*;
 CONTROL_CODE	= 00000000 00000000;
 /MN
    1:  ! golden path ;
-   2:  ! UT1 XYZ mm 0.000 0.000 0.000 ;
-   3:  ! UT1 ABC deg 0.000 0.000 0.000 ;
-   4:  UFRAME_NUM=0 ;
-   5:  UTOOL_NUM=1 ;
-   6:  ! P1 ;
-   7:J P[1] 10% FINE ;
-   8:J P[2] 7% CNT50 ;
-   9:  ! P2 ;
-  10:J P[3] 7% FINE ;
+   2:  ! UT1 X = 0.000 mm ;
+   3:  ! UT1 Y = 0.000 mm ;
+   4:  ! UT1 Z = 0.000 mm ;
+   5:  ! UT1 A = 0.000 deg ;
+   6:  ! UT1 B = 0.000 deg ;
+   7:  ! UT1 C = 0.000 deg ;
+   8:  UFRAME_NUM=0 ;
+   9:  UTOOL_NUM=1 ;
+  10:  ! P1 ;
+  11:J P[1] 10% FINE ;
+  12:J P[2] 7% CNT50 ;
+  13:  ! P2 ;
+  14:J P[3] 7% FINE ;
 /POS
 P[1]{
    GP1:
