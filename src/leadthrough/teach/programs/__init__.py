@@ -57,7 +57,10 @@ class Language(NamedTuple):
     Attributes:
         suffix: File suffix of the main file (others share its stem).
         configure: Configuration data of a joint configuration, or None (URScript).
-        render: Texts by suffix from targets, configurations, options and header.
+        render: Texts by suffix from the targets (:func:`~leadthrough.teach.programs.targets.
+            program_targets`), the configuration data of each (None for joint moves and in
+            URScript), the options (name, speeds, zone, tool, joint space, FANUC CNT) and the
+            header comment lines.
         parse: The program read back from its texts by suffix.
     """
 

@@ -77,17 +77,8 @@ def _remarks(lines: list[str]) -> list[str]:
 
 def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
               options: ProgramOptions, header: list[str]) -> dict[str, str]:
-    """The ``.LS`` text.
-
-    Args:
-        targets: The moves.
-        configs: Configuration of each target (None for joint moves).
-        options: Name, speeds, CNT, tool, joint space.
-        header: Comment lines.
-
-    Returns:
-        ``{".ls": text}``.
-    """
+    """The program as ``{".ls": text}``; arguments as
+    :attr:`leadthrough.teach.programs.Language.render`."""
     tool = [fmt(v, 3) for v in xyzabc(options.tool)]
     units = ("mm", "mm", "mm", "deg", "deg", "deg")
     tool_lines = [f"UT1 {k} = {v} {u}" for k, v, u in zip("XYZABC", tool, units, strict=True)]

@@ -55,17 +55,8 @@ def _axis(q: np.ndarray) -> str:
 
 def render_krl(targets: list[ProgramTarget], configs: list[KukaConfig | None],
                options: ProgramOptions, header: list[str]) -> dict[str, str]:
-    """The ``.src`` and ``.dat`` texts.
-
-    Args:
-        targets: The moves.
-        configs: Status/Turn of each target (None for joint moves).
-        options: Name, speeds, zone, tool, joint space.
-        header: Comment lines (without ``;``).
-
-    Returns:
-        ``{".src": text, ".dat": text}``.
-    """
+    """The program as ``{".src": text, ".dat": text}``; arguments as
+    :attr:`leadthrough.teach.programs.Language.render`."""
     name = options.name
     dat = ["&ACCESS RVP", "&REL 1", f"DEFDAT {name} PUBLIC", *[f"; {h}" for h in header],
            f"DECL FRAME TOOL_LT={{{_frame(xyzabc(options.tool))}}}"]

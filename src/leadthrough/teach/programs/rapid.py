@@ -63,17 +63,8 @@ def _tool(options: ProgramOptions) -> tuple[str, list[str]]:
 
 def render_rapid(targets: list[ProgramTarget], configs: list[AbbConfig | None],
                  options: ProgramOptions, header: list[str]) -> dict[str, str]:
-    """The ``.mod`` text.
-
-    Args:
-        targets: The moves.
-        configs: confdata of each target (None for joint moves).
-        options: Name, speeds, zone, tool, joint space.
-        header: Comment lines.
-
-    Returns:
-        ``{".mod": text}``.
-    """
+    """The module as ``{".mod": text}``; arguments as
+    :attr:`leadthrough.teach.programs.Language.render`."""
     tool, decl = _tool(options)
     r = options.zone_mm
     v_ori = fmt(np.degrees(options.orientation_speed_rad_s), 3)

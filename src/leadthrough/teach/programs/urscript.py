@@ -48,16 +48,8 @@ def _joints(q: np.ndarray) -> str:
 
 def render_urscript(targets: list[ProgramTarget], options: ProgramOptions,
                     header: list[str]) -> dict[str, str]:
-    """The ``.script`` text.
-
-    Args:
-        targets: The moves (:func:`~leadthrough.teach.programs.targets.program_targets`).
-        options: Name, speeds, zone, tool, joint space.
-        header: Comment lines (without ``#``).
-
-    Returns:
-        ``{".script": text}``.
-    """
+    """The script as ``{".script": text}``; arguments as
+    :attr:`leadthrough.teach.programs.Language.render`."""
     if targets[0].q.size != 6:
         raise TeachError("a UR controller drives six joints", field="robot",
                          value=f"{targets[0].q.size} joints", expected="6 joints for URScript")
