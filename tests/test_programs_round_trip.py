@@ -13,6 +13,7 @@ controller does. The Panda (7 axes) gets joint programs only.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -21,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from leadthrough.errors import TeachError
-from leadthrough.robot import Robot, load_robot
+from leadthrough.robot import Robot, builtin_robot_path, load_robot
 from leadthrough.robot.arm_configuration import arm_structure, branch_values
 from leadthrough.robot.inverse_kinematics import pose_of, solve_pose
 from leadthrough.teach.programs import LANGUAGES
@@ -118,3 +119,36 @@ def test_unreachable_pose_is_a_clear_error(er20: Robot) -> None:
     assert solve_pose(er20, far, (win.lower, win.upper),
                       lambda x: win.accepts(branch_values(s, er20, x))) == []
     assert math.isfinite(float(np.linalg.norm(far.translation)))
+
+
+def _robot_file(tmp_path: Path, joint5: str, joint6: str) -> Robot:
+    """An ER20 variant: its own name, a longer forearm and the given joint 5 and 6 origins."""
+    data = builtin_robot_path("er20").parent
+    toml = (data / "er20.toml").read_text().replace('name = "er20"', 'name = "my_arm"')
+    toml = toml.replace('urdf = "er20.urdf"', 'urdf = "my_arm.urdf"')
+    (tmp_path / "my_arm.toml").write_text(toml)
+    urdf = (data / "er20.urdf").read_text()
+    urdf = urdf.replace('<origin xyz="0.760 0 0" rpy="0 0 0"/>\n    <axis xyz="0 1 0"/>', joint5)
+    urdf = urdf.replace('<origin xyz="0.125 0 0" rpy="0 0 0"/>\n    <axis xyz="1 0 0"/>', joint6)
+    (tmp_path / "my_arm.urdf").write_text(urdf)
+    return load_robot(tmp_path / "my_arm.toml")
+
+
+def test_any_robot_file_round_trips_and_an_offset_wrist_is_refused(tmp_path: Path) -> None:
+    # A5 reversed, its zero turned by 0.3 rad (the wrist singularity moves to A5 = 0.3 rad),
+    # forearm 0.9 m: still a vendor-like arm
+    j5 = '<origin xyz="0.900 0 0" rpy="0 0.3 0"/>\n    <axis xyz="0 -1 0"/>'
+    j6 = '<origin xyz="0.125 0 0" rpy="0 0 0"/>\n    <axis xyz="1 0 0"/>'
+    robot = _robot_file(tmp_path, j5, j6)
+    assert arm_structure(robot).wrist_zero == pytest.approx(0.3, abs=1e-9)
+    qs = sample_configurations(robot, 20, 4)
+    for language in LANGUAGES:
+        assert round_trip_errors(robot, language, qs).max() <= ROUND_TRIP_TOLERANCE_DEG
+    # A6 offset 60 mm sideways from A5: no longer a spherical or UR-type wrist; the vendor
+    # indicators leave two solutions for some poses, which is reported, not written
+    robot = _robot_file(tmp_path, j5, '<origin xyz="0.125 0.06 0" rpy="0 0 0"/>\n'
+                                      '    <axis xyz="1 0 0"/>')
+    qs = sample_configurations(robot, 30, 3)
+    with pytest.raises(TeachError, match="does not single out one joint solution"):
+        round_trip_errors(robot, "krl", qs)
+    assert round_trip_errors(robot, "urscript", qs).max() <= ROUND_TRIP_TOLERANCE_DEG

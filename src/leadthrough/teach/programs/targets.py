@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 from leadthrough.errors import TeachError
 from leadthrough.robot.description import Robot
 from leadthrough.robot.inverse_kinematics import newton_pose, pose_of
-from leadthrough.teach.limits_check import check_limits
+from leadthrough.teach.limits_check import limit_report
 from leadthrough.teach.line_fit import WeldingLine
 from leadthrough.teach.program import TaughtProgram
 
@@ -154,7 +154,8 @@ def _mark_index(labels: tuple[str, ...], mark: str) -> int:
 
 
 def _rows(program: TaughtProgram, robot: Robot,
-          tool: pin.SE3) -> list[tuple[str, Array, pin.SE3]]:
+          tool: pin.SE3) -> list[tuple[str, Array, pin.SE3, int]]:
+    """Label, joints, programmed TCP and waypoint index of each target."""
     w = program.waypoints
     line = program.welding_line
     ends: dict[int, int] = {}
@@ -170,7 +171,7 @@ def _rows(program: TaughtProgram, robot: Robot,
             q, flange = _line_target(robot, line, w.q[k], ends[k])
         else:
             q, flange = w.q[k], pose_of(robot, w.q[k])
-        rows.append((w.labels[k], q, flange * tool))
+        rows.append((w.labels[k], q, flange * tool, k))
     return rows
 
 
@@ -189,22 +190,25 @@ def program_targets(program: TaughtProgram, robot: Robot, options: ProgramOption
 
     Raises:
         TeachError: A line end that cannot be reached, or a target outside the joint position
-            or speed limits (naming the target, joint, value and limit).
+            or speed limits (naming the taught waypoint, joint, value and limit).
     """
     rows = _rows(program, robot, options.tool)
     q_all = np.array([r[1] for r in rows])
     pos = np.array([r[2].translation for r in rows])
     quat = np.array([pin.Quaternion(r[2].rotation).coeffs() for r in rows])
-    rep = check_limits(q_all, pos, quat, robot, options.speed_m_s,
+    rep = limit_report(q_all, pos, quat, robot, options.speed_m_s,
                        orientation_speed_rad_s=options.orientation_speed_rad_s,
-                       labels=[r[0] for r in rows], source=source)
+                       labels=[r[0] for r in rows])
+    if rep.violations:  # named by the taught waypoint the target stands for
+        first = rep.violations[0]
+        raise replace(first, waypoint=rows[first.waypoint][3]).error(source)
     ratio = np.vstack([np.zeros((1, robot.n)), rep.speed_ratio])
     speed = np.vstack([np.zeros((1, robot.n)), rep.joint_speed_rad_s])
     last = len(rows) - 1
     return [ProgramTarget(label=lab, q=q, pose=pose, exact=bool(lab) or i in (0, last),
                           joint_speed_rad_s=float(speed[i].max()),
                           speed_ratio=float(min(1.0, ratio[i].max())))
-            for i, (lab, q, pose) in enumerate(rows)]
+            for i, (lab, q, pose, _) in enumerate(rows)]
 
 
 def joint_percent(ratio: float) -> int:
