@@ -48,7 +48,7 @@ from leadthrough.teach.programs.urscript import parse_urscript, render_urscript
 
 __all__ = ["LANGUAGES", "Language", "ProgramOptions", "ProgramTarget", "RenderedProgram",
            "program_name", "program_targets", "render_robot_program", "solve_back",
-           "write_robot_program"]
+           "target_configurations", "write_robot_program"]
 
 
 class Language(NamedTuple):
@@ -109,6 +109,34 @@ def _header(program: TaughtProgram, robot: Robot, options: ProgramOptions, langu
     return lines
 
 
+def target_configurations(language: str, robot: Robot, targets: list[ProgramTarget],
+                          joint_space: bool, source: str | None = None) -> list[Any]:
+    """Configuration data of each target in ``language`` (None: a joint move, or URScript).
+
+    The first target is a joint move; the others carry configuration data unless
+    ``joint_space``.
+
+    Raises:
+        TeachError: A robot or joint angle the language's configuration cannot express,
+            naming the target.
+    """
+    lang = LANGUAGES[language]
+    configs: list[Any] = [None] * len(targets)
+    if joint_space or lang.configure is None:
+        return configs
+    structure = arm_structure(robot)
+    data = robot.model.createData()
+    for i, t in enumerate(targets[1:], start=1):
+        try:
+            configs[i] = lang.configure(structure, robot, t.q,
+                                        branch_values(structure, robot, t.q, data))
+        except TeachError as e:
+            label = f" ({t.label})" if t.label else ""
+            raise TeachError(f"target {i}{label}: {e.message}", source=source, field=e.field,
+                             value=e.value, expected=e.expected) from e
+    return configs
+
+
 def render_robot_program(program: TaughtProgram, robot: Robot, language: str,
                          options: ProgramOptions, source: str | None = None) -> RenderedProgram:
     """The program texts, checked by reading them back and solving them back.
@@ -133,18 +161,7 @@ def render_robot_program(program: TaughtProgram, robot: Robot, language: str,
         raise TeachError("unknown program language", field="format", value=language,
                          expected=", ".join(LANGUAGES))
     targets = program_targets(program, robot, options, source)
-    configs: list[Any] = [None] * len(targets)
-    if not options.joint_space and lang.configure is not None:
-        structure = arm_structure(robot)
-        data = robot.model.createData()
-        for i, t in enumerate(targets[1:], start=1):
-            try:
-                configs[i] = lang.configure(structure, robot, t.q,
-                                            branch_values(structure, robot, t.q, data))
-            except TeachError as e:
-                label = f" ({t.label})" if t.label else ""
-                raise TeachError(f"target {i}{label}: {e.message}", source=source,
-                                 field=e.field, value=e.value, expected=e.expected) from e
+    configs = target_configurations(language, robot, targets, options.joint_space, source)
     files = lang.render(targets, configs, options,
                         _header(program, robot, options, language, len(targets)))
     worst = check_round_trip(lang.parse(files), robot, np.array([t.q for t in targets]),

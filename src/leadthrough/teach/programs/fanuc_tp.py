@@ -98,7 +98,8 @@ def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
         pos += _pos_block(i, t, cfg)
     body = [f"{k:4d}:  {line}" if not line.startswith(("J ", "L ")) else f"{k:4d}:{line}"
             for k, line in enumerate(mn, start=1)]
-    attr = ["OWNER\t\t= MNEDITOR;", f'COMMENT\t\t= "leadthrough {options.name[:8]}";',
+    comment = f"leadthrough {options.name}"[:16]  # a program comment has 16 characters
+    attr = ["OWNER\t\t= MNEDITOR;", f'COMMENT\t\t= "{comment}";',
             "PROG_SIZE\t= 0;", f"FILE_NAME\t= {options.name};", "VERSION\t\t= 0;",
             f"LINE_COUNT\t= {len(mn)};", "MEMORY_SIZE\t= 0;", "PROTECT\t\t= READ_WRITE;",
             "TCD:  STACK_SIZE\t= 0,", "      TASK_PRIORITY\t= 50,", "      TIME_SLICE\t= 0,",

@@ -15,7 +15,6 @@ Used by ``tests/test_programs_round_trip.py`` (asserting ≤ 0.01°) and
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,7 +22,7 @@ from numpy.typing import NDArray
 from leadthrough.robot.arm_configuration import arm_structure, branch_values
 from leadthrough.robot.description import Robot
 from leadthrough.robot.inverse_kinematics import pose_of
-from leadthrough.teach.programs import LANGUAGES
+from leadthrough.teach.programs import LANGUAGES, target_configurations
 from leadthrough.teach.programs.parsed import solve_back
 from leadthrough.teach.programs.targets import ProgramOptions, ProgramTarget
 
@@ -76,13 +75,7 @@ def _target(robot: Robot, q: Array) -> ProgramTarget:
 def _render_parse_solve(robot: Robot, language: str, qs: Array, options: ProgramOptions) -> Array:
     lang = LANGUAGES[language]
     targets = [_target(robot, q) for q in qs]
-    configs: list[Any] = [None] * len(targets)
-    if not options.joint_space and lang.configure is not None:
-        structure = arm_structure(robot)
-        data = robot.model.createData()
-        configs[1:] = [lang.configure(structure, robot, t.q,
-                                      branch_values(structure, robot, t.q, data))
-                       for t in targets[1:]]
+    configs = target_configurations(language, robot, targets, options.joint_space)
     files = lang.render(targets, configs, options, [])
     return solve_back(lang.parse(files), robot)
 
