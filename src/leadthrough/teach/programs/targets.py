@@ -7,10 +7,16 @@ Program (all languages):
    the last target, where the robot stops exactly;
 3. the welding line replaces the waypoints between its two marks: one linear move from the fitted
    P1 to the fitted P2 at the programmed speed (orientation of the P1 and P2 waypoints; their
-   joints solved from the marks' taught joints, the same configuration).
+   joints solved from the marks' taught joints, the same configuration). A joint-space program
+   cannot move linearly: it gets joint moves through points of the line, as many as keep the
+   flange within the RDP tolerance of the line (checked at each segment's middle).
 
 The tool option moves the programmed TCP from the robot file's TCP frame by a fixed offset (a
-torch tip): poses are then the tool's, and each program declares that tool.
+torch tip): poses are then the tool's, and each program declares that tool. The waypoints and the
+welding line are still those of the robot file's TCP frame (where the session measured the
+path); with the orientation constant along the seam, as in welding, the tool tip's line is
+straight too. For a torch whose tip traced the seam, put the torch in the robot TOML's TCP frame
+so that the line is fitted at the tip.
 """
 
 from __future__ import annotations
@@ -149,12 +155,37 @@ def _line_target(robot: Robot, line: WeldingLine, q: Array, end: int) -> tuple[A
     return res.q, goal
 
 
+def _split_line(robot: Robot, a: tuple[Array, pin.SE3], b: tuple[Array, pin.SE3],
+                tolerance_m: float, depth: int = 0) -> list[tuple[Array, pin.SE3]]:
+    """Points along the line a → b (b included) such that joint moves between them keep the
+    flange within ``tolerance_m`` of the line at each segment's middle.
+
+    The line moves the position linearly and the orientation by slerp, as a controller's linear
+    move does; each point is solved from the joints of the previous one (same configuration).
+    """
+    (qa, ta), (qb, tb) = a, b
+    mid = pin.SE3(ta.rotation @ pin.exp3(0.5 * pin.log3(ta.rotation.T @ tb.rotation)),
+                  0.5 * (ta.translation + tb.translation))
+    q_lin = 0.5 * (qa + qb)
+    deviation = float(np.linalg.norm(pose_of(robot, q_lin).translation - mid.translation))
+    if deviation <= tolerance_m or depth >= 10:
+        return [b]
+    res = newton_pose(robot, mid, q_lin)
+    if not res.converged:
+        raise TeachError("a point of the welding line is not reachable in the taught "
+                         "configuration", field="welding_line", value=round(res.error, 6),
+                         expected="a line reachable without a configuration change")
+    m = (res.q, mid)
+    return (_split_line(robot, a, m, tolerance_m, depth + 1)
+            + _split_line(robot, m, b, tolerance_m, depth + 1))
+
+
 def _mark_index(labels: tuple[str, ...], mark: str) -> int:
     return next(k for k, lab in enumerate(labels) if mark in lab.split("/"))
 
 
-def _rows(program: TaughtProgram, robot: Robot,
-          tool: pin.SE3) -> list[tuple[str, Array, pin.SE3, int]]:
+def _rows(program: TaughtProgram, robot: Robot, tool: pin.SE3,
+          joint_space: bool) -> list[tuple[str, Array, pin.SE3, int]]:
     """Label, joints, programmed TCP and waypoint index of each target."""
     w = program.waypoints
     line = program.welding_line
@@ -163,12 +194,17 @@ def _rows(program: TaughtProgram, robot: Robot,
         ends = {_mark_index(w.labels, line.start_label): 0,
                 _mark_index(w.labels, line.end_label): 1}
     lo, hi = (min(ends), max(ends)) if ends else (-1, -1)
-    rows = []
+    rows: list[tuple[str, Array, pin.SE3, int]] = []
     for k in range(len(w)):
         if lo < k < hi:
             continue  # the welding line replaces the guided path between its marks
         if line is not None and k in ends:
             q, flange = _line_target(robot, line, w.q[k], ends[k])
+            if joint_space and k == hi:  # joint moves along the line, not one across it
+                a = (rows[-1][1], rows[-1][2] * tool.inverse())
+                for qm, tm in _split_line(robot, a, (q, flange),
+                                          1e-3 * program.tolerance_mm)[:-1]:
+                    rows.append(("", qm, tm * tool, k))
         else:
             q, flange = w.q[k], pose_of(robot, w.q[k])
         rows.append((w.labels[k], q, flange * tool, k))
@@ -192,7 +228,7 @@ def program_targets(program: TaughtProgram, robot: Robot, options: ProgramOption
         TeachError: A line end that cannot be reached, or a target outside the joint position
             or speed limits (naming the taught waypoint, joint, value and limit).
     """
-    rows = _rows(program, robot, options.tool)
+    rows = _rows(program, robot, options.tool, options.joint_space)
     q_all = np.array([r[1] for r in rows])
     pos = np.array([r[2].translation for r in rows])
     quat = np.array([pin.Quaternion(r[2].rotation).coeffs() for r in rows])
