@@ -77,7 +77,8 @@ def register(sub: Any) -> None:
                    help="FANUC CNT value (0-100) at blended waypoints (default 50)")
     p.add_argument("--tool", default=None, metavar="X,Y,Z,A,B,C",
                    help="program TCP relative to the robot file's TCP frame [mm, deg; A, B, C "
-                        "about z, y, x] (default: the robot file's TCP frame)")
+                        "about z, y, x] (default: the robot file's TCP frame; the waypoints and "
+                        "the welding line stay those of the robot file's TCP frame)")
     p.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
                    help="also write the waypoints as CSV (joint and Cartesian, units in header)")
     p.add_argument("--tolerance-mm", type=float, default=1.0, metavar="MM",
