@@ -4,10 +4,10 @@ Sections ``/PROG``, ``/ATTR``, ``/MN`` (``L P[i] <speed>mm/sec FINE|CNT<n> ;``, 
 …``), ``/POS`` (``P[i]{ GP1: UF, UT, CONFIG : 'F U T, t1, t4, t6', X, Y, Z [mm], W, P, R
 [deg] };`` with R = Rz(R)·Ry(P)·Rx(W), or ``J1 … J6`` [deg] in the joint representation) and
 ``/END``, as in FANUC's ASCII program listings (FANUC R-30iB HandlingTool operator's manual,
-"Program" and "Position data"; public examples: RoboDK's ``Fanuc_R30iA.py`` post-processor
-output, ``visose/Robots`` FANUC output, the ``kobbled/fanuc_ls`` grammar examples). Values have 3
-decimals, as the controller lists them. Loading an ``.LS`` on a controller needs FANUC's ASCII
-upload option (or ROBOGUIDE's MakeTP to compile a ``.TP``).
+"Program" and "Position data"; public examples: ``ros-industrial/fanuc``
+``fanuc_driver/tpe/ros_movesm.ls``, RoboDK's ``Fanuc_R30iA.py`` post-processor, the FANUC output
+of ``visose/Robots``). Values have 3 decimals, as the controller lists them. Loading an ``.LS``
+on a controller needs FANUC's ASCII upload option (or ROBOGUIDE's MakeTP to compile a ``.TP``).
 
 The user frame is UF 0 (the robot's world = base frame) and the tool UT 1: the controller's tool
 frame 1 must hold the TCP this program states in its remarks ``UT1 X = … mm`` … ``UT1 C = … deg``

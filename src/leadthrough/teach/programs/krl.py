@@ -11,9 +11,10 @@ origin, KUKA's default ``$ROBROOT``, or set ``$BASE`` to the robot root).
 
 Syntax: KUKA System Software 8.3, Operating and Programming Instructions for System
 Integrators (``DEF``/``END``, ``DEFDAT``/``ENDDAT``, ``DECL E6POS``, ``LIN``, ``PTP``,
-``BAS (#INITMOV,0)``); the subset matches public KRL programs such as the ``.src``/``.dat``
-examples in the kuka-krl language grammars (e.g. ``ICube-Robotics/kuka_krl`` examples) and
-``visose/Robots``' KRL output. KRL ``REAL`` is single precision: 4 decimals in mm and degrees.
+``BAS (#INITMOV,0)``); the subset matches public KRL programs (``ros-industrial/
+kuka_experimental``, ``kuka_kss_hw_interface/krl/KSS_86/Program/ROS/ros_krlptp.src``) and the KRL
+output of ``visose/Robots`` (``src/Robots/Manufacturers/KUKA/Krl.cs``). KRL ``REAL`` is single
+precision: 4 decimals in mm and degrees.
 """
 
 from __future__ import annotations

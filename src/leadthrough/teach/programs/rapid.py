@@ -11,8 +11,9 @@ must be set on the controller (the taught path does not know the tool's mass).
 
 Syntax: ABB "Technical reference manual — RAPID Instructions, Functions and Data types"
 (``MoveL``, ``MoveAbsJ``, ``ConfL``, ``robtarget``, ``jointtarget``, ``confdata``,
-``speeddata``, ``zonedata``, ``tooldata``); the subset matches public RAPID modules (e.g. the
-``visose/Robots`` RAPID output and ABB's RobotStudio example modules on GitHub).
+``speeddata``, ``zonedata``, ``tooldata``); the subset matches public RAPID modules
+(``ros-industrial/abb`` ``abb_driver/rapid/ROS_motion.mod``; the RAPID output of ``visose/Robots``,
+``src/Robots/Manufacturers/ABB/Rapid.cs``).
 """
 
 from __future__ import annotations

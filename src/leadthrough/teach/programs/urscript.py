@@ -7,8 +7,9 @@ radians; joints in radians; ``a`` acceleration, ``v`` speed, ``r`` blend radius 
 target's taught joints, and each ``movel`` then continues in that configuration. The joint-space
 variant uses ``movej`` to every target, at the leading joint's speed of the segment.
 
-Layout follows public URScript examples (a single ``def name(): … end`` as the controller
-runs it, e.g. the Universal Robots "Script manual" examples and ur_rtde's example scripts).
+Layout follows public URScript programs (a single ``def name(): … end`` as the controller runs
+it, e.g. ``UniversalRobots/Universal_Robots_ROS_Driver``
+``ur_robot_driver/resources/ros_control.urscript``).
 """
 
 from __future__ import annotations
