@@ -13,7 +13,8 @@ writes into ``OUT_DIR``: ``params.toml`` (calibrated on the simulated er20, seed
 ``<case>.npz``: the feedback trace of every driver read (``fb_*``), the commands and states the
 loop produced from it (``q_cmd``, ``qd_cmd``, ``twist``, ``tcp``, ``state``, ``fault``,
 ``wrench``, ``tau_ext``), the transitions (``events``), and the same arrays from a replay of the
-trace through the reference loop (``replay_*``: the reference's own determinism).
+trace through the reference loop (``replay_*``: the reference's own determinism), and the
+compute time of each controller cycle in the simulated session (``cycle_us`` [µs]).
 """
 
 from __future__ import annotations
@@ -24,14 +25,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
-from leadthrough.control.guiding import GuidingConfig
-from leadthrough.control.safety import SafetyConfig
 from leadthrough.drivers.sim_driver import Fault, FaultKind
-from leadthrough.excitation.design import ExcitationConfig
-from leadthrough.identification.api import identify_with_sweep
-from leadthrough.identification.params_file import ParamsFile, load_params, save_params
-from leadthrough.robot import load_robot
 from leadthrough.session.sim_session import (
     SimSessionConfig,
     guide_start_pose,
@@ -39,37 +33,15 @@ from leadthrough.session.sim_session import (
     replay_session,
     run_sim_session,
 )
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 
-#: The sessions: name -> the settings of SimSessionConfig, in plain values (the same table is
-#: interpreted by today's code in replay_equivalence.py).
-CASES: dict[str, dict[str, object]] = {
-    "rest": {"operator": "rest"},
-    "rest-velocity": {"operator": "rest", "controller": "velocity"},
-    "push-x": {"operator": "push-x", "mass": 100.0},
-    "push-x-velocity": {"operator": "push-x", "controller": "velocity", "mass": 100.0},
-    "push-x-1000kg": {"operator": "push-x"},
-    "diagonal": {"operator": "diagonal"},
-    "seam": {"operator": "seam"},
-    "random-0": {"operator": "random", "operator_seed": 0, "mass": 100.0},
-    "random-8": {"operator": "random", "operator_seed": 8, "mass": 100.0},
-    "random-18": {"operator": "random", "operator_seed": 18, "mass": 100.0},
-    "tool-frame": {"operator": "push-x", "mass": 100.0, "frame": "tool"},
-    "tool-frame-diagonal": {"operator": "diagonal", "frame": "tool"},
-    "auto-friction": {"operator": "push-x", "mass": 100.0, "friction_mode": "auto"},
-    "translation-rezero": {"operator": "random", "operator_seed": 3, "mass": 100.0,
-                           "axes": "translation", "rezero_s": 0.3},
-    "momentum": {"operator": "push-x", "mass": 100.0, "method": "momentum"},
-    "workspace": {"operator": "push-x", "mass": 100.0, "box_dx": 0.15},
-    "fault-stale": {"operator": "push-x", "mass": 100.0,
-                    "fault": ["stale", 3.0, 1e9, None, 0.0]},
-    "fault-nan-current": {"operator": "push-x", "mass": 100.0,
-                          "fault": ["nan_current", 3.0035, 3.0045, 2, 0.0]},
-    "fault-nan-q": {"operator": "push-x", "mass": 100.0,
-                    "fault": ["nan_q", 2.5, 2.52, None, 0.0]},
-    "fault-following": {"operator": "push-x", "mass": 100.0,
-                        "fault": ["q_offset", 3.0, 1e9, 1, 0.2]},
-}
+from equivalence_cases import CASES
+from leadthrough.control.guiding import GuidingConfig
+from leadthrough.control.safety import SafetyConfig
+from leadthrough.excitation.design import ExcitationConfig
+from leadthrough.identification.api import identify_with_sweep
+from leadthrough.identification.params_file import ParamsFile, load_params, save_params
+from leadthrough.robot import load_robot
+from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 
 
 def session_config(robot: object, case: dict[str, object]) -> SimSessionConfig:
@@ -146,6 +118,7 @@ def main() -> None:
         np.savez_compressed(
             out / f"{name}.npz", fb_dt=fb.dt, fb_t=fb.t, fb_q=fb.q, fb_current=fb.current,
             fb_sequence=fb.sequence, fb_fresh=fb.fresh, events=json.dumps(events),
+            cycle_us=s.result.cycle_us,
             **_arrays("", s.result.log), **_arrays("replay_", again.log))
         print(f"{name}: {fb.reads} reads, faults {s.summary.faults or 'none'}", flush=True)
 

@@ -15,7 +15,7 @@ import pinocchio as pin
 from leadthrough.dynamics import nominal_drive_parameters
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.robot import load_robot
-from leadthrough.session.sim_session import SimSessionConfig
+from leadthrough.session.loop_config import LoopConfig
 
 
 def main() -> None:
@@ -37,13 +37,14 @@ def main() -> None:
     configs = {f"{m}/{a}": EstimatorConfig(method=m, axes=a)
                for m in ("direct", "momentum") for a in ("wrench", "force")}
     # what guiding sessions run: the force fit, commanded-velocity friction with memory and
-    # the friction-uncertainty weights (SimSessionConfig's estimator)
-    configs["guiding"] = SimSessionConfig().estimator
+    # the friction-uncertainty weights (the guiding loop's estimator)
+    configs["guiding"] = LoopConfig().estimator
     for label, cfg in configs.items():
         est = ExternalForceEstimator(robot, params, np.zeros(robot.n), cfg,
                                      noise_std=np.ones(robot.n))
         inp, out = est.make_input(), est.make_output()
         est.reset(q)
+        est.warm_up()
         times = np.empty(args.steps)
         for k in range(args.steps):
             inp.t = k * 1e-3

@@ -32,7 +32,7 @@ from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify, identify_with_sweep
 from leadthrough.identification.presliding import fit_presliding
 from leadthrough.robot import load_robot
-from leadthrough.session.sim_session import guide_start_pose
+from leadthrough.robot.poses import guide_start_pose
 from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, hold
 from leadthrough.sim.calibration_set import (
     record_calibration_set,
@@ -70,12 +70,12 @@ def main() -> None:
             name = f"{m}/force presliding{' tare' if tare else ''}"
             variants[name] = (*plain, EstimatorConfig(method=m, axes="force",
                                                       friction_velocity="command",
-                                                      presliding_rad=2e-4, tare_s=tare))
+                                                      presliding_length=2e-4, tare_s=tare))
         for kappa in (0.0, 1.0):
             for label, chosen in (("+sweep", swept), ("+sweep +presliding test", tested)):
                 name = f"{m}/force presliding tare{' weighted' if kappa else ''} {label}"
                 variants[name] = (*chosen, EstimatorConfig(
-                    method=m, axes="force", friction_velocity="command", presliding_rad=2e-4,
+                    method=m, axes="force", friction_velocity="command", presliding_length=2e-4,
                     tare_s=0.25, friction_weighting=kappa))
     stats: dict[str, dict[str, list[float]]] = {v: {"rms": [], "settle": [], "rest": []}
                                                 for v in variants}

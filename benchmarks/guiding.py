@@ -27,26 +27,33 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from leadthrough.control.guiding import GuidingConfig
+from leadthrough.drivers.protocol import Driver
+from leadthrough.drivers.replay import FeedbackTrace
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify_with_sweep
-from leadthrough.identification.params_file import ParamsFile
-from leadthrough.robot import load_robot
+from leadthrough.identification.params_file import ParamsFile, load_params, save_params
+from leadthrough.robot import Robot, load_robot
+from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import release_overruns
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
-from leadthrough.session.sim_session import (
+from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.session import (
     PUSH_MASS_KG,
     SimSessionConfig,
-    guide_start_pose,
     light_guiding,
     replay_session,
     run_sim_session,
 )
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from realtime_probe import ProbeDriver, compiled_allocations
 
 CONTROLLERS = ("virtual-friction", "velocity")
 #: Replays of each session's loop for the cycle time.
@@ -75,42 +82,74 @@ def main() -> None:
     parser.add_argument("--poses", type=int, default=20)
     parser.add_argument("--rest-seconds", type=float, default=10.0)
     parser.add_argument("--random", type=int, default=24, help="random-push sessions")
+    parser.add_argument("--sections", default="12345",
+                        help="sections to run (default 12345; 5 implies 3's sessions)")
+    parser.add_argument("--reference", metavar="REV", default=None,
+                        help="also time the diagonal and seam sessions with the code of commit "
+                             "REV (section 5; via replay_equivalence.py's export)")
+    parser.add_argument("--params", type=Path, default=None,
+                        help="use these parameters instead of calibrating (e.g. the "
+                             "guiding_params.toml an earlier run wrote into --out)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/out"))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     robot = load_robot("er20")
-    cal = record_calibration_set(robot, seed=1, duration=60.0,
-                                 excitation_config=ExcitationConfig(starts=4))
-    sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
-    sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
-    pf = ParamsFile.from_result(sc.result)
-    print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
-          + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + " N·m")
+    if args.params is not None:
+        pf = load_params(args.params, robot)
+        print(f"Parameters: {args.params}")
+    else:
+        cal = record_calibration_set(robot, seed=1, duration=60.0,
+                                     excitation_config=ExcitationConfig(starts=4))
+        sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
+        sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
+        r = sc.result
+        path = save_params(args.out / "guiding_params.toml", robot, r.method, r.params,
+                           r.stats, sim_seed=1)
+        pf = load_params(path, robot)
+        print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
+              + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + f" N·m -> {path}")
+    if "1" in args.sections:
+        section_rest(robot, pf, args.poses, args.rest_seconds)
+    if "2" in args.sections:
+        section_push(robot, pf, args.out)
+    if "3" in args.sections or "5" in args.sections:
+        timed = section_paths(robot, pf, args.out)
+    if "4" in args.sections:
+        section_random(robot, pf, args.random)
+    if "5" in args.sections:
+        section_cycle_time(robot, pf, timed, args.reference)
 
-    print(f"\n1. Rest, no force: {args.poses} random poses × {args.rest_seconds:g} s")
+
+def section_rest(robot: Robot, pf: ParamsFile, poses_n: int, seconds: float) -> None:
+    """1. Rest, no force, random poses, both controllers."""
+    print(f"\n1. Rest, no force: {poses_n} random poses × {seconds:g} s")
     rng = np.random.default_rng(0)
     poses = [rng.uniform(0.5 * robot.lower_limits, 0.5 * robot.upper_limits)
-             for _ in range(args.poses)]
+             for _ in range(poses_n)]
     for ctl in CONTROLLERS:
         vmax, drift, nonzero, faults = 0.0, 0.0, 0, 0
         for k, q0 in enumerate(poses):
             s = run_sim_session(robot, pf, SimSessionConfig(
-                operator="rest", controller=ctl, duration_s=args.rest_seconds,
-                q0=tuple(q0), run=600 + k))
+                operator="rest", duration_s=seconds, q0=tuple(q0), run=600 + k,
+                loop=LoopConfig(guiding=GuidingConfig(controller=ctl))))
             vmax = max(vmax, s.summary.max_linear_speed, s.summary.max_angular_speed)
             drift = max(drift, s.summary.rest_drift_m or 0.0)
             nonzero += int(np.any(s.result.log.twist_cmd_base != 0.0))
             faults += len(s.summary.faults)
         print(f"  {ctl:<17} peak commanded speed {vmax:.4f} (m/s | rad/s), sessions with "
-              f"any nonzero command {nonzero}/{args.poses}, max rest drift "
+              f"any nonzero command {nonzero}/{poses_n}, max rest drift "
               f"{1000 * drift:.2f} mm, faults {faults}")
 
+
+def section_push(robot: Robot, pf: ParamsFile, out: Path) -> None:
+    """2. Push +x with 40 N, both controllers; Fig. 4."""
     print(f"\n2. Push +x, 40 N from 1 s to 4 s, virtual mass {PUSH_MASS_KG:g} kg "
           "(Table IV's 1000 kg would reach 0.075 m/s)")
     logs = {}
     for ctl in CONTROLLERS:
-        s = run_sim_session(robot, pf, SimSessionConfig(operator="push-x", controller=ctl,
-                                                        guiding=light_guiding()))
+        guiding = replace(light_guiding(), controller=ctl)
+        s = run_sim_session(robot, pf, SimSessionConfig(operator="push-x",
+                                                        loop=LoopConfig(guiding=guiding)))
         log = logs[ctl] = s.result.log
         v = log.twist_cmd_base[:, :3]
         main_peak = float(np.abs(v[:, 0]).max())
@@ -125,41 +164,49 @@ def main() -> None:
         print(f"  {'':<17} force estimate error RMS {np.sqrt(np.mean(np.sum(err**2, 1))):.1f} N")
     print("  ->", plot_force_velocity({"virtual friction": logs["virtual-friction"],
                                       "velocity [14]": logs["velocity"]},
-                                     args.out / "fig4_push_x.png"))
+                                     out / "fig4_push_x.png"))
 
+
+def section_paths(robot: Robot, pf: ParamsFile, out: Path) -> list[TimedSession]:
+    """3. Diagonal and seam sessions (Fig. 5), probed for section 5."""
     print("\n3. Diagonal and seam sessions (virtual friction)")
-    paths, targets, cycle = {}, {}, []
-    alone, moving = [], []
+    paths, targets, timed = {}, {}, []
     for op in ("diagonal", "seam"):
         cfg = SimSessionConfig(operator=op)
-        s = run_sim_session(robot, pf, cfg, record_feedback=True)
+        probe: list[ProbeDriver] = []
+
+        def wrap(d: Driver, keep: list[ProbeDriver] = probe) -> Driver:
+            keep.append(ProbeDriver(d, round(60.0 / d.dt)))
+            return keep[-1]
+
+        s = run_sim_session(robot, pf, cfg, record_feedback=True, wrap_driver=wrap)
         paths[op] = s.result.log
-        cycle.append(s.result.cycle_us)
-        assert s.feedback is not None
-        # the same loop on the recorded feedback, without the simulator between the cycles,
-        # REPLAYS times (the same computation each time, bit for bit)
-        alone.append(np.array([replay_session(robot, pf, cfg, s.feedback).cycle_us
-                               for _ in range(REPLAYS)]))
+        log = s.result.log
+        every = round(cfg.loop.guiding.dt / float(log.time[1] - log.time[0]))
         # a cycle moves when it commands a twist (else it holds its setpoint and reuses the
         # setpoint's kinematics)
-        log = s.result.log
-        every = round(cfg.guiding.dt / float(log.time[1] - log.time[0]))
-        twist = log.twist_cmd_base[::every][:alone[-1].shape[1]]
-        moving.append(np.any(twist != 0.0, axis=1))
+        moving = np.any(log.twist_cmd_base[::every] != 0.0, axis=1)[:s.result.cycle_us.size]
+        assert s.feedback is not None
+        timed.append(TimedSession(op, cfg, s.result.cycle_us, moving, s.feedback,
+                                  probe[0].finish()))
         if s.p1_base is not None and s.p2_base is not None:
             targets.update({"P1": s.p1_base, "P2": s.p2_base})
         print(f"  {op:<9} max speed {s.summary.max_linear_speed:.3f} m/s, faults "
               f"{s.summary.faults or 'none'}")
-    print("  ->", plot_path_3d(paths, args.out / "fig5_paths.png", targets=targets))
+    print("  ->", plot_path_3d(paths, out / "fig5_paths.png", targets=targets))
+    return timed
 
+
+def section_random(robot: Robot, pf: ParamsFile, sessions: int) -> None:
+    """4. Random pushes: travel beyond the shortest stop after each release."""
     light = light_guiding()
     a_max = light.limits.max_linear_acceleration
-    print(f"\n4. Random pushes, {args.random} sessions × 8 (operator seeds 0..{args.random - 1}, "
+    print(f"\n4. Random pushes, {sessions} sessions × 8 (operator seeds 0..{sessions - 1}, "
           f"{PUSH_MASS_KG:g} kg): travel after a release beyond a stop at {a_max:g} m/s²")
     overruns, faults = [], []
-    for k in range(args.random):
+    for k in range(sessions):
         s = run_sim_session(robot, pf, SimSessionConfig(operator="random", operator_seed=k,
-                                                        guiding=light))
+                                                        loop=LoopConfig(guiding=light)))
         over = release_overruns(s.result.log, a_max)
         if over is not None:  # the simulator always records the applied wrench
             overruns.append(over)
@@ -168,18 +215,34 @@ def main() -> None:
     print(f"  {o.size} releases: median {np.median(o):.1f} mm, p90 {np.percentile(o, 90):.1f} "
           f"mm, max {o.max():.1f} mm, total {o.sum():.0f} mm; faults {faults or 'none'}")
 
+
+def section_cycle_time(robot: Robot, pf: ParamsFile, timed: list[TimedSession],
+                       reference: str | None) -> None:
+    """5. Cycle time in the simulated sessions and of the loop alone; what the periods
+    compiled, collected and allocated; the reference commit's cycle time."""
     r = rnea_time_us()
     print("\n5. Cycle time (estimator + controller + IK + limits + interpolation), diagonal and "
-          f"seam sessions; one pin.rnea: {r:.2f} µs; goal p99 <= 50 µs")
-    _report("in the simulated session", np.concatenate(cycle), r)
-    runs = np.concatenate(alone, axis=1)               # (REPLAYS, cycles of both sessions)
+          f"seam sessions; one pin.rnea: {r:.2f} µs; goal p99 <= 100 µs")
+    in_loop = np.concatenate([t.cycle_us for t in timed])
+    _report("in the simulated session", in_loop, r)
+    if reference is not None:
+        ref = reference_cycle_us(reference)
+        _report(f"in the simulated session, commit {reference}", ref, r)
+        print(f"  {'':<44} today / {reference}: median "
+              f"{np.median(in_loop) / np.median(ref):.2f}×, p99 "
+              f"{np.percentile(in_loop, 99) / np.percentile(ref, 99):.2f}×")
+    _report_worst_case(robot, pf, timed)
+    # the same loop on the recorded feedback, without the simulator between the cycles,
+    # REPLAYS times (the same computation each time, bit for bit)
+    runs = np.concatenate([np.array([replay_session(robot, pf, t.config, t.feedback).cycle_us
+                                     for _ in range(REPLAYS)]) for t in timed], axis=1)
     for k in range(REPLAYS):
         _report(f"loop alone, replay {k + 1}", runs[k], r)
     # each cycle's fastest replay: what the computation itself costs, without the machine's
     # interruptions (they hit a cycle at random, see below)
     fastest = runs.min(axis=0)
     _report(f"loop alone, each cycle's fastest of {REPLAYS}", fastest, r)
-    mov = np.concatenate(moving)
+    mov = np.concatenate([t.moving for t in timed])
     _report(f"  of which moving ({mov.sum()} cycles)", fastest[mov], r)
     _report(f"  of which at rest ({(~mov).sum()} cycles)", fastest[~mov], r)
     gaps = interruptions()
@@ -188,6 +251,73 @@ def main() -> None:
           f"{np.median(gaps):.0f} µs (p90 {np.percentile(gaps, 90):.0f} µs); a cycle of "
           f"{np.median(fastest[mov]):.0f} µs is hit with probability "
           f"{100 * rate * np.median(fastest[mov]) * 1e-6:.1f} %")
+
+
+def _report_worst_case(robot: Robot, pf: ParamsFile, timed: list[TimedSession]) -> None:
+    """What the servo periods of the simulated sessions compiled and collected, and (a replay
+    of their feedback under tracemalloc, so that the simulator's own allocations do not count)
+    what they allocated."""
+    periods = sum(t.probe["periods"] for t in timed)
+    new = {k: v for t in timed for k, v in t.probe["new_signatures"].items()}
+    collections = sum(t.probe["collections"] for t in timed)
+    nrt = sum(t.probe["nrt_allocations"] for t in timed)
+    print(f"  {periods} servo periods of the simulated sessions: compiled or loaded "
+          f"{sum(new.values())} signatures ({', '.join(new) or 'none'}), garbage collections "
+          f"{collections}")
+    kept, transient = [], []
+    for t in timed:
+        holder: list[ProbeDriver] = []
+
+        def wrap(d: Driver, keep: list[ProbeDriver] = holder, reads: int = t.feedback.reads
+                 ) -> Driver:
+            keep.append(ProbeDriver(d, reads, trace_memory=True))
+            return keep[-1]
+
+        replay_session(robot, pf, t.config, t.feedback, wrap_driver=wrap)
+        fig = holder[0].finish()
+        kept.append(fig["kept"])
+        transient.append(fig["transient"])
+    tr_all = np.concatenate(transient)
+    print(f"  the loop alone (replay under tracemalloc): memory kept over the periods "
+          f"{', '.join(f'{k:+d} B' for k in kept)}; allocated and freed within a period: "
+          f"median {np.median(tr_all):.0f} B, max {tr_all.max():.0f} B (Pinocchio's returned "
+          "arrays, Python scalars and views)")
+    parts = build_loop(robot, pf, timed[0].config.loop, timed[0].feedback.dt)
+    q0 = timed[0].feedback.q[np.argmax(timed[0].feedback.fresh)]
+    for part in parts:
+        part.reset(q0)
+    inside = compiled_allocations(parts)
+    print("  allocations per call inside the compiled functions (called from compiled code): "
+          + ", ".join(f"{k} {v:g}" for k, v in inside.items()) + f"; per period "
+          f"{nrt / max(periods, 1):.1f} come from the dispatcher wrapping each array "
+          "argument of a call from Python (freed when the call returns)")
+
+
+def reference_cycle_us(rev: str) -> np.ndarray:
+    """Cycle times [µs] of the diagonal and seam sessions simulated with commit ``rev``'s code
+    (exported and run by ``replay_equivalence.py``'s reference side, in a subprocess of this
+    run)."""
+    import tempfile
+
+    from replay_equivalence import export_reference, run_reference
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        run_reference(export_reference(rev, work), work / "sessions", ["diagonal", "seam"])
+        return np.concatenate([np.load(work / "sessions" / f"{c}.npz")["cycle_us"]
+                               for c in ("diagonal", "seam")])
+
+
+@dataclass
+class TimedSession:
+    """A simulated session kept for the cycle time: its settings, controller cycle times [µs],
+    which cycles moved, its recorded feedback, and its probe's figures."""
+
+    name: str
+    config: SimSessionConfig
+    cycle_us: np.ndarray
+    moving: np.ndarray
+    feedback: FeedbackTrace
+    probe: dict[str, Any]
 
 
 def interruptions(seconds: float = INTERRUPTION_PROBE_S) -> np.ndarray:

@@ -52,7 +52,7 @@ def run_reference(ref: Path, out: Path, cases: list[str]) -> None:
 
 def compare(out: Path, names: list[str]) -> bool:
     """Replay each case with today's code and compare; returns whether all meet the goal."""
-    from equivalence_reference import CASES  # the case table (plain values)
+    from equivalence_cases import CASES  # the case table (plain values)
     from leadthrough.identification.params_file import load_params
     from leadthrough.robot import load_robot
 
@@ -91,12 +91,58 @@ class _TodayAPI:
                              current=ref["fb_current"], sequence=ref["fb_sequence"],
                              fresh=ref["fb_fresh"])
 
+    def config(self, robot: object, case: dict[str, object]) -> object:
+        """Today's SimSessionConfig of a case (the reference builds the same settings with its
+        own API: equivalence_reference.session_config)."""
+        from dataclasses import replace
+
+        import pinocchio as pin
+
+        from leadthrough.control.guiding import GuidingConfig
+        from leadthrough.control.safety import SafetyConfig
+        from leadthrough.robot.poses import guide_start_pose
+        from leadthrough.session.loop_config import LoopConfig
+        from leadthrough.sim.driver import InjectedFault, InjectedFaultKind
+        from leadthrough.sim.session import SimSessionConfig, light_guiding
+
+        guiding = GuidingConfig()
+        if "mass" in case:
+            guiding = light_guiding(float(case["mass"]))  # type: ignore[arg-type]
+        guiding = replace(guiding, controller=str(case.get("controller", "virtual-friction")))
+        if "frame" in case:
+            guiding = replace(guiding, frame=str(case["frame"]))
+        if "friction_mode" in case:
+            guiding = replace(guiding, friction_mode=str(case["friction_mode"]))
+        if case.get("axes") == "translation":
+            guiding = replace(guiding, axes_enabled=(True,) * 3 + (False,) * 3)
+        if "rezero_s" in case:
+            guiding = replace(guiding, rezero_s=float(case["rezero_s"]))  # type: ignore[arg-type]
+        if "box_dx" in case:
+            data = robot.model.createData()  # type: ignore[attr-defined]
+            pin.framesForwardKinematics(robot.model, data,  # type: ignore[attr-defined]
+                                        guide_start_pose(robot))  # type: ignore[arg-type]
+            x0 = float(data.oMf[robot.tcp_frame_id].translation[0])  # type: ignore[attr-defined]
+            inf = float("inf")
+            guiding = replace(guiding, safety=SafetyConfig(
+                workspace_min=(-inf, -inf, -inf),
+                workspace_max=(x0 + float(case["box_dx"]), inf, inf)))  # type: ignore[arg-type]
+        estimator = LoopConfig().estimator
+        if "method" in case:
+            estimator = replace(estimator, method=str(case["method"]))
+        faults = ()
+        if "fault" in case:
+            kind, t0, t1, joint, offset = case["fault"]  # type: ignore[misc]
+            faults = (InjectedFault(InjectedFaultKind(kind), t_start=t0, t_end=t1, joint=joint,
+                                    offset=offset),)
+        return SimSessionConfig(operator=str(case["operator"]),
+                                operator_seed=case.get("operator_seed"),  # type: ignore[arg-type]
+                                loop=LoopConfig(estimator=estimator, guiding=guiding),
+                                faults=faults)
+
     def replay(self, robot: object, pf: object, case: dict[str, object], trace: object
                ) -> object:
-        from equivalence_reference import session_config
-        from leadthrough.session.sim_session import replay_session
-        cfg = session_config(robot, case)
-        return replay_session(robot, pf, cfg, trace).log  # type: ignore[arg-type]
+        from leadthrough.sim.session import replay_session
+        return replay_session(robot, pf, self.config(robot, case), trace).log  # type: ignore[arg-type]
 
 
 def _today_api() -> _TodayAPI:
@@ -113,7 +159,7 @@ def main() -> None:
     parser.add_argument("cases", nargs="*", help="cases to run (default: all)")
     args = parser.parse_args()
     sys.path.insert(0, str(HERE))
-    from equivalence_reference import CASES
+    from equivalence_cases import CASES
     names = args.cases or list(CASES)
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work if args.work is not None else Path(tmp)

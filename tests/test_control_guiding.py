@@ -23,10 +23,11 @@ from leadthrough.control import (
     HermiteInterpolator,
     SafetyConfig,
     State,
-    Status,
     VirtualFrictionConfig,
 )
-from leadthrough.control import cycle_kernel as ck
+from leadthrough.control import (
+    GuidingStatus as Status,
+)
 from leadthrough.errors import ControlError
 from leadthrough.robot import Robot
 
@@ -460,7 +461,7 @@ def test_rest_cycles_reuse_the_kinematics_bit_for_bit(er20: Robot) -> None:
             inp.t, inp.sequence, inp.deadman = k * DT, k, bool(deadman[k])
             inp.wrench_base[:] = w[k]
             if recompute:
-                ctl._flags[[ck.KINEMATICS_FRESH, ck.RESIDUAL_FRESH]] = 0
+                ctl.record["kinematics_fresh"] = ctl.record["residual_fresh"] = False
             ctl.update(inp, out)
             if k in (200, 540):             # at rest, and in FAULT before its clearing
                 with pytest.raises(ControlError, match="workspace"):

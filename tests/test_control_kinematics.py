@@ -11,19 +11,34 @@ from leadthrough.control import (
     AutoFrictionConfig,
     DifferentialIK,
     IKConfig,
-    joint_kernels,
-    se3_kernels,
+    ik_step,
+    se3,
 )
-from leadthrough.control.ik import dls_damping
-from leadthrough.errors import ControlError
-from leadthrough.estimation.kernels import (
+from leadthrough.control.ik import ik_dtype
+from leadthrough.damped_least_squares import (
     cholesky_factor,
     cholesky_solve,
+    damping_of,
     gram_manipulability,
 )
+from leadthrough.errors import ControlError
 from leadthrough.robot import Robot
+from leadthrough.state_records import new_record, view
 
 DT = 0.01
+
+
+def _ik_record(jacobian: np.ndarray, error: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+               vmax: np.ndarray, dv: np.ndarray, half_inv_a: np.ndarray) -> np.void:
+    """An IK record (no damping) for a given Jacobian, log6 error and joint bounds."""
+    rec = new_record(ik_dtype(jacobian.shape[1]))
+    r = view(rec)
+    r.jacobian, r.gram, r.error, r.dt = jacobian, jacobian @ jacobian.T, error, DT
+    r.lower, r.upper, r.max_velocity, r.velocity_step = lower, upper, vmax, dv
+    r.half_inverse_acceleration = half_inv_a
+    return rec[0]
+
+
 Q_WORK = np.array([0.3, -0.6, 0.9, 0.4, 0.8, 0.2])
 Q_WRIST_SINGULAR = np.array([0.0, -0.6, 0.9, 0.0, 0.0, 0.0])
 
@@ -91,8 +106,8 @@ def test_manipulability_and_damping(er20: Robot) -> None:
     ik.compute_kinematics(Q_WRIST_SINGULAR)
     assert ik.manipulability < 1e-6
     assert ik.damping == pytest.approx(0.05, rel=1e-6)
-    assert dls_damping(0.01, 0.02, 0.05) == pytest.approx(0.05 * np.sqrt(0.75))
-    assert dls_damping(0.03, 0.02, 0.05) == 0.0
+    assert damping_of(0.01, 0.02, 0.05) == pytest.approx(0.05 * np.sqrt(0.75))
+    assert damping_of(0.03, 0.02, 0.05) == 0.0
 
 
 def test_ik_step_reaches_a_nearby_target(er20: Robot) -> None:
@@ -192,13 +207,13 @@ def test_ik_braking_at_a_position_limit_slows_no_other_joint_beyond_its_accelera
     lower, upper = np.full(n, -3.0), np.full(n, 3.0)
     q = np.zeros(n)
     q[0] = upper[0] - 0.05
-    bound = joint_kernels._braking_speed(0.05, dv[0], dt)
+    bound = ik_step._braking_speed(0.05, dv[0], dt)
     qd_prev = np.zeros(n)
     qd_prev[0], qd_prev[1] = bound + 0.5 * dv[0], 2.0           # both keep their speed
     qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
-    scale = joint_kernels.dls_step(np.eye(n), np.eye(n), 0.0, qd_prev * dt, dt, q, qd_prev,
-                                   lower, upper, np.full(n, 10.0), dv, np.full(n, 0.5 / a),
-                                   qd_dls, qd, q_next, np.zeros((7, 6)))
+    ik = _ik_record(np.eye(n), qd_prev * dt, lower, upper, np.full(n, 10.0), dv,
+                    np.full(n, 0.5 / a))
+    scale = ik_step.dls_step(ik, q, qd_prev, qd_dls, qd, q_next)
     np.testing.assert_allclose(qd_dls, qd_prev, rtol=1e-12)
     assert scale == pytest.approx(bound / qd_prev[0], rel=1e-12)
     assert qd[0] == pytest.approx(bound, rel=1e-12)              # the bound holds
@@ -258,7 +273,7 @@ def test_compiled_base_frame_step_matches_pinocchio_exp3() -> None:
             twist = rng.normal(size=6) * scale
             R = pin.exp3(rng.normal(size=3))
             p = rng.normal(size=3)
-            se3_kernels.integrate_base(R, p, twist, DT, R_out, p_out)
+            se3.integrate_base(R, p, twist, DT, R_out, p_out)
             np.testing.assert_allclose(R_out, pin.exp3(twist[3:] * DT) @ R, atol=1e-14)
             np.testing.assert_allclose(p_out, p + twist[:3] * DT, atol=1e-15)
 
@@ -271,7 +286,7 @@ def test_compiled_tool_frame_step_matches_pinocchio_exp6() -> None:
         for _ in range(20):
             T = pin.SE3.Random()
             twist = rng.normal(size=6) * scale
-            se3_kernels.integrate_tool(T.rotation, T.translation, twist, DT, R_out, p_out)
+            se3.integrate_tool(T.rotation, T.translation, twist, DT, R_out, p_out)
             ref = T * pin.exp6(pin.Motion(twist * DT))
             np.testing.assert_allclose(R_out, ref.rotation, atol=1e-14)
             np.testing.assert_allclose(p_out, ref.translation, atol=1e-13)
@@ -291,7 +306,7 @@ def test_compiled_log6_matches_pinocchio(angle: float) -> None:
         axis = rng.normal(size=3)
         xi = np.concatenate([rng.normal(size=3), axis / np.linalg.norm(axis) * angle])
         Tb = Ta * pin.exp6(pin.Motion(xi))
-        norm = se3_kernels.log6_between(Ta.rotation, Ta.translation, Tb.rotation,
+        norm = se3.log6_between(Ta.rotation, Ta.translation, Tb.rotation,
                                         Tb.translation, out)
         ref = pin.log6(Ta.actInv(Tb)).vector
         np.testing.assert_allclose(out, ref, atol=tol)
@@ -413,9 +428,9 @@ def test_ik_step_on_a_singular_system_brakes_instead_of_failing() -> None:
     qd_prev = np.array([0.2, -0.2, 0.03, 0.0, -0.01, 0.1])
     qd_dls, qd, q_next = np.zeros(n), np.zeros(n), np.zeros(n)
     q = np.zeros(n)
-    scale = joint_kernels.dls_step(J, J @ J.T, 0.0, np.ones(6), DT, q, qd_prev,
-                                   np.full(n, -3.0), np.full(n, 3.0), np.full(n, 10.0), dv,
-                                   np.full(n, 0.1), qd_dls, qd, q_next, np.zeros((7, 6)))
+    ik = _ik_record(J, np.ones(6), np.full(n, -3.0), np.full(n, 3.0), np.full(n, 10.0), dv,
+                    np.full(n, 0.1))
+    scale = ik_step.dls_step(ik, q, qd_prev, qd_dls, qd, q_next)
     assert scale == 0.0
     np.testing.assert_allclose(qd, [0.15, -0.15, 0.0, 0.0, 0.0, 0.05])
     np.testing.assert_allclose(q_next, qd * DT)

@@ -3,27 +3,26 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
-import pinocchio as pin
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
 
-from leadthrough.control import (
-    CartesianLimits,
-    VelocityBaseline,
-    VelocityBaselineConfig,
-    VirtualFriction,
-    VirtualFrictionConfig,
-    kernels,
-    se3_kernels,
+from leadthrough.control import CartesianLimits, VelocityBaselineConfig, VirtualFrictionConfig
+from leadthrough.control.limits import (
+    braking_distance,
+    decelerate_twist,
+    limit_twist,
 )
-from leadthrough.control import guiding_kernel as gk
-from leadthrough.control.guiding import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
-from leadthrough.control.limits import TwistLimiter
+from leadthrough.control.release import (
+    RELEASE_DROP,
+    RELEASE_SMOOTHING_S,
+    RELEASE_WINDOW_S,
+    release_step,
+)
+from leadthrough.control.velocity_baseline import velocity_baseline
+from leadthrough.control.virtual_friction import virtual_friction
 from leadthrough.errors import ControlError
 
 DT = 0.01
@@ -31,13 +30,29 @@ DELTA = np.full(6, 15.0)
 DELTA_S = np.full(6, 50.0)
 
 
-def _run(law: VirtualFriction | VelocityBaseline, wrenches: np.ndarray,
-         delta: np.ndarray = DELTA, delta_s: np.ndarray = DELTA_S) -> np.ndarray:
+Law = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
+
+
+def vf_law(cfg: VirtualFrictionConfig | None = None) -> Law:
+    """Eq. 31–33 as the guiding cycle runs it: (twist, wrench, δ, δ_s, out)."""
+    dt_over_mass = (cfg or VirtualFrictionConfig()).dt_over_mass(DT)
+    return lambda v, w, d, ds, out: virtual_friction(v, w, d, ds, dt_over_mass, out)
+
+
+def vb_law(cfg: VelocityBaselineConfig | None = None) -> Law:
+    """[14] as the guiding cycle runs it (ignores the friction)."""
+    cfg = cfg or VelocityBaselineConfig()
+    gain, alpha = np.asarray(cfg.gain, dtype=float), cfg.alpha(DT)
+    return lambda v, w, d, ds, out: velocity_baseline(v, w, gain, alpha, out)
+
+
+def _run(law: Law, wrenches: np.ndarray, delta: np.ndarray = DELTA,
+         delta_s: np.ndarray = DELTA_S) -> np.ndarray:
     """Twists after each cycle for a (k, 6) wrench sequence (no limits)."""
     v, new = np.zeros(6), np.zeros(6)
     out = np.empty_like(wrenches)
     for k, w in enumerate(wrenches):
-        law.step(v, w, delta, delta_s, new)
+        law(v, w, delta, delta_s, new)
         v[:] = new
         out[k] = v
     return out
@@ -57,7 +72,7 @@ def test_no_motion_below_friction_is_exactly_zero() -> None:
     """eq. 33: |F̂| < δ never starts a motion; the velocity is 0.0 exactly, not small."""
     rng = np.random.default_rng(0)
     w = rng.uniform(-14.999, 14.999, size=(5000, 6))
-    v = _run(VirtualFriction(dt=DT), w)
+    v = _run(vf_law(), w)
     assert np.all(v == 0.0)
 
 
@@ -65,7 +80,7 @@ def test_breakaway_acceleration_is_force_minus_friction_over_mass() -> None:
     """eq. 31 + 33: above δ the axis accelerates with (|F̂| − δ)/M, in the force's direction."""
     w = np.zeros((100, 6))
     w[:, 0], w[:, 4] = 40.0, -20.0
-    v = _run(VirtualFriction(dt=DT), w)
+    v = _run(vf_law(), w)
     np.testing.assert_allclose(v[:, 0], (40.0 - 15.0) / 1000.0 * DT * np.arange(1, 101),
                                rtol=1e-12)
     np.testing.assert_allclose(v[:, 4], -(20.0 - 15.0) / 1000.0 * DT * np.arange(1, 101),
@@ -75,20 +90,20 @@ def test_breakaway_acceleration_is_force_minus_friction_over_mass() -> None:
 
 def test_moving_friction_opposes_velocity() -> None:
     """eq. 32: while moving with F̂ ≥ δ the friction is δ·sgn(v) (decelerating a push back)."""
-    law = VirtualFriction(dt=DT)
+    law = vf_law()
     v, out = np.zeros(6), np.zeros(6)
     v[1] = 0.1
     w = np.zeros(6)
     w[1] = 30.0                                   # same direction: a = (30 − 15)/M
-    law.step(v, w, DELTA, DELTA_S, out)
+    law(v, w, DELTA, DELTA_S, out)
     assert out[1] == pytest.approx(0.1 + DT * 15.0 / 1000.0, rel=1e-12)
     w[1] = -30.0                                  # pushing back: a = (−30 − 15)/M
-    law.step(v, w, DELTA, DELTA_S, out)
+    law(v, w, DELTA, DELTA_S, out)
     assert out[1] == pytest.approx(0.1 - DT * 45.0 / 1000.0, rel=1e-12)
 
 
 def test_stopping_friction_after_release_stops_exactly_without_reversal() -> None:
-    law = VirtualFriction(dt=DT)
+    law = vf_law()
     w = np.zeros((1000, 6))
     w[:400, 2] = 60.0
     w[400:, 2] = 10.0                             # "released": a residual 10 N below δ
@@ -114,8 +129,6 @@ def test_config_validation_names_the_field() -> None:
         VelocityBaselineConfig(time_constant=0.0)
     with pytest.raises(ControlError, match=r"limits.max_linear_speed"):
         CartesianLimits(max_linear_speed=math.nan)
-    with pytest.raises(ControlError, match="dt"):
-        VirtualFriction(dt=0.0)
 
 
 def test_velocity_baseline_is_a_first_order_lag() -> None:
@@ -123,7 +136,7 @@ def test_velocity_baseline_is_a_first_order_lag() -> None:
     cfg = VelocityBaselineConfig(gain=(0.0025,) * 6, time_constant=0.2)
     w = np.zeros((300, 6))
     w[:150, 0] = 40.0
-    v = _run(VelocityBaseline(cfg, DT), w)[:, 0]
+    v = _run(vb_law(cfg), w)[:, 0]
     t = DT * np.arange(1, 151)
     np.testing.assert_allclose(v[:150], 0.1 * (1 - np.exp(-t / 0.2)), rtol=1e-9)
     np.testing.assert_allclose(v[150:], v[149] * np.exp(-t / 0.2), rtol=1e-9)
@@ -132,20 +145,21 @@ def test_velocity_baseline_is_a_first_order_lag() -> None:
 def test_velocity_baseline_drifts_on_noise_that_virtual_friction_ignores() -> None:
     rng = np.random.default_rng(1)
     w = rng.normal(2.0, 3.0, size=(1000, 6))     # a biased, noisy estimate far below δ
-    vf = _run(VirtualFriction(dt=DT), w)
-    vb = _run(VelocityBaseline(dt=DT), w)
+    vf = _run(vf_law(), w)
+    vb = _run(vb_law(), w)
     assert np.all(vf == 0.0)
     drift = np.sum(vb[:, :3], axis=0) * DT        # TCP displacement over 10 s [m]
     assert np.all(drift > 0.03)
 
 
 def test_limiter_caps_speed_and_acceleration_by_norm() -> None:
-    lim = TwistLimiter(CartesianLimits(), DT)
+    lim = CartesianLimits()
+    speed, step = lim.max_speed, lim.max_step(DT)
     prev, out = np.zeros(6), np.zeros(6)
     desired = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 5.0])
     speeds, accs = [], []
     for _ in range(200):
-        lim.limit(prev, desired, 1.0, out)
+        limit_twist(prev, desired, speed, step, 1.0, out)
         accs.append(np.linalg.norm(out[:3] - prev[:3]) / DT)
         prev[:] = out
         speeds.append(np.linalg.norm(out[:3]))
@@ -155,19 +169,19 @@ def test_limiter_caps_speed_and_acceleration_by_norm() -> None:
     assert out[5] == pytest.approx(0.2, rel=1e-12)
     # a lowered speed scale is reached by decelerating, not by a jump
     before = out.copy()
-    lim.limit(before, desired, 0.1, out)
+    limit_twist(before, desired, speed, step, 0.1, out)
     assert np.linalg.norm(out[:3] - before[:3]) / DT == pytest.approx(0.4, rel=1e-12)
 
 
 def test_decelerate_reaches_exact_zero_at_the_limit() -> None:
-    lim = TwistLimiter(CartesianLimits(), DT)
+    step = CartesianLimits().max_step(DT)
     v = np.array([0.12, -0.16, 0.0, 0.05, 0.0, 0.0])
     direction = v[:3] / np.linalg.norm(v[:3])
     cycles = 0
     while v.any() and cycles < 100:
         cycles += 1
         before = v.copy()
-        lim.decelerate(before, v)
+        decelerate_twist(before, step, 0.0, v)
         assert np.linalg.norm(v[:3] - before[:3]) <= 0.4 * DT * (1 + 1e-12)
         assert np.linalg.norm(v[3:] - before[3:]) <= 0.4 * DT * (1 + 1e-12)
         if np.linalg.norm(v[:3]) > 0:             # straight line in velocity space
@@ -175,26 +189,26 @@ def test_decelerate_reaches_exact_zero_at_the_limit() -> None:
         # proportional: the angular part (0.05 rad/s) ends with the linear one
         assert np.count_nonzero(v) in (0, 3)
     assert not v.any() and cycles == 50          # 0.2 m/s at 0.4 m/s²: 50 cycles
-    assert CartesianLimits().braking_distance(0.2) == pytest.approx(0.05)
+    assert braking_distance(0.2, 0.4, 0.0) == pytest.approx(0.05)
 
 
 def test_decelerate_takes_the_joints_stop_when_longer() -> None:
-    lim = TwistLimiter(CartesianLimits(), DT)
+    step = CartesianLimits().max_step(DT)
     v = np.array([0.1, 0.0, 0.0, 0.0, 0.0, 0.0])  # 25 cycles at the Cartesian limit
     path, cycles = 0.0, 0
     while v.any() and cycles < 100:
         cycles += 1
         before = v[0]
         # the joints, whose speeds scale with the twist, need 40 cycles from the start
-        lim.decelerate(v, v, 40.0 * before / 0.1)
+        decelerate_twist(v, step, 40.0 * before / 0.1, v)
         assert before - v[0] == pytest.approx(0.1 / 40.0, rel=1e-9)
         path += v[0] * DT
     assert cycles == 40
     # the braking distance given that stop time bounds the discrete stop's path
-    bound = CartesianLimits().braking_distance(0.1, 40 * DT)
+    bound = braking_distance(0.1, 0.4, 40 * DT)
     assert bound == pytest.approx(0.1 * 0.4 / 2)
     assert path <= bound and path == pytest.approx(bound, rel=0.03)
-    assert CartesianLimits().braking_distance(0.1, 0.01) == pytest.approx(0.1 ** 2 / 0.8)
+    assert braking_distance(0.1, 0.4, 0.01) == pytest.approx(0.1 ** 2 / 0.8)
 
 
 def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
@@ -206,7 +220,7 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
     smooth, peak = np.zeros(6), np.zeros(6)
     rng = np.random.default_rng(3)
     noise = rng.uniform(-10.0, 10.0, size=(2000, 6))
-    step = partial(kernels.release_step, friction=friction, drop=RELEASE_DROP, alpha=alpha,
+    step = partial(release_step, friction=friction, drop=RELEASE_DROP, alpha=alpha,
                    forget=forget, smooth=smooth, peak=peak)
     assert not any(step(w, moving=False) for w in noise)
     smooth[:], peak[:] = 0.0, 0.0
@@ -242,64 +256,9 @@ def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:
         count = 0
         for k in range(700):                  # 7 s
             w[1] = 49.0 - 10.0 * max(0.0, k * DT - 1.0)
-            count += kernels.release_step(w, friction, RELEASE_DROP, alpha, forget, smooth,
+            count += release_step(w, friction, RELEASE_DROP, alpha, forget, smooth,
                                           peak, False)
         return count
 
     assert releases(float(np.exp(-DT / RELEASE_WINDOW_S))) == 0
     assert releases(1.0) >= 5
-
-
-_vec6 = arrays(np.float64, 6, elements=st.floats(-80.0, 80.0))
-
-
-@settings(max_examples=300, deadline=None)
-@given(twist=_vec6, wrench=_vec6, friction=arrays(np.float64, 6, elements=st.floats(0.0, 30.0)),
-       extra=arrays(np.float64, 6, elements=st.floats(0.0, 40.0)), smooth=_vec6, peak=_vec6,
-       at_rest=st.booleans(), law_id=st.sampled_from([gk.LAW_VIRTUAL_FRICTION, gk.LAW_VELOCITY]),
-       rest_s=st.sampled_from([0.0, 0.05, 0.6, math.inf]),
-       release_s=st.sampled_from([0.0, 0.05, 0.6, math.inf]), scale=st.floats(0.1, 1.0),
-       angle=st.floats(-3.0, 3.0))
-def test_guiding_step_is_the_chain_of_its_kernels(
-        twist: np.ndarray, wrench: np.ndarray, friction: np.ndarray, extra: np.ndarray,
-        smooth: np.ndarray, peak: np.ndarray, at_rest: bool, law_id: int, rest_s: float,
-        release_s: float, scale: float, angle: float) -> None:
-    """The fused GUIDING step computes bit for bit what its links compute one by one: release
-    detection, settling friction, law, limits, base-frame integration."""
-    twist = np.zeros(6) if at_rest else twist / 200.0
-    law: VirtualFriction | VelocityBaseline = (
-        VirtualFriction(VirtualFrictionConfig(mass=(100.0,) * 3 + (1000.0,) * 3), DT)
-        if law_id == gk.LAW_VIRTUAL_FRICTION else VelocityBaseline(dt=DT))
-    limiter = TwistLimiter(CartesianLimits(), DT)
-    hold, alpha = 0.5, DT / (RELEASE_SMOOTHING_S + DT)
-    forget = math.exp(-DT / RELEASE_WINDOW_S)
-    R = pin.rpy.rpyToMatrix(angle, 0.5 * angle, -angle)
-    p = np.array([0.8, -0.2, 1.1])
-    axes = np.zeros((gk.AXES_ROWS, 6))
-    for row, v in ((gk.TWIST, twist), (gk.WRENCH, wrench), (gk.FRICTION, friction),
-                   (gk.STOP_FRICTION, friction + extra), (gk.SMOOTH, smooth), (gk.PEAK, peak),
-                   (gk.LAW, law.coefficients)):
-        axes[row] = v
-    R_out, p_out = np.zeros((3, 3)), np.zeros(3)
-    settings_ = np.array([hold, DT, RELEASE_DROP, alpha, forget])
-    release_after = gk.guiding_step(axes, law.law_id, law.alpha, settings_, limiter.max_speed,
-                                    limiter.max_step, scale, rest_s, release_s, True, R, p,
-                                    R_out, p_out)
-    # the chain, link by link
-    smooth_ref, peak_ref = smooth.copy(), peak.copy()
-    resting = not twist.any()
-    if kernels.release_step(wrench, friction, RELEASE_DROP, alpha, forget, smooth_ref,
-                            peak_ref, not resting) and resting:
-        release_s = 0.0
-    settling = resting and (rest_s < hold or release_s < hold)
-    desired, new = np.zeros(6), np.zeros(6)
-    law.step(twist, wrench, friction + extra if settling else friction, friction + extra,
-             desired)
-    limiter.limit(twist, desired, scale, new)
-    R_ref, p_ref = np.zeros((3, 3)), np.zeros(3)
-    se3_kernels.integrate_base(R, p, new, DT, R_ref, p_ref)
-    assert release_after == release_s + DT
-    for got, want in ((axes[gk.SMOOTH], smooth_ref), (axes[gk.PEAK], peak_ref),
-                      (axes[gk.DESIRED], desired), (axes[gk.NEW], new), (R_out, R_ref),
-                      (p_out, p_ref)):
-        np.testing.assert_array_equal(got, want)

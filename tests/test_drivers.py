@@ -7,10 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from leadthrough.drivers import Driver, Fault, FaultKind, SimDriver
+from leadthrough.drivers import Driver
 from leadthrough.errors import SimulationError
 from leadthrough.robot import Robot
 from leadthrough.sim import SimConfig, SimRobot
+from leadthrough.sim.driver import InjectedFault as Fault
+from leadthrough.sim.driver import InjectedFaultKind as FaultKind
+from leadthrough.sim.driver import SimDriver
 
 POSE = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
 

@@ -8,18 +8,24 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from leadthrough.damped_least_squares import damping_of, smallest_eigenvalue_3
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics import nominal_drive_parameters
 from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.errors import DataError
-from leadthrough.estimation import kernels
 from leadthrough.estimation.estimator import (
     EstimatorConfig,
     ExternalForceEstimator,
-    Status,
 )
-from leadthrough.estimation.filters import FirstOrderLowPass, StateVariableDifferentiator
+from leadthrough.estimation.estimator import EstimatorStatus as Status
+from leadthrough.estimation.filters import (
+    differentiate,
+    differentiator_coefficients,
+    low_pass_alpha,
+    restart_differentiator,
+)
 from leadthrough.estimation.payload import estimate_payload
+from leadthrough.estimation.wrench import friction_weights, wrench_from_torque
 from leadthrough.robot import Robot
 from leadthrough.sim import ConstantWrench, Payload, SimConfig, SimRobot, hold
 from leadthrough.sim.mujoco_model import build_mujoco_model
@@ -30,13 +36,14 @@ Q0 = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
 
 def test_differentiator_tracks_a_sine() -> None:
     dt, w = 1e-3, 2 * np.pi * 0.5
-    diff = StateVariableDifferentiator(1, 20.0, dt)
+    coef = differentiator_coefficients(20.0, dt)[0]
     t = np.arange(0, 4, dt)
-    diff.reset(np.zeros(1))
+    position, velocity, acceleration = np.zeros(1), np.zeros(1), np.zeros(1)
+    restart_differentiator(np.zeros(1), position, velocity, acceleration)
     v, a = np.empty(t.size), np.empty(t.size)
     for k, tk in enumerate(t):
-        diff.step(np.array([np.sin(w * tk)]))
-        v[k], a[k] = diff.velocity[0], diff.acceleration[0]
+        differentiate(coef, np.array([np.sin(w * tk)]), position, velocity, acceleration)
+        v[k], a[k] = velocity[0], acceleration[0]
     late = t > 1.0
     # critically damped 2nd order at 20 Hz: small lag at 0.5 Hz (≈ 2·ζ/ω_c = 16 ms)
     lag = 2.0 / (2 * np.pi * 20.0)
@@ -47,12 +54,19 @@ def test_differentiator_tracks_a_sine() -> None:
 
 
 def test_low_pass_step_response() -> None:
-    lp = FirstOrderLowPass(2, 3.0, 1e-3)
+    """y ← y + α·(x − y) with α = 1 − e^(−2π·f·dt): after 1 s at 3 Hz the step's error is
+    e^(−6π) ≈ 6.5e-9 of the step."""
+    alpha = low_pass_alpha(3.0, 1e-3)
+    assert alpha == pytest.approx(1 - np.exp(-2 * np.pi * 3.0 * 1e-3), rel=1e-15)
+    y = np.zeros(2)
     for _ in range(1000):
-        y = lp.step(np.array([1.0, -2.0]))
-    np.testing.assert_allclose(y, [1.0, -2.0], rtol=1e-6)
-    with pytest.raises(DataError):
-        StateVariableDifferentiator(1, 600.0, 1e-3)
+        y += alpha * (np.array([1.0, -2.0]) - y)
+    np.testing.assert_allclose(y, [1.0, -2.0], rtol=1e-8)
+    assert abs(y[0] - 1.0) == pytest.approx(np.exp(-6 * np.pi), rel=1e-6)
+    with pytest.raises(DataError, match="cutoff_hz"):
+        differentiator_coefficients(600.0, 1e-3)
+    with pytest.raises(DataError, match="cutoff_hz"):
+        low_pass_alpha(0.0, 1e-3)
 
 
 def _quiet_config() -> SimConfig:
@@ -195,22 +209,26 @@ def test_never_raises_never_ok_over_nan_and_latches(er20: Robot, method: str, ax
         assert s1 == s2 and np.array_equal(v1, v2)
 
 
-def test_input_arrays_of_the_wrong_size_latch_a_fault(er20: Robot) -> None:
-    from leadthrough.estimation.estimator import EstimatorInput
+def test_an_input_for_another_robot_latches_a_fault(er20: Robot) -> None:
+    """The input's arrays are its record's (they cannot be resized), but an input or output
+    made for another robot can be passed: FAULT_INPUT_SIZE, latched until reset."""
+    from leadthrough.estimation.estimator import EstimatorInput, EstimatorOutput
 
     est = _estimator(er20, friction_velocity="command")
     out = est.make_output()
-    for inp in (EstimatorInput(0.0, Q0[:5].copy(), np.zeros(6), np.zeros(6)),
-                EstimatorInput(0.0, Q0.copy(), np.zeros(7), np.zeros(6)),
-                EstimatorInput(0.0, Q0.copy(), np.zeros(6))):    # qd_cmd left empty
+    for inp, o in ((EstimatorInput(5), out), (EstimatorInput(7), out),
+                   (est.make_input(), EstimatorOutput(5))):
         est.reset(Q0)
-        assert est.update(inp, out) is Status.FAULT_INPUT_SIZE
-        assert est.update(est.make_input(), out) is Status.FAULT_INPUT_SIZE   # latched
+        o.wrench[:] = 1.0
+        assert est.update(inp, o) is Status.FAULT_INPUT_SIZE
+        good = est.make_input()
+        good.q[:] = Q0
+        assert est.update(good, out) is Status.FAULT_INPUT_SIZE   # latched
         assert np.all(out.wrench == 0.0)
-    # without the command friction, qd_cmd is not used and may be left empty
-    est = _estimator(er20)
     est.reset(Q0)
-    assert est.update(EstimatorInput(0.0, Q0.copy(), np.zeros(6)), out) is Status.WARMING_UP
+    good = est.make_input()
+    good.q[:] = Q0
+    assert est.update(good, out) is Status.WARMING_UP
 
 
 @pytest.mark.parametrize("missed", [1, 5, 25])
@@ -274,21 +292,29 @@ def test_rezero_takes_any_window_without_raising(er20: Robot) -> None:
 @given(st.floats(-0.2, 0.2), st.floats(0.0, 1.0))
 def test_wrench_stays_bounded_near_the_wrist_singularity(er20: Robot, q5: float, scale: float
                                                          ) -> None:
-    """q5 → 0 aligns axes 4 and 6: the damped inverse keeps the wrench bounded."""
+    """q5 → 0 aligns axes 4 and 6: the damped inverse keeps the wrench bounded, by the damped
+    least squares' largest gain max_i σ_i/(σ_i² + λ²) ≤ 1/(2λ) (σ_i the singular values of J),
+    and it is the damped solution (J Jᵀ + λ²·1)⁻¹·J·τ itself."""
     cfg = EstimatorConfig()
     q = np.array([0.2, -0.5, 0.3, 0.4, q5, 0.1])
     J = pin.computeFrameJacobian(er20.model, er20.model.createData(), q, er20.tcp_frame_id,
                                  pin.LOCAL_WORLD_ALIGNED)
     tau = scale * np.array([50.0, 50.0, 20.0, 5.0, 5.0, 5.0])
-    wrench, info = np.zeros(6), np.zeros(2)
-    kernels.wrench_from_torque(J, tau, np.ones(6), False, cfg.manipulability_threshold,
+    wrench = np.zeros(6)
+    info = wrench_from_torque(J, tau, np.ones(6), False, cfg.manipulability_threshold,
                                cfg.max_damping, cfg.min_force_lever, wrench,
-                               np.zeros((2, 6, 6)), info)
+                               np.zeros((6, 6)), np.zeros((6, 6)))
     assert np.all(np.isfinite(wrench))
-    assert np.linalg.norm(wrench) < 1e4
     mu, lam = info
+    sigma = np.linalg.svd(J, compute_uv=False)
+    gain = float(np.max(sigma / (sigma**2 + lam**2)))
+    assert np.linalg.norm(wrench) <= gain * np.linalg.norm(tau) * (1 + 1e-9) + 1e-12
+    if lam > 0:
+        assert gain <= 1.0 / (2.0 * lam) * (1 + 1e-12)
+        np.testing.assert_allclose(wrench, np.linalg.solve(J @ J.T + lam**2 * np.eye(6), J @ tau),
+                                   rtol=1e-7, atol=1e-9 * max(1.0, np.linalg.norm(tau)))
     assert mu == pytest.approx(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)), rel=1e-6, abs=1e-6)
-    assert lam == kernels.damping_of(mu, cfg.manipulability_threshold, cfg.max_damping)
+    assert lam == damping_of(mu, cfg.manipulability_threshold, cfg.max_damping)
     if mu < cfg.manipulability_threshold:
         assert lam > 0
 
@@ -310,7 +336,7 @@ def test_smallest_eigenvalue_3_matches_lapack(entries: list[float], shrink: floa
     a[3:, 3:] = -1e3 * np.eye(3)          # outside the leading block: never read
     ref = np.linalg.eigvalsh(a[:3, :3])[0]
     scale = max(1.0, float(np.abs(a[:3, :3]).max()))
-    assert kernels.smallest_eigenvalue_3(a) == pytest.approx(ref, abs=5e-8 * scale)
+    assert smallest_eigenvalue_3(a) == pytest.approx(ref, abs=5e-8 * scale)
 
 
 def test_force_fit_is_undamped_at_the_wrist_singularity(er20: Robot) -> None:
@@ -323,18 +349,18 @@ def test_force_fit_is_undamped_at_the_wrist_singularity(er20: Robot) -> None:
     force = np.array([30.0, -40.0, 20.0])
     tau = J[:3].T @ force
     weight = 1.0 / np.array([15.0, 19.0, 3.0, 0.8, 0.8, 0.25])
-    wrench, info = np.zeros(6), np.zeros(2)
-    kernels.wrench_from_torque(J, tau, weight, True, cfg.manipulability_threshold,
+    wrench = np.zeros(6)
+    info = wrench_from_torque(J, tau, weight, True, cfg.manipulability_threshold,
                                cfg.max_damping, cfg.min_force_lever, wrench,
-                               np.zeros((2, 6, 6)), info)
+                               np.zeros((6, 6)), np.zeros((6, 6)))
     assert info[0] < 1e-9 < cfg.manipulability_threshold
     assert info[1] == 0.0
     np.testing.assert_allclose(wrench[:3], force, rtol=1e-9)
     np.testing.assert_array_equal(wrench[3:], 0.0)
-    full, full_info = np.zeros(6), np.zeros(2)
-    kernels.wrench_from_torque(J, tau, weight, False, cfg.manipulability_threshold,
+    full = np.zeros(6)
+    full_info = wrench_from_torque(J, tau, weight, False, cfg.manipulability_threshold,
                                cfg.max_damping, cfg.min_force_lever, full,
-                               np.zeros((2, 6, 6)), full_info)
+                               np.zeros((6, 6)), np.zeros((6, 6)))
     assert full_info[1] == pytest.approx(cfg.max_damping)
 
 
@@ -354,11 +380,11 @@ def test_force_fit_damping_follows_the_shortest_lever(lever: float, w: float, se
     J[:3] = u @ np.diag([1.2, 0.7, lever]) @ v[:3]
     J[3:] = rng.normal(size=(3, 6))
     tau = rng.normal(scale=20.0, size=6)
-    wrench, info = np.zeros(6), np.zeros(2)
-    kernels.wrench_from_torque(J, tau, np.full(6, w), True, cfg.manipulability_threshold,
+    wrench = np.zeros(6)
+    info = wrench_from_torque(J, tau, np.full(6, w), True, cfg.manipulability_threshold,
                                cfg.max_damping, cfg.min_force_lever, wrench,
-                               np.zeros((2, 6, 6)), info)
-    lam = kernels.damping_of(lever, cfg.min_force_lever, cfg.max_damping)
+                               np.zeros((6, 6)), np.zeros((6, 6)))
+    lam = damping_of(lever, cfg.min_force_lever, cfg.max_damping)
     assert info[1] == pytest.approx(lam, abs=1e-7)
     Jv = J[:3]
     ref = np.linalg.solve(Jv @ Jv.T + info[1] ** 2 * np.eye(3), Jv @ tau)
@@ -417,11 +443,14 @@ def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
 
 @pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt"])
 def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: str) -> None:
-    """The compiled per-sample model (smoothed sign) equals the offline eq. 21 for |q̇| > v_ε."""
+    """The estimator's per-sample model (its identified links in Pinocchio, its compiled
+    friction with the smoothed sign, rotor inertia and offset) equals the offline eq. 21 for
+    |q̇| > v_ε."""
     from dataclasses import replace
 
     from leadthrough.dynamics import FrictionModel, model_torque
     from leadthrough.dynamics.friction import StribeckParameters
+    from leadthrough.estimation.estimator_step import smoothed_friction
     from leadthrough.estimation.identified_model import IdentifiedModel
 
     base = nominal_drive_parameters(er20)
@@ -436,14 +465,15 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
         "cbrt": replace(base, friction_model=FrictionModel.CBRT,
                         coulomb=12 * ones, viscous=3 * ones, cbrt=4 * ones),
     }[model]
-    rt = IdentifiedModel(er20, params, standstill_velocity=0.02)
+    rt = IdentifiedModel(er20, params)
     rng = np.random.default_rng(3)
-    out = np.zeros(n)
+    out, sign, friction = np.zeros(n), np.zeros(n), np.zeros(n)
     for _ in range(50):
         q = rng.uniform(er20.lower_limits, er20.upper_limits)
         qd = rng.choice([-1.0, 1.0], n) * rng.uniform(0.03, 2.0, n)
         qdd = rng.normal(size=n)
-        rt.torque(q, qd, qdd, out)
+        smoothed_friction(qd, np.full(n, 1 / 0.02), rt.friction[0], sign, friction)
+        out[:] = pin.rnea(rt.model, rt.data, q, qd, qdd) + friction + rt.rotor * qdd + rt.offset
         expected = model_torque(er20, params, q[None], qd[None], qdd[None])[0]
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-9)
 
@@ -518,7 +548,7 @@ def test_commanded_friction_keeps_its_value_after_a_stop(er20: Robot) -> None:
     taus = {}
     for speed in (0.0, v):
         est = ExternalForceEstimator(er20, params, np.zeros(n), EstimatorConfig(
-            friction_velocity="command", warm_up_s=0.0, presliding_rad=z0,
+            friction_velocity="command", warm_up_s=0.0, presliding_length=z0,
             output_cutoff_hz=400.0))
         inp, out = est.make_input(), est.make_output()
         est.reset(Q0)
@@ -548,9 +578,7 @@ def test_rezero_zeroes_a_constant_error_and_cancel_keeps_the_tare(er20: Robot) -
     gravity = est.model  # current that exactly holds the identified model with no offset
     inp, out = est.make_input(), est.make_output()
     est.reset(Q0)
-    tau_hold = np.zeros(n)
-    gravity.torque(Q0, np.zeros(n), np.zeros(n), tau_hold)
-    tau_hold -= wrong.offset
+    tau_hold = pin.rnea(gravity.model, gravity.data, Q0, np.zeros(n), np.zeros(n))
     current = er20.torque_to_current(tau_hold)
 
     def run(samples: int) -> None:
@@ -575,20 +603,19 @@ def test_rezero_zeroes_a_constant_error_and_cancel_keeps_the_tare(er20: Robot) -
 
 
 def test_friction_weights_count_a_turning_joint_less_and_recover() -> None:
-    """kernels.friction_weights: 1/σ in steady sliding; half way through a turnover (F = 0) the
+    """friction_weights: 1/σ in steady sliding; half way through a turnover (F = 0) the
     gap g lowers the weight to 1/√(σ² + (κg)²); the envelope then decays by ``decay`` per step."""
-    from leadthrough.estimation import kernels
 
     sigma = np.array([10.0, 1.0])
     level = np.array([50.0, 5.0])
     envelope, weight = np.zeros(2), np.zeros(2)
-    kernels.friction_weights(level, level.copy(), 0.9, 2.0, sigma, envelope, weight)
+    friction_weights(level, level.copy(), 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(weight, 1.0 / sigma)
     state = np.array([50.0, 0.0])  # joint 2 turning over after a reversal
-    kernels.friction_weights(level, state, 0.9, 2.0, sigma, envelope, weight)
+    friction_weights(level, state, 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(weight, [0.1, 1.0 / np.sqrt(1.0 + (2.0 * 5.0) ** 2)])
     for _ in range(10):  # turned over: the envelope holds the peak, decaying
-        kernels.friction_weights(level, -level, 0.9, 2.0, sigma, envelope, weight)
+        friction_weights(level, -level, 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(envelope, [0.0, 5.0 * 0.9**10])
     np.testing.assert_allclose(weight[1], 1.0 / np.sqrt(1.0 + (2.0 * 5.0 * 0.9**10) ** 2))
 

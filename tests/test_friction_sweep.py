@@ -21,14 +21,15 @@ from leadthrough.identification.api import identify, identify_with_sweep
 from leadthrough.identification.friction_sweep import fit_sweep_friction, sweep_points
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
-from leadthrough.session.sim_session import (
+from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session.loop_config import LoopConfig
+from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.robot import SimConfig, SimRobot
+from leadthrough.sim.session import (
     SimSessionConfig,
-    guide_start_pose,
     light_guiding,
     run_sim_session,
 )
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
-from leadthrough.sim.robot import SimConfig, SimRobot
 
 SHORT = FrictionSweepConfig(speeds=(0.005, 0.02, 0.06, 0.15, 0.4), max_cruise_s=1.5)
 
@@ -156,7 +157,8 @@ def test_push_x_with_sweep_parameters_reaches_the_cap_and_stops(
     reaches the 0.2 m/s cap without overshoot, and the robot comes to rest after release."""
     _, _, sc = sweep_calibration
     pf = ParamsFile.from_result(sc.result)  # type: ignore[attr-defined]
-    s = run_sim_session(er20, pf, SimSessionConfig(operator="push-x", guiding=light_guiding()))
+    s = run_sim_session(er20, pf, SimSessionConfig(operator="push-x",
+                                                   loop=LoopConfig(guiding=light_guiding())))
     v = s.result.log.twist_cmd_base
     main = float(np.max(v[:, 0]))
     off = float(np.max(np.linalg.norm(v[:, 1:3], axis=1)))

@@ -25,7 +25,7 @@ from leadthrough.identification.presliding import (
     fit_presliding,
 )
 from leadthrough.robot.description import Robot
-from leadthrough.session.sim_session import guide_start_pose
+from leadthrough.robot.poses import guide_start_pose
 from leadthrough.sim.calibration_set import record_presliding_test
 from leadthrough.sim.robot import SimConfig, SimRobot
 

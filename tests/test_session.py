@@ -15,18 +15,19 @@ from leadthrough.cli import main
 from leadthrough.control.safety import Fault as ControlFault
 from leadthrough.control.safety import State
 from leadthrough.drivers.replay import ReplayDriver
-from leadthrough.drivers.sim_driver import Fault, FaultKind
 from leadthrough.dynamics import nominal_drive_parameters
 from leadthrough.errors import ControlError, DataError
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot
 from leadthrough.session.loop import run_session
+from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import release_overruns
 from leadthrough.session.record import SessionLog, load_session, save_session
-from leadthrough.session.sim_session import (
+from leadthrough.sim.driver import InjectedFault as Fault
+from leadthrough.sim.driver import InjectedFaultKind as FaultKind
+from leadthrough.sim.session import (
     SimSessionConfig,
-    build_loop,
     light_guiding,
     replay_session,
     run_sim_session,
@@ -89,7 +90,8 @@ def test_a_bad_sample_between_controller_cycles_faults_the_controller(
     a released deadman."""
     fault = Fault(kind, t_start=3.0035, t_end=3.0045, joint=2)
     s = run_sim_session(er20, nominal_params, SimSessionConfig(
-        operator="push-x", duration_s=5.0, guiding=light_guiding(), faults=(fault,)))
+        operator="push-x", duration_s=5.0, loop=LoopConfig(guiding=light_guiding()),
+        faults=(fault,)))
     log = s.result.log
     first = int(np.argmax(log.state == int(State.FAULT)))
     assert first > 0 and 3.004 <= log.time[first] <= 3.02
@@ -112,7 +114,8 @@ def test_replayed_feedback_repeats_the_session_bit_for_bit(er20: Robot,
                                                            nominal_params: ParamsFile) -> None:
     """The loop is deterministic: its recorded reads (stale ones included) give the same
     estimates, states and commands without the simulator."""
-    cfg = SimSessionConfig(operator="push-x", duration_s=4.0, guiding=light_guiding(),
+    cfg = SimSessionConfig(operator="push-x", duration_s=4.0,
+                           loop=LoopConfig(guiding=light_guiding()),
                            faults=(Fault(FaultKind.STALE, t_start=3.5, t_end=3.503),))
     s = run_sim_session(er20, nominal_params, cfg, record_feedback=True)
     assert s.feedback is not None
@@ -130,18 +133,19 @@ def test_the_loop_pauses_the_garbage_collector_and_leaves_no_cycles(
         er20: Robot, nominal_params: ParamsFile) -> None:
     """The cyclic collector is off while the loop runs (a collection would stall a cycle) and
     back on after; pausing it is free because the loop creates no reference cycles."""
-    cfg = SimSessionConfig(operator="push-x", duration_s=2.0, guiding=light_guiding())
+    cfg = SimSessionConfig(operator="push-x", duration_s=2.0,
+                           loop=LoopConfig(guiding=light_guiding()))
     s = run_sim_session(er20, nominal_params, cfg, record_feedback=True)
     assert s.feedback is not None
     duration = (s.feedback.reads - 1) * 1e-3
     seen: list[bool] = []
-    parts = build_loop(er20, nominal_params, cfg, 1e-3)
+    parts = build_loop(er20, nominal_params, cfg.loop, 1e-3)
     assert gc.isenabled()
     run_session(ReplayDriver(s.feedback), *parts, duration,
                 deadman=lambda t: seen.append(gc.isenabled()) or True)
     assert len(seen) == 200 and not any(seen)
     assert gc.isenabled()
-    parts = build_loop(er20, nominal_params, cfg, 1e-3)
+    parts = build_loop(er20, nominal_params, cfg.loop, 1e-3)
     driver = ReplayDriver(s.feedback)
     gc.collect()
     gc.disable()

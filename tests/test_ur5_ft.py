@@ -14,7 +14,8 @@ from leadthrough.data.io import load_recording
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics import nominal_drive_parameters
 from leadthrough.errors import DataError, DataWarning
-from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator, Status
+from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
+from leadthrough.estimation.estimator import EstimatorStatus as Status
 from leadthrough.estimation.replay import replay
 from leadthrough.identification.api import IdentificationResult
 from leadthrough.robot import Robot

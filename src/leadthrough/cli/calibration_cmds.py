@@ -51,6 +51,11 @@ _RAW = argparse.RawDescriptionHelpFormatter
 
 def register(sub: Any) -> None:
     """Add the four subcommands."""
+    for add in (_register_excite, _register_record, _register_identify, _register_validate):
+        add(sub)
+
+
+def _register_excite(sub: Any) -> None:
     p = sub.add_parser("excite", help="design an exciting trajectory", formatter_class=_RAW,
                        description="Optimise a Fourier excitation trajectory (rest to rest) for "
                                    "identification: minimal condition number within joint, "
@@ -80,6 +85,8 @@ def register(sub: Any) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run_excite)
 
+
+def _register_record(sub: Any) -> None:
     p = sub.add_parser("record", help="run a trajectory on the simulated robot",
                        formatter_class=_RAW,
                        description="Run a joint trajectory on the simulated robot (position "
@@ -98,6 +105,8 @@ def register(sub: Any) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_record)
 
+
+def _register_identify(sub: Any) -> None:
     p = sub.add_parser("identify", help="calibrate the dynamic model from a recording",
                        formatter_class=_RAW,
                        description="Identify link, friction and rotor parameters from an "
@@ -126,6 +135,8 @@ def register(sub: Any) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_identify)
 
+
+def _register_validate(sub: Any) -> None:
     p = sub.add_parser("validate", help="check identified parameters on a held-out recording",
                        formatter_class=_RAW,
                        description="J, per-joint mean/std and relative torque error of a params "

@@ -15,7 +15,7 @@ from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_fr
 from leadthrough.excitation.presliding import PreslidingTestConfig, design_presliding_test
 from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot.description import Robot
-from leadthrough.session.sim_session import guide_start_pose
+from leadthrough.robot.poses import guide_start_pose
 
 __all__ = ["excite_friction_experiment"]
 

@@ -12,14 +12,15 @@ from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
+from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.record import save_session
-from leadthrough.session.sim_session import (
+from leadthrough.sim.operator_scripts import OPERATOR_NAMES
+from leadthrough.sim.session import (
     SimSessionConfig,
     light_guiding,
     run_sim_session,
     sim_robot_seed,
 )
-from leadthrough.sim.operator_scripts import OPERATOR_NAMES
 
 __all__ = ["register"]
 
@@ -69,10 +70,10 @@ def run(args: argparse.Namespace) -> int:
     pf = load_params(args.params, robot)
     seed = sim_robot_seed(args.seed, pf)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
-    cfg = SimSessionConfig(operator=args.operator, controller=args.controller,
-                           duration_s=args.duration, seed=seed,
-                           operator_seed=args.operator_seed, paced=args.realtime,
-                           guiding=replace(guiding, friction_mode=args.friction))
+    loop = LoopConfig(guiding=replace(guiding, controller=args.controller,
+                                      friction_mode=args.friction))
+    cfg = SimSessionConfig(operator=args.operator, duration_s=args.duration, seed=seed,
+                           operator_seed=args.operator_seed, paced=args.realtime, loop=loop)
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
     save_session(session.result.log, args.output)

@@ -2,32 +2,40 @@
 
 * :mod:`~leadthrough.control.virtual_friction`: virtual mass and friction per Cartesian axis
   (eq. 31–33) with the stopping friction, Table IV defaults;
+* :mod:`~leadthrough.control.release`: a hand letting go at rest (the stopping friction while
+  the drives settle);
 * :mod:`~leadthrough.control.auto_friction`: friction from the identified noise (eq. 36);
 * :mod:`~leadthrough.control.velocity_baseline`: the closed-loop velocity baseline [14] (Fig. 4);
-* :mod:`~leadthrough.control.limits`: Cartesian speed and acceleration limits, braking;
-* :mod:`~leadthrough.control.ik`: damped-least-squares differential IK with joint limits;
+* :mod:`~leadthrough.control.limits`: Cartesian speed and acceleration limits, stops;
+* :mod:`~leadthrough.control.se3`: pose integration, log6, frames;
+* :mod:`~leadthrough.control.ik` and :mod:`~leadthrough.control.ik_step`: damped-least-squares
+  differential IK with joint limits;
 * :mod:`~leadthrough.control.interpolation`: 10 ms → 1 ms cubic Hermite joint commands;
 * :mod:`~leadthrough.control.jerk_limit`: optional jerk-limited interpolation (``ruckig``, not a
   dependency: imported only when used);
-* :mod:`~leadthrough.control.safety`: states, faults, transition log;
+* :mod:`~leadthrough.control.safety` (with :mod:`~leadthrough.control.safety_states` and
+  :mod:`~leadthrough.control.safety_rules`): states, faults, transition log;
 * :mod:`~leadthrough.control.guiding`: :class:`GuidingController`, all of the above in one
-  ``update(inp, out) -> Status`` per 10 ms cycle (its settings, input and output types in
-  :mod:`~leadthrough.control.guiding_types`).
+  ``update(inp, out) -> GuidingStatus`` per 10 ms cycle (its settings, input and output types
+  in :mod:`~leadthrough.control.guiding_types`, its record in
+  :mod:`~leadthrough.control.guiding_state`, its compiled cycle in
+  :mod:`~leadthrough.control.guiding_cycle`).
 
-Twists and wrenches are 6-vectors, linear first (Pinocchio's order).
+Twists and wrenches are 6-vectors, linear first (Pinocchio's order, :data:`AXIS_NAMES`).
 """
 
-from leadthrough.control.admittance import AXIS_NAMES, AdmittanceLaw
+from leadthrough.control import ik_step, se3
 from leadthrough.control.auto_friction import AutoFriction, AutoFrictionConfig
 from leadthrough.control.guiding import GuidingController
 from leadthrough.control.guiding_types import (
+    AXIS_NAMES,
     CONTROLLERS,
     GuidingConfig,
     GuidingInput,
     GuidingOutput,
-    Status,
+    GuidingStatus,
 )
-from leadthrough.control.ik import DifferentialIK, IKConfig, IKResult, dls_damping
+from leadthrough.control.ik import DifferentialIK, IKConfig, IKResult
 from leadthrough.control.interpolation import (
     CommandBuffer,
     HermiteInterpolator,
@@ -36,15 +44,15 @@ from leadthrough.control.interpolation import (
     JointInterpolator,
 )
 from leadthrough.control.jerk_limit import JerkLimitConfig, JerkLimitedInterpolator
-from leadthrough.control.limits import CartesianLimits, TwistLimiter
-from leadthrough.control.safety import Cause, Event, Fault, SafetyConfig, SafetySupervisor, State
-from leadthrough.control.velocity_baseline import VelocityBaseline, VelocityBaselineConfig
-from leadthrough.control.virtual_friction import VirtualFriction, VirtualFrictionConfig
+from leadthrough.control.limits import CartesianLimits
+from leadthrough.control.safety import Event, SafetyConfig, SafetySupervisor
+from leadthrough.control.safety_states import Cause, Fault, State
+from leadthrough.control.velocity_baseline import VelocityBaselineConfig
+from leadthrough.control.virtual_friction import VirtualFrictionConfig
 
 __all__ = [
     "AXIS_NAMES",
     "CONTROLLERS",
-    "AdmittanceLaw",
     "AutoFriction",
     "AutoFrictionConfig",
     "CartesianLimits",
@@ -57,6 +65,7 @@ __all__ = [
     "GuidingController",
     "GuidingInput",
     "GuidingOutput",
+    "GuidingStatus",
     "HermiteInterpolator",
     "IKConfig",
     "IKResult",
@@ -68,11 +77,8 @@ __all__ = [
     "SafetyConfig",
     "SafetySupervisor",
     "State",
-    "Status",
-    "TwistLimiter",
-    "VelocityBaseline",
     "VelocityBaselineConfig",
-    "VirtualFriction",
     "VirtualFrictionConfig",
-    "dls_damping",
+    "ik_step",
+    "se3",
 ]

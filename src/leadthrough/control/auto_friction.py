@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control.ik import dls_damping
+from leadthrough.damped_least_squares import damping_of
 from leadthrough.errors import ControlError, check_fields
 
 __all__ = ["AutoFriction", "AutoFrictionConfig"]
@@ -123,11 +123,11 @@ class AutoFriction:
         self._use_std = cfg.basis in ("std", "mean+std")
         self._min = np.asarray(cfg.min_friction, dtype=float)
         self._min_stop = np.asarray(cfg.min_stopping_friction, dtype=float)
-        self._M = np.zeros((6, 6))
-        self._Jm = np.zeros(6)
-        self._A2 = np.zeros((6, n))
-        self._w = np.zeros(6)
-        self._s = np.zeros(6)
+        self._gram = np.zeros((6, 6))
+        self._jacobian_noise = np.zeros(6)
+        self._inverse_squared = np.zeros((6, n))
+        self._noise = np.zeros(6)
+        self._std_noise = np.zeros(6)
 
     def noise_wrench(self, jacobian: Array, manipulability: float, out: Array) -> None:
         """The noise statistic seen at the TCP, before the ratio r and the floor.
@@ -138,18 +138,18 @@ class AutoFriction:
             out: |A·τ̄_ω|, √(A²·σ²) or their sum per axis [N, N·m], shape (6,).
         """
         cfg = self.config
-        lam = dls_damping(manipulability, cfg.manipulability_threshold, cfg.max_damping)
-        np.matmul(jacobian, jacobian.T, out=self._M)
-        self._M.flat[::7] += lam * lam
+        lam = damping_of(manipulability, cfg.manipulability_threshold, cfg.max_damping)
+        np.matmul(jacobian, jacobian.T, out=self._gram)
+        self._gram.flat[::7] += lam * lam
         out[:] = 0.0
         if self._use_mean:
-            np.matmul(jacobian, self._mean, out=self._Jm)
-            np.abs(np.linalg.solve(self._M, self._Jm), out=out)
+            np.matmul(jacobian, self._mean, out=self._jacobian_noise)
+            np.abs(np.linalg.solve(self._gram, self._jacobian_noise), out=out)
         if self._use_std:
-            np.square(np.linalg.solve(self._M, jacobian), out=self._A2)
-            np.matmul(self._A2, self._var, out=self._s)
-            np.sqrt(self._s, out=self._s)
-            out += self._s
+            np.square(np.linalg.solve(self._gram, jacobian), out=self._inverse_squared)
+            np.matmul(self._inverse_squared, self._var, out=self._std_noise)
+            np.sqrt(self._std_noise, out=self._std_noise)
+            out += self._std_noise
 
     def update(self, jacobian: Array, manipulability: float, friction: Array,
                stopping_friction: Array) -> None:
@@ -161,8 +161,8 @@ class AutoFriction:
             friction: δ = max(r·noise, floor) [N, N·m], shape (6,), written in place.
             stopping_friction: δ_s = max(r_s·noise, floor_s), shape (6,), written in place.
         """
-        self.noise_wrench(jacobian, manipulability, self._w)
-        np.multiply(self._w, self.config.guiding_ratio, out=friction)
+        self.noise_wrench(jacobian, manipulability, self._noise)
+        np.multiply(self._noise, self.config.guiding_ratio, out=friction)
         np.maximum(friction, self._min, out=friction)
-        np.multiply(self._w, self.config.stopping_ratio, out=stopping_friction)
+        np.multiply(self._noise, self.config.stopping_ratio, out=stopping_friction)
         np.maximum(stopping_friction, self._min_stop, out=stopping_friction)

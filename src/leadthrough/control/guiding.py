@@ -41,14 +41,14 @@ One cycle:
    the cycle reuses their kinematics (FK, Jacobian, μ) and IK residual instead of recomputing
    the same numbers.
 
-Steps 1–4 run as one compiled call (:func:`~leadthrough.control.cycle_kernel.controller_cycle`)
-on the packed state of the controller, its IK and its supervisor; only the Pinocchio kinematics
-of a setpoint that moved, and eq. 36 (automatic friction), run in Python before it
-(``benchmarks/guiding.py`` measures the cycle).
+Steps 1–4 run as one compiled call (:func:`~leadthrough.control.guiding_cycle.guiding_cycle`)
+on the named records of the controller (:mod:`~leadthrough.control.guiding_state`), its IK and
+its supervisor; only the Pinocchio kinematics of a setpoint that moved, and eq. 36 (automatic
+friction), run in Python before it (``benchmarks/guiding.py`` measures the cycle).
 
 ``update`` never raises, never reads the clock, and allocates no arrays of its own (Pinocchio
-allocates the Jacobian it returns, and eq. 36 its ``numpy.linalg`` results; a state transition
-writes one row of the supervisor's preallocated event ring).
+returns a new Jacobian when the setpoint moved, and eq. 36 its ``numpy.linalg`` results; a state
+transition writes one entry of the supervisor's preallocated event ring).
 """
 
 from __future__ import annotations
@@ -58,25 +58,24 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control import cycle_kernel as ck
-from leadthrough.control import guiding_kernel as gk
-from leadthrough.control import kernels
-from leadthrough.control.admittance import AdmittanceLaw
 from leadthrough.control.auto_friction import AutoFriction
+from leadthrough.control.guiding_cycle import guiding_cycle, not_started_cycle
+from leadthrough.control.guiding_state import Law, controller_dtype
 from leadthrough.control.guiding_types import (
     CONTROLLERS,
     GuidingConfig,
     GuidingInput,
     GuidingOutput,
-    Status,
+    GuidingStatus,
 )
 from leadthrough.control.ik import DifferentialIK
-from leadthrough.control.limits import TwistLimiter
-from leadthrough.control.safety import STATE_BY_CODE, Event, Fault, SafetySupervisor, State
-from leadthrough.control.velocity_baseline import VelocityBaseline
-from leadthrough.control.virtual_friction import VirtualFriction
+from leadthrough.control.ik_step import update_manipulability_of
+from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
+from leadthrough.control.safety import Event, SafetySupervisor, State
+from leadthrough.control.safety_rules import clear_fault
 from leadthrough.errors import ControlError
 from leadthrough.robot.description import Robot
+from leadthrough.state_records import new_record, view
 
 __all__ = [
     "CONTROLLERS",
@@ -84,22 +83,10 @@ __all__ = [
     "GuidingController",
     "GuidingInput",
     "GuidingOutput",
-    "Status",
+    "GuidingStatus",
 ]
 
 Array = NDArray[np.float64]
-
-#: A release at rest: the (smoothed) force on an axis falls back from its peak by this fraction
-#: of that axis's friction δ or more.
-RELEASE_DROP = 0.5
-#: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
-#: below δ must not look like a release).
-RELEASE_SMOOTHING_S = 0.05
-#: Time constant with which the release's peak forgets slow changes [s]: letting go drops the
-#: estimate within ~0.2 s (the estimator's 3 Hz filter), while under a steady hand at rest the
-#: estimate drifts by up to ~10 N/s as the drives' static friction takes up or gives back
-#: load; such a drift must not renew the stopping friction again and again.
-RELEASE_WINDOW_S = 0.3
 
 
 class GuidingController:
@@ -122,9 +109,6 @@ class GuidingController:
         self.config = cfg = config if config is not None else GuidingConfig()
         self.robot = robot
         self.n = n = robot.n
-        law: AdmittanceLaw = (
-            VirtualFriction(cfg.virtual_friction, cfg.dt) if cfg.controller == "virtual-friction"
-            else VelocityBaseline(cfg.velocity_baseline, cfg.dt))
         self._auto: AutoFriction | None = None
         if cfg.friction_mode == "auto":
             if noise_mean is None:
@@ -134,57 +118,53 @@ class GuidingController:
             if self._auto.n != n:
                 raise ControlError("wrong size", field="noise_mean", value=self._auto.n,
                                    expected=f"{n} values")
-        lim = TwistLimiter(cfg.limits, cfg.dt)
-        self._ik = ik = DifferentialIK(robot, cfg.ik, cfg.dt)
+        self._ik = DifferentialIK(robot, cfg.ik, cfg.dt)
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
-        self._tool = cfg.frame == "tool"
-        # the cycle's state, packed for its compiled call (cycle_kernel); the names are views
-        self._state = np.zeros(ck.state_size(n))
-        values, axes, self._rotations, self._positions, joints = ck.state_views(self._state, n)
-        self._values, self._axes, self._joints = values, axes, joints
-        self._twist = axes[gk.TWIST]
-        self._friction = axes[gk.FRICTION]
-        self._stop_friction = axes[gk.STOP_FRICTION]
-        self._friction[:] = cfg.virtual_friction.friction
-        self._stop_friction[:] = cfg.virtual_friction.stopping_friction
-        axes[gk.LAW] = law.coefficients
-        axes[gk.MASK] = [1.0 if a else 0.0 for a in cfg.axes_enabled]
-        self._q_cmd = joints[ck.Q_CMD]
-        self._qd_cmd = joints[ck.QD_CMD]
-        joints[ck.MEASURED] = math.nan       # the last finite q before the first reset
-        self._flags = flags = np.zeros(ck.FLAG_SLOTS, dtype=np.int64)
-        flags[ck.TOOL] = int(self._tool)
-        flags[ck.LAW_ID] = law.law_id
-        values[ck.REST_S] = values[ck.RELEASE_S] = values[ck.STOP_PLAN] = math.inf
-        values[ck.IK_SCALE] = values[ck.SPEED_SCALE] = 1.0
-        # guiding_step's settings: hold, dt, release drop, smoothing weight, forgetting factor
-        values[ck.STEP_SETTINGS:ck.STEP_SETTINGS + 5] = (
-            cfg.settle_s + cfg.rezero_s, cfg.dt, RELEASE_DROP,
-            cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt), math.exp(-cfg.dt / RELEASE_WINDOW_S))
-        values[ck.LAW_ALPHA] = law.alpha
-        values[ck.MAX_SPEED:ck.MAX_SPEED + 2] = lim.max_speed
-        values[ck.MAX_STEP:ck.MAX_STEP + 2] = lim.max_step
-        values[ck.STOP_FRACTION] = cfg.ik.stop_acceleration_fraction
-        values[ck.MU0] = cfg.ik.manipulability_threshold
-        values[ck.MAX_DAMPING] = cfg.ik.max_damping
-        self._Jc = np.zeros((6, n))
-        sup = self._safety
-        # the arguments of the compiled cycle after the input's, in its order
-        self._cycle_args = (ik.rotation_tool_to_base, ik.translation_tool_to_base, ik.buffer,
-                            self._state, flags, sup.buffer, sup.flags)
+        #: The controller's record (:func:`~leadthrough.control.guiding_state.controller_dtype`).
+        self.record = new_record(controller_dtype(n))
+        self._s = view(self.record)
+        self._set_up(cfg)
+        self._jacobian_in_frame = np.zeros((6, n))
+        # what a cycle runs on when given an input or output made for another robot
+        self._bad_input, self._spare_output = GuidingInput(n), GuidingOutput(n)
+        self._bad_input.q[:] = math.nan
+        self._layouts = (self._bad_input.record.dtype, self._spare_output.record.dtype)
+
+    def _set_up(self, cfg: GuidingConfig) -> None:
+        """The record's settings, and the state before the first reset."""
+        s = self._s
+        s.dt = cfg.dt
+        s.tool_frame = cfg.frame == "tool"
+        if cfg.controller == "virtual-friction":
+            s.law, s.law_coefficients = Law.VIRTUAL_FRICTION, cfg.virtual_friction.dt_over_mass(
+                cfg.dt)
+        else:
+            s.law, s.law_coefficients = Law.VELOCITY, cfg.velocity_baseline.gain
+            s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
+        s.axis_mask = [1.0 if a else 0.0 for a in cfg.axes_enabled]
+        s.hold_s = cfg.settle_s + cfg.rezero_s
+        s.release_drop = RELEASE_DROP
+        s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
+        s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
+        s.max_speed = cfg.limits.max_speed
+        s.max_step = cfg.limits.max_step(cfg.dt)
+        s.stop_fraction = cfg.ik.stop_acceleration_fraction
+        s.friction = cfg.virtual_friction.friction
+        s.stopping_friction = cfg.virtual_friction.stopping_friction
+        s.q_measured = math.nan       # the last finite q before the first reset
+        s.rest_s = s.release_s = s.stop_plan = math.inf
+        s.ik_scale = s.speed_scale = 1.0
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
         """A preallocated input."""
-        n = self.n
-        return GuidingInput(t=0.0, sequence=0, q=np.zeros(n), current=np.zeros(n),
-                            wrench_base=np.zeros(6))
+        return GuidingInput(self.n)
 
     def make_output(self) -> GuidingOutput:
         """A preallocated output."""
-        out = GuidingOutput(np.zeros(ck.output_size(self.n)))
-        out.friction[:] = self._friction
-        out.stopping_friction[:] = self._stop_friction
+        out = GuidingOutput(self.n)
+        out.friction[:] = self._s.friction
+        out.stopping_friction[:] = self._s.stopping_friction
         return out
 
     def reset(self, q: Array, t: float = 0.0) -> None:
@@ -213,8 +193,8 @@ class GuidingController:
                                expected=f"within {r.lower_limits.tolist()} .. "
                                         f"{r.upper_limits.tolist()} rad")
         # the IK's kinematics are those of q from here, not of the setpoint (if refused below)
-        flags, values, ik = self._flags, self._values, self._ik
-        flags[ck.KINEMATICS_FRESH] = 0
+        s, ik = self._s, self._ik
+        s.kinematics_fresh = False
         ik.compute_kinematics(q)
         p = ik.translation_tool_to_base
         if self._safety.workspace_clearance(p, 0.0) < 0.0:
@@ -222,18 +202,17 @@ class GuidingController:
             raise ControlError("TCP outside the workspace box", field="q", value=p.tolist(),
                                expected=f"TCP within {sc.workspace_min} .. {sc.workspace_max} m, "
                                         f"{sc.workspace_margin} m inside")
-        self._q_cmd[:] = q
-        self._joints[[ck.QD_CMD, ck.QD_DLS]] = 0.0
-        flags[ck.KINEMATICS_FRESH] = flags[ck.KINEMATICS_NEW] = 1
+        s.q_cmd = q
+        s.qd_cmd = s.qd_dls = 0.0
+        s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
-        self._twist[:] = 0.0
-        self._axes[[gk.PEAK, gk.SMOOTH]] = 0.0
-        self._rotations[ck.CMD] = ik.rotation_tool_to_base
-        self._positions[ck.CMD] = p
-        flags[ck.RESIDUAL_FRESH] = flags[ck.RESYNC] = 0
-        flags[ck.STARTED] = 1
-        values[ck.STOP_PLAN] = 0.0 if self._safety.has_box else math.inf
-        values[ck.RELEASE_S] = values[ck.REST_S] = math.inf
+        s.twist = s.release_peak = s.release_smooth = 0.0
+        s.pose_rotation = ik.rotation_tool_to_base
+        s.pose_position = p
+        s.residual_fresh = s.resync = False
+        s.started = True
+        s.stop_plan = 0.0 if self._safety.has_box else math.inf
+        s.release_s = s.rest_s = math.inf
         self._safety.reset(t)
 
     def clear_fault(self, t: float = 0.0) -> bool:
@@ -245,9 +224,10 @@ class GuidingController:
             Whether the fault was cleared (False while the twist or the joints are still
             decelerating, or if not in FAULT).
         """
-        ok = self._safety.clear_fault(t, not (self._twist.any() or self._qd_cmd.any()))
+        s = self._s
+        ok = self._safety.clear_fault(t, not (s.twist.any() or s.qd_cmd.any()))
         if ok:
-            self._flags[ck.RESYNC] = 1
+            s.resync = True
         return ok
 
     @property
@@ -265,8 +245,22 @@ class GuidingController:
         """Number of events dropped from the bounded log."""
         return self._safety.events_dropped
 
+    def warm_up(self) -> None:
+        """Load (or compile) every compiled function the cycle and a fault reset use, on copies
+        of the records: the next cycle then runs at its steady-state speed. Call it before a
+        real-time loop starts; it changes nothing of the controller's state."""
+        sup = self._safety
+        ctl, ik, sv, events = (self.record.copy(), self._ik.record.copy(), sup.record.copy(),
+                               sup.event_ring.copy())
+        inp, out = self.make_input(), self.make_output()
+        inp.q[:] = self._s.q_cmd
+        update_manipulability_of(ik)
+        not_started_cycle(inp.record, ctl, sv, events, out.record)
+        guiding_cycle(inp.record, ctl, ik, sv, events, out.record)
+        clear_fault(sv[0], events, 0.0, True)
+
     # ----------------------------------------------------------------- real time
-    def update(self, inp: GuidingInput, out: GuidingOutput) -> Status:
+    def update(self, inp: GuidingInput, out: GuidingOutput) -> GuidingStatus:
         """One controller cycle; fills ``out``; never raises.
 
         Args:
@@ -274,58 +268,49 @@ class GuidingController:
             out: Setpoint, commanded pose and twist, state.
 
         Returns:
-            ``Status.OK``, or ``Status.FAULT`` while a fault is latched.
+            ``GuidingStatus.OK``, or ``GuidingStatus.FAULT`` while a fault is latched.
         """
-        flags = self._flags
-        if not flags[ck.STARTED]:
-            return self._not_started(inp, out)
-        if not flags[ck.KINEMATICS_FRESH]:
-            flags[ck.KINEMATICS_FRESH] = flags[ck.KINEMATICS_NEW] = 1
+        s, sup = self._s, self._safety
+        # a tuple compares its items by identity first: fast for the layouts of make_input
+        if (inp.record.dtype, out.record.dtype) != self._layouts:
+            return self._wrong_layout(inp, out)
+        if not s.started:
+            not_started_cycle(inp.record, self.record, sup.record, sup.event_ring, out.record)
+            return GuidingStatus.FAULT
+        if not s.kinematics_fresh:
+            s.kinematics_fresh = s.kinematics_new = True
             if self._auto is None:
-                self._ik.frame_kinematics(self._q_cmd)
+                self._ik.frame_kinematics(s.q_cmd)
             else:
-                self._ik.compute_kinematics(self._q_cmd)
+                self._ik.compute_kinematics(s.q_cmd)
                 self._update_auto_friction()
-        state = ck.controller_cycle(
-            inp.t, inp.sequence, inp.deadman, inp.estimator_status, inp.q, inp.current,
-            inp.wrench_base, *self._cycle_args, out.buffer)
-        values = self._values
-        out.state = STATE_BY_CODE[state]
-        if state == State.FAULT:
-            out.fault = self._safety.fault
-            out.status = Status.FAULT
-        else:
-            out.fault = Fault.NONE
-            out.status = Status.OK
-        out.manipulability = values[ck.MANIPULABILITY]
-        out.ik_residual = values[ck.RESIDUAL]
-        out.speed_scale = values[ck.SPEED_SCALE]
-        out.ik_scale = values[ck.IK_SCALE]
-        out.rest_s = values[ck.REST_S]
-        return out.status
+        state = guiding_cycle(inp.record, self.record, self._ik.record, sup.record,
+                              sup.event_ring, out.record)
+        return GuidingStatus.FAULT if state == State.FAULT else GuidingStatus.OK
 
-    def _not_started(self, inp: GuidingInput, out: GuidingOutput) -> Status:
-        """No setpoint yet: NOT_STARTED fault, holding wherever the robot was last measured
-        (NaN before any finite measurement: there is no position to command)."""
-        sup, measured = self._safety, self._joints[ck.MEASURED]
-        sup.trip(inp.t, Fault.NOT_STARTED)
-        if inp.q.shape == measured.shape and np.isfinite(inp.q).all():
-            measured[:] = inp.q
-        kernels.write_output(measured, self._qd_cmd, self._rotations[ck.CMD],
-                             self._positions[ck.CMD], self._twist, self._tool,
-                             self._axes[gk.WRENCH], self._friction, self._stop_friction, out.q,
-                             out.qd, out.transform_tool_to_base, out.twist_base, out.twist_tool,
-                             out.wrench, out.friction, out.stopping_friction)
-        out.state, out.fault, out.status = sup.state, sup.fault, Status.FAULT
-        out.speed_scale = out.ik_scale = 1.0
-        out.rest_s = self._values[ck.REST_S]
-        return out.status
+    def _wrong_layout(self, inp: GuidingInput, out: GuidingOutput) -> GuidingStatus:
+        """An input or output made for another robot: the cycle runs on a non-finite input
+        (``Fault.NONFINITE_INPUT``, a stop at the limit), into a spare output if ``out`` cannot
+        take it."""
+        bad = self._bad_input
+        bad.t = float(inp.record["t"][0]) if "t" in (inp.record.dtype.names or ()) else math.nan
+        if out.record.dtype != self._spare_output.record.dtype:
+            out = self._spare_output
+        s = self._s
+        if not s.started:
+            not_started_cycle(bad.record, self.record, self._safety.record,
+                              self._safety.event_ring, out.record)
+            return GuidingStatus.FAULT
+        guiding_cycle(bad.record, self.record, self._ik.record, self._safety.record,
+                      self._safety.event_ring, out.record)
+        return GuidingStatus.FAULT
 
     def _update_auto_friction(self) -> None:
         """Eq. 36 at the setpoint's pose (automatic friction only), after its
         ``compute_kinematics``."""
         if self._auto is None:
             return
-        ik = self._ik
-        ik.jacobian_in_frame(self.config.frame, self._Jc)
-        self._auto.update(self._Jc, ik.manipulability, self._friction, self._stop_friction)
+        ik, s = self._ik, self._s
+        ik.jacobian_in_frame(self.config.frame, self._jacobian_in_frame)
+        self._auto.update(self._jacobian_in_frame, ik.manipulability, s.friction,
+                          s.stopping_friction)

@@ -1,30 +1,39 @@
 """Settings, input, output and status of the guiding controller (see
-:mod:`leadthrough.control.guiding`)."""
+:mod:`leadthrough.control.guiding`).
+
+The input and the output are records (:mod:`leadthrough.state_records`) that the compiled cycle
+reads and writes by field: their arrays are attributes to fill or read in place.
+"""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
+from functools import cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.auto_friction import AutoFrictionConfig
-from leadthrough.control.cycle_kernel import output_size, output_views
 from leadthrough.control.ik import IKConfig
 from leadthrough.control.limits import CartesianLimits
-from leadthrough.control.safety import Fault, SafetyConfig, State
+from leadthrough.control.safety import SafetyConfig
+from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.velocity_baseline import VelocityBaselineConfig
 from leadthrough.control.virtual_friction import VirtualFrictionConfig
 from leadthrough.errors import ControlError, check_fields
+from leadthrough.state_records import RecordView
+from leadthrough.state_records import field as record_field
 
 __all__ = [
+    "AXIS_NAMES",
     "CONTROLLERS",
     "GuidingConfig",
     "GuidingInput",
     "GuidingOutput",
-    "Status",
+    "GuidingStatus",
 ]
 
 Array = NDArray[np.float64]
@@ -32,8 +41,13 @@ Array = NDArray[np.float64]
 #: Names of the force-following laws.
 CONTROLLERS: tuple[str, ...] = ("virtual-friction", "velocity")
 
+#: Cartesian axis names in twist / wrench order: Pinocchio's, linear first (the paper lists
+#: them angular first): x, y, z (force [N], velocity [m/s], mass [kg]), then ωx, ωy, ωz
+#: (torque [N·m], angular velocity [rad/s], inertia [kg·m²]).
+AXIS_NAMES: tuple[str, ...] = ("x", "y", "z", "rx", "ry", "rz")
 
-class Status(IntEnum):
+
+class GuidingStatus(IntEnum):
     """Result of one update."""
 
     #: Normal cycle (IDLE, GUIDING or STOPPING).
@@ -106,97 +120,102 @@ class GuidingConfig:
                                expected=f"> ik.joint_limit_margin = {self.ik.joint_limit_margin}")
 
 
-@dataclass
-class GuidingInput:
-    """One controller cycle's input (write into the arrays in place).
-
-    Attributes:
-        t: Time [s] (only logged; the controller never reads the clock).
-        sequence: Feedback sequence number; must advance every cycle.
-        q: Measured joint positions [rad], shape (n,).
-        current: Measured motor currents [A], shape (n,).
-        wrench_base: Estimated operator wrench at the TCP in base axes (the estimator's
-            ``frame="base"``), force first [N, N·m], shape (6,). With ``frame="tool"`` it is
-            rotated into tool axes with the commanded TCP orientation (which the measured one
-            follows within the following-error limit).
-        deadman: Enabling input held.
-        estimator_status: The estimator's status of the last sample
-            (:class:`~leadthrough.estimation.estimator.Status`); a negative value (a latched
-            fault: it ran every servo period, and may have seen a bad sample the controller did
-            not) trips ``Fault.ESTIMATOR``.
-    """
-
-    t: float
-    sequence: int
-    q: Array
-    current: Array
-    wrench_base: Array
-    deadman: bool = False
-    estimator_status: int = 0
+@cache
+def input_dtype(n: int) -> np.dtype[Any]:
+    """The record of :class:`GuidingInput` for ``n`` joints."""
+    f8 = np.float64
+    return np.dtype([("t", f8), ("sequence", np.int64), ("deadman", np.bool_),
+                     ("estimator_status", np.int64), ("q", f8, (n,)), ("current", f8, (n,)),
+                     ("wrench_base", f8, (6,))])
 
 
-@dataclass
-class GuidingOutput:
-    """One controller cycle's result, filled by ``update``.
+@cache
+def output_dtype(n: int) -> np.dtype[Any]:
+    """The record of :class:`GuidingOutput` for ``n`` joints."""
+    f8, i8 = np.float64, np.int64
+    return np.dtype([("q", f8, (n,)), ("qd", f8, (n,)), ("transform_tool_to_base", f8, (4, 4)),
+                     ("twist_base", f8, (6,)), ("twist_tool", f8, (6,)), ("wrench", f8, (6,)),
+                     ("friction", f8, (6,)), ("stopping_friction", f8, (6,)), ("state", i8),
+                     ("fault", i8), ("status", i8), ("manipulability", f8),
+                     ("speed_scale", f8), ("ik_scale", f8), ("ik_residual", f8),
+                     ("rest_s", f8)])
 
-    Built from one buffer (``GuidingController.make_output`` allocates it), which ``update``
-    fills in one compiled call: the arrays are views of it, written in place (read or copy
-    them; never rebind them).
+
+class GuidingInput(RecordView):
+    """One controller cycle's input (``GuidingController.make_input``; fill the arrays in
+    place, set the scalars).
 
     Args:
-        buffer: The output's storage, shape (46 + 2·n,) for n joints
-            (``cycle_kernel.output_size``).
-
-    Attributes:
-        q: Joint position setpoint for the end of the cycle [rad], shape (n,).
-        qd: Joint velocity over the cycle [rad/s], shape (n,) (exactly 0.0 at rest).
-        transform_tool_to_base: Commanded TCP pose, homogeneous, shape (4, 4) [m].
-        twist_base: Commanded TCP twist in base axes at the TCP, linear first [m/s, rad/s],
-            shape (6,).
-        twist_tool: The same twist in tool axes, shape (6,).
-        wrench: Wrench fed to the law, in the controller's frame, disabled axes zeroed
-            [N, N·m], shape (6,); NaN while the input is not finite.
-        friction: Virtual friction δ in use [N, N·m], shape (6,).
-        stopping_friction: Stopping friction δ_s in use [N, N·m], shape (6,).
-        state: Safety state.
-        fault: Latched fault (``Fault.NONE`` unless ``state`` is FAULT).
-        status: Result of the update.
-        manipulability: μ = √det(J Jᵀ) at the commanded joint position.
-        speed_scale: Factor applied to the speed limits (singularity slow-down).
-        ik_scale: Fraction of the IK step kept by the joint bounds (1: none active).
-        ik_residual: ‖log6(T(q_cmd)⁻¹·T_cmd)‖ left by the last IK step [m, rad].
-        rest_s: Time the commanded motion has been at rest since it last moved [s] (0 while
-            moving; infinite before the first motion).
+        n: Number of joints.
     """
 
-    buffer: Array
-    q: Array = field(init=False)
-    qd: Array = field(init=False)
-    transform_tool_to_base: Array = field(init=False)
-    twist_base: Array = field(init=False)
-    twist_tool: Array = field(init=False)
-    wrench: Array = field(init=False)
-    friction: Array = field(init=False)
-    stopping_friction: Array = field(init=False)
-    state: State = State.IDLE
-    fault: Fault = Fault.NONE
-    status: Status = Status.OK
-    manipulability: float = 0.0
-    speed_scale: float = 1.0
-    ik_scale: float = 1.0
-    ik_residual: float = 0.0
-    rest_s: float = math.inf
+    __slots__ = ()
 
-    def __post_init__(self) -> None:
-        b = self.buffer
-        n = (b.size - output_size(0)) // 2 if isinstance(b, np.ndarray) else -1
-        if (not isinstance(b, np.ndarray) or b.dtype != np.float64 or b.ndim != 1
-                or not b.flags.c_contiguous or n < 1 or b.size != output_size(n)):
-            raise ControlError("not an output buffer", field="buffer",
-                               value=getattr(b, "shape", type(b).__name__),
-                               expected="a contiguous float64 vector of 46 + 2·n values "
-                                        "(GuidingController.make_output)")
-        self.transform_tool_to_base, six, self.q, self.qd = output_views(b, n)
-        self.twist_base, self.twist_tool, self.wrench = six[0], six[1], six[2]
-        self.friction, self.stopping_friction = six[3], six[4]
+    t = record_field("t", "Time [s] (only logged; the controller never reads the clock).",
+                     float)
+    sequence = record_field("sequence", "Feedback sequence number; must advance every cycle.",
+                            int)
+    deadman = record_field("deadman", "Enabling input held.", bool)
+    estimator_status = record_field(
+        "estimator_status", "The estimator's status of the last sample "
+        "(:class:`~leadthrough.estimation.estimator.EstimatorStatus`); a negative value (a "
+        "latched fault: it ran every servo period, and may have seen a bad sample the "
+        "controller did not) trips ``Fault.ESTIMATOR``.", int)
+    q = record_field[Array]("q", "Measured joint positions [rad], shape (n,).")
+    current = record_field[Array]("current", "Measured motor currents [A], shape (n,).")
+    wrench_base = record_field[Array](
+        "wrench_base", "Estimated operator wrench at the TCP in base axes (the estimator's "
+        "``frame=\"base\"``), force first [N, N·m], shape (6,). With ``frame=\"tool\"`` it is "
+        "rotated into tool axes with the commanded TCP orientation (which the measured one "
+        "follows within the following-error limit).")
+
+    def __init__(self, n: int) -> None:
+        super().__init__(input_dtype(n))
+
+
+class GuidingOutput(RecordView):
+    """One controller cycle's result, filled by ``update`` (``GuidingController.make_output``).
+
+    Args:
+        n: Number of joints.
+    """
+
+    __slots__ = ()
+
+    q = record_field[Array]("q", "Joint position setpoint for the end of the cycle [rad], "
+                                 "shape (n,).")
+    qd = record_field[Array]("qd", "Joint velocity over the cycle [rad/s], shape (n,) (exactly "
+                                   "0.0 at rest).")
+    transform_tool_to_base = record_field[Array](
+        "transform_tool_to_base", "Commanded TCP pose, homogeneous, shape (4, 4) [m].")
+    twist_base = record_field[Array](
+        "twist_base", "Commanded TCP twist in base axes at the TCP, linear first [m/s, rad/s], "
+        "shape (6,).")
+    twist_tool = record_field[Array]("twist_tool", "The same twist in tool axes, shape (6,).")
+    wrench = record_field[Array](
+        "wrench", "Wrench fed to the law, in the controller's frame, disabled axes zeroed "
+        "[N, N·m], shape (6,); NaN while the input is not finite.")
+    friction = record_field[Array]("friction", "Virtual friction δ in use [N, N·m], shape (6,).")
+    stopping_friction = record_field[Array](
+        "stopping_friction", "Stopping friction δ_s in use [N, N·m], shape (6,).")
+    state = record_field("state", "Safety state.", State)
+    fault = record_field("fault", "Latched fault (``Fault.NONE`` unless ``state`` is FAULT).",
+                         Fault)
+    status = record_field("status", "Result of the update.", GuidingStatus)
+    manipulability = record_field("manipulability", "μ = √det(J Jᵀ) at the commanded joint "
+                                                    "position.", float)
+    speed_scale = record_field("speed_scale", "Factor applied to the speed limits (singularity "
+                                              "slow-down).", float)
+    ik_scale = record_field("ik_scale", "Fraction of the IK step kept by the joint bounds (1: "
+                                        "none active).", float)
+    ik_residual = record_field("ik_residual", "‖log6(T(q_cmd)⁻¹·T_cmd)‖ left by the last IK "
+                                              "step [m, rad].", float)
+    rest_s = record_field("rest_s", "Time the commanded motion has been at rest since it last "
+                                    "moved [s] (0 while moving; infinite before the first "
+                                    "motion).", float)
+
+    def __init__(self, n: int) -> None:
+        super().__init__(output_dtype(n))
         self.transform_tool_to_base[3, 3] = 1.0
+        self.rest_s = math.inf
+        self.speed_scale = self.ik_scale = 1.0

@@ -20,29 +20,51 @@ One call per controller cycle (dt = 10 ms) turns the Cartesian TCP target into a
 When a bound shortens the step (``IKResult.limited``) the Cartesian target is not reached; the
 guiding controller then re-synchronises its target with the reached pose so that the IK never
 has to catch up with a large error.
+
+The IK keeps its settings, the kinematics of the last q and its work space in one record
+(:func:`ik_dtype`); the step itself is compiled (:mod:`leadthrough.control.ik_step`) and the
+guiding cycle runs it in its own compiled call. Pinocchio computes the kinematics.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from leadthrough.control import joint_kernels
+from leadthrough.control import ik_step
 from leadthrough.errors import ControlError, check_fields, check_period
-from leadthrough.estimation.kernels import damping_of, gram_manipulability
 from leadthrough.robot.description import Robot
+from leadthrough.state_records import new_record, view
 
-__all__ = ["DifferentialIK", "IKConfig", "IKResult", "dls_damping"]
+__all__ = ["DifferentialIK", "IKConfig", "IKResult", "ik_dtype"]
 
 Array = NDArray[np.float64]
 
 
-#: Damping λ of a damped pseudo-inverse (λ_max·√(1 − (μ/μ₀)²) below μ₀, else 0): the estimator's
-#: compiled function, shared so that both use one formula.
-dls_damping = damping_of
+def ik_dtype(n: int) -> np.dtype[Any]:
+    """The IK's record for ``n`` joints: settings, the kinematics at the last q, work space."""
+    f8 = np.float64
+    return np.dtype([
+        # settings: per joint the position bounds [rad] (the limits less the margin), speed
+        # limits [rad/s], largest velocity change per cycle a·dt [rad/s], 1/(2a) [s²/rad], and
+        # the velocity change per cycle a planned stop may take [rad/s]; the cycle [s]; the
+        # manipulability μ₀ below which the least squares are damped, and λ_max
+        ("lower", f8, (n,)), ("upper", f8, (n,)), ("max_velocity", f8, (n,)),
+        ("velocity_step", f8, (n,)), ("half_inverse_acceleration", f8, (n,)),
+        ("stop_velocity_step", f8, (n,)), ("dt", f8),
+        ("manipulability_threshold", f8), ("max_damping", f8),
+        # kinematics at the last q: TCP pose [m], Jacobian in tool axes, J Jᵀ and its Cholesky
+        # factor, μ and λ
+        ("tcp_rotation", f8, (3, 3)), ("tcp_position", f8, (3,)), ("jacobian", f8, (6, n)),
+        ("gram", f8, (6, 6)), ("gram_factor", f8, (6, 6)), ("manipulability", f8),
+        ("damping", f8),
+        # work space: the factor of J Jᵀ + λ²·1 and the solution, the log6 error [m, rad]
+        ("solve_factor", f8, (6, 6)), ("solve_rhs", f8, (6,)), ("error", f8, (6,)),
+    ])
 
 
 @dataclass(frozen=True)
@@ -115,6 +137,9 @@ class DifferentialIK:
         config: Settings.
         dt: Controller cycle [s].
 
+    Attributes:
+        record: The IK's record (:func:`ik_dtype`), read by field by the compiled step.
+
     Raises:
         ControlError: ``dt`` not positive, or the margin leaves no room between the limits.
     """
@@ -135,31 +160,55 @@ class DifferentialIK:
         self._data = robot.model.createData()
         self._fid = robot.tcp_frame_id
         amax = robot.acceleration_limit * cfg.acceleration_scale
-        #: All arrays of the IK, one buffer (``joint_kernels.ik_views``); the arrays below are
-        #: its views.
-        self.buffer = np.zeros(joint_kernels.ik_size(n))
-        self.gram, self.scratch, self._err, self.jacobian, self.table = (
-            joint_kernels.ik_views(self.buffer, n))
-        #: Per-joint table, shape (``joint_kernels.IK_ROWS``, n): the bounds, speed limits,
-        #: a·dt, 1/(2a) and the planned stop's a·dt (``joint_kernels.IK_*`` rows).
-        self.table[:] = [lo, hi, robot.velocity_limit * cfg.velocity_scale, amax * dt,
-                         0.5 / amax, amax * dt * cfg.stop_acceleration_fraction]
-        #: Joint position bounds of the IK (the robot limits shrunk by the margin) [rad].
-        self.lower = self.table[joint_kernels.IK_LOWER]
-        self.upper = self.table[joint_kernels.IK_UPPER]
-        #: Frame Jacobian of the TCP in tool axes (``pin.LOCAL``), shape (6, n), at the last q
-        #: (a view of ``buffer``), with J Jᵀ and its Cholesky factor (``gram``, shape (2, 6, 6))
-        #: and the least squares' work space (``scratch``, shape (7, 6)).
+        self.record = new_record(ik_dtype(n))
+        s = self._s = view(self.record)
+        s.lower, s.upper = lo, hi
+        s.max_velocity = robot.velocity_limit * cfg.velocity_scale
+        s.velocity_step = amax * dt
+        s.half_inverse_acceleration = 0.5 / amax
+        s.stop_velocity_step = amax * dt * cfg.stop_acceleration_fraction
+        s.dt = dt
+        s.manipulability_threshold = cfg.manipulability_threshold
+        s.max_damping = cfg.max_damping
         #: TCP pose at the last q: Pinocchio's own frame placement (``data.oMf``), updated in
         #: place by :meth:`compute_kinematics` (copy it to keep a pose).
         self.transform_tool_to_base: pin.SE3 = self._data.oMf[self._fid]
-        #: Views of its rotation, shape (3, 3), and translation [m], shape (3,): they follow it.
-        self.rotation_tool_to_base: Array = self.transform_tool_to_base.rotation
-        self.translation_tool_to_base: Array = self.transform_tool_to_base.translation
-        #: μ = √det(J Jᵀ) at the last q.
-        self.manipulability = 0.0
-        #: λ of the damped least squares at the last q.
-        self.damping = 0.0
+
+    @property
+    def lower(self) -> Array:
+        """Joint position bounds of the IK (the robot limits shrunk by the margin) [rad]."""
+        return self._s.lower
+
+    @property
+    def upper(self) -> Array:
+        """Upper joint position bounds of the IK [rad]."""
+        return self._s.upper
+
+    @property
+    def jacobian(self) -> Array:
+        """Frame Jacobian of the TCP in tool axes (``pin.LOCAL``) at the last q, shape (6, n)
+        (the record's own array)."""
+        return self._s.jacobian
+
+    @property
+    def rotation_tool_to_base(self) -> Array:
+        """R of the TCP at the last q, shape (3, 3) (the record's own array)."""
+        return self._s.tcp_rotation
+
+    @property
+    def translation_tool_to_base(self) -> Array:
+        """p of the TCP at the last q [m], shape (3,) (the record's own array)."""
+        return self._s.tcp_position
+
+    @property
+    def manipulability(self) -> float:
+        """μ = √det(J Jᵀ) at the last q (of :meth:`compute_kinematics`)."""
+        return float(self._s.manipulability)
+
+    @property
+    def damping(self) -> float:
+        """λ of the damped least squares at the last q (of :meth:`compute_kinematics`)."""
+        return float(self._s.damping)
 
     def stop_cycles(self, qd: Array) -> float:
         """Cycles a planned stop gives the joints to stop from ``qd``.
@@ -171,7 +220,7 @@ class DifferentialIK:
             max_j |q̇_j|/(f·a_j·dt) (not rounded), f the ``stop_acceleration_fraction`` and
             a_j the IK's joint acceleration limits.
         """
-        return float(joint_kernels.joint_stop_cycles(qd, self.table[joint_kernels.IK_DV_STOP]))
+        return float(ik_step.joint_stop_cycles(qd, self._s.stop_velocity_step))
 
     def make_result(self) -> IKResult:
         """A preallocated result."""
@@ -180,18 +229,19 @@ class DifferentialIK:
     def compute_kinematics(self, q: Array) -> None:
         """Jacobian, TCP pose, manipulability and damping at ``q`` (shape (n,) [rad])."""
         self.frame_kinematics(q)
-        self.manipulability = gram_manipulability(self.jacobian, self.gram[0], self.gram[1])
-        self.damping = dls_damping(self.manipulability, self.config.manipulability_threshold,
-                                   self.config.max_damping)
+        ik_step.update_manipulability_of(self.record)
 
     def frame_kinematics(self, q: Array) -> None:
         """Only the Pinocchio part of :meth:`compute_kinematics`: the TCP pose and Jacobian at
-        ``q`` (``manipulability``, ``damping`` and ``gram`` are left as they were; the guiding
-        cycle computes them in its compiled call)."""
-        m, d = self._model, self._data
+        ``q`` into the record (``manipulability``, ``damping`` and J Jᵀ are left as they were;
+        the guiding cycle computes them in its compiled call)."""
+        m, d, s = self._model, self._data, self._s
         pin.computeJointJacobians(m, d, q)
         pin.updateFramePlacement(m, d, self._fid)   # in place: transform_tool_to_base
-        self.jacobian[:] = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
+        s.jacobian = pin.getFrameJacobian(m, d, self._fid, pin.LOCAL)
+        T = self.transform_tool_to_base
+        s.tcp_rotation = T.rotation
+        s.tcp_position = T.translation
 
     def jacobian_in_frame(self, frame: str, out: Array) -> None:
         """The TCP Jacobian at the last q in the controller's frame.
@@ -201,15 +251,16 @@ class DifferentialIK:
                 ``pin.LOCAL_WORLD_ALIGNED``): blockdiag(R, R)·J_tool with R the TCP rotation.
             out: Result, shape (6, n); Jᵀ·w maps a wrench w in that frame to joint torques.
         """
+        jacobian, rotation = self._s.jacobian, self._s.tcp_rotation
         if frame == "tool":
-            out[:] = self.jacobian
+            out[:] = jacobian
             return
-        R = self.rotation_tool_to_base
-        np.matmul(R, self.jacobian[:3], out=out[:3])
-        np.matmul(R, self.jacobian[3:], out=out[3:])
+        np.matmul(rotation, jacobian[:3], out=out[:3])
+        np.matmul(rotation, jacobian[3:], out=out[3:])
 
     def solve(self, q: Array, qd_previous: Array, target: pin.SE3, out: IKResult) -> None:
-        """One DLS step toward ``target`` from ``q`` (after ``compute_kinematics(q)``).
+        """One DLS step toward ``target`` from ``q`` (after ``compute_kinematics(q)``): the
+        compiled :func:`~leadthrough.control.ik_step.ik_step` the guiding cycle runs.
 
         Args:
             q: Joint position [rad], shape (n,): the one given to ``compute_kinematics``.
@@ -217,9 +268,8 @@ class DifferentialIK:
             target: TCP pose to reach at the end of the cycle.
             out: Result, filled in place.
         """
-        scale, out.residual = joint_kernels.ik_step(
-            self.jacobian, self.gram, self.table, self.scratch, self._err, self.damping,
-            self.dt, self.rotation_tool_to_base, self.translation_tool_to_base,
-            target.rotation, target.translation, q, qd_previous, out.qd_dls, out.qd, out.q)
+        scale, out.residual = ik_step.ik_step(self.record[0], target.rotation,
+                                              target.translation, q, qd_previous, out.qd_dls,
+                                              out.qd, out.q)
         out.scale = scale
         out.limited = scale < 1.0

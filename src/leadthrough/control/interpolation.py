@@ -15,20 +15,23 @@ milliradian at the joint acceleration limits, well inside the IK's joint-limit m
 
 :class:`leadthrough.control.jerk_limit.JerkLimitedInterpolator` has the same interface and adds
 jerk limits (``ruckig``, optional). Both take the setpoint once per cycle (``set_target``) and
-produce one command per ``update``.
+produce one command per ``update``. The segment lives in one record (:func:`interpolator_dtype`)
+and both steps are compiled (Numba, ``nopython``, cached on disk: :func:`start_segment`,
+:func:`next_command`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.control import joint_kernels
 from leadthrough.errors import ControlError, check_period
+from leadthrough.state_records import new_record, view
 
 __all__ = [
     "CommandBuffer",
@@ -36,6 +39,9 @@ __all__ = [
     "InterpolatorStatus",
     "JointCommand",
     "JointInterpolator",
+    "interpolator_dtype",
+    "next_command",
+    "start_segment",
 ]
 
 Array = NDArray[np.float64]
@@ -94,6 +100,96 @@ class JointInterpolator(Protocol):
         """Advance by one servo period and write the command into ``out.q``, ``out.qd``."""
         ...
 
+    def warm_up(self) -> None:
+        """Prepare whatever the first ``update`` would otherwise prepare (compiled code)."""
+        ...
+
+
+def interpolator_dtype(n: int, substeps: int) -> np.dtype[Any]:
+    """The Hermite interpolator's record for ``n`` joints and ``substeps`` commands a segment."""
+    f8 = np.float64
+    return np.dtype([
+        # per substep k (s = (k + 1)/substeps): the position basis h01(s), T·h10(s), T·h11(s)
+        # and the velocity basis h01'(s)/T, h10'(s), h11'(s)
+        ("h01", f8, (substeps,)), ("h10", f8, (substeps,)), ("h11", f8, (substeps,)),
+        ("dh01", f8, (substeps,)), ("dh10", f8, (substeps,)), ("dh11", f8, (substeps,)),
+        # the segment: start position and velocity (the last command), end position and
+        # velocity (the setpoint), end − start [rad, rad/s]
+        ("p0", f8, (n,)), ("v0", f8, (n,)), ("p1", f8, (n,)), ("v1", f8, (n,)),
+        ("dp", f8, (n,)),
+        # the last command [rad, rad/s] and the next substep
+        ("q", f8, (n,)), ("qd", f8, (n,)), ("k", np.int64),
+    ])
+
+
+@njit(cache=True, nogil=True)
+def start_segment(segment: NDArray[np.void], q: Array, qd: Array) -> bool:
+    """A new segment from the last command to the setpoint (q, q̇).
+
+    Args:
+        segment: The interpolator's record (:func:`interpolator_dtype`, one element), in
+            place.
+        q: Setpoint [rad], shape (n,).
+        qd: Velocity at the setpoint [rad/s], shape (n,).
+
+    Returns:
+        False, with nothing changed, for a setpoint of the wrong size or not finite.
+    """
+    seg = segment[0]
+    n = seg.q.size
+    if q.size != n or qd.size != n:
+        return False
+    for j in range(n):
+        if not (np.isfinite(q[j]) and np.isfinite(qd[j])):
+            return False
+    for j in range(n):
+        seg.p0[j] = seg.q[j]
+        seg.v0[j] = seg.qd[j]
+        seg.p1[j] = q[j]
+        seg.v1[j] = qd[j]
+        seg.dp[j] = q[j] - seg.q[j]
+    seg.k = 0
+    return True
+
+
+@njit(cache=True, nogil=True)
+def next_command(segment: NDArray[np.void], q_out: Array, qd_out: Array) -> int:
+    """The segment's next command: q = p0 + h01·Δp + T·h10·v0 + T·h11·v1,
+    q̇ = h01'/T·Δp + h10'·v0 + h11'·v1; the last one is the setpoint itself; past it, the end
+    position is held at rest.
+
+    Args:
+        segment: The interpolator's record (:func:`interpolator_dtype`, one element); the last
+            command and the substep advance.
+        q_out: Position command [rad], shape (n,).
+        qd_out: Velocity command [rad/s], shape (n,).
+
+    Returns:
+        ``InterpolatorStatus``: WORKING inside the segment, FINISHED at its end, STARVED past
+        it.
+    """
+    seg = segment[0]
+    k = seg.k
+    substeps = seg.h01.size
+    if k < substeps:
+        seg.k = k + 1
+    status = InterpolatorStatus.WORKING
+    for j in range(q_out.size):
+        if k >= substeps:
+            seg.qd[j] = 0.0
+            status = InterpolatorStatus.STARVED
+        elif k == substeps - 1:
+            seg.q[j] = seg.p1[j]
+            seg.qd[j] = seg.v1[j]
+            status = InterpolatorStatus.FINISHED
+        else:
+            dp, v0, v1 = seg.dp[j], seg.v0[j], seg.v1[j]
+            seg.q[j] = dp * seg.h01[k] + v0 * seg.h10[k] + v1 * seg.h11[k] + seg.p0[j]
+            seg.qd[j] = dp * seg.dh01[k] + v0 * seg.dh10[k] + v1 * seg.dh11[k]
+        q_out[j] = seg.q[j]
+        qd_out[j] = seg.qd[j]
+    return status.value      # an int: returning the member would box its class every call
+
 
 class HermiteInterpolator:
     """Cubic Hermite interpolation of controller setpoints (C¹, no steps).
@@ -102,6 +198,9 @@ class HermiteInterpolator:
         n: Number of joints.
         period: Controller cycle T [s].
         substeps: Servo commands per controller cycle (10 for 10 ms → 1 ms).
+
+    Attributes:
+        record: The segment (:func:`interpolator_dtype`).
 
     Raises:
         ControlError: ``period`` not positive or ``substeps`` < 1.
@@ -115,13 +214,13 @@ class HermiteInterpolator:
         self.n = n
         self.period = period
         self.substeps = substeps
+        self.record = new_record(interpolator_dtype(n, substeps))
+        seg = self._seg = view(self.record)
         s = np.arange(1, substeps + 1) / substeps
-        # per substep: position basis (h01 and T·h10, T·h11) and velocity basis (h'/T)
-        self._basis = np.column_stack([3 * s**2 - 2 * s**3, period * (s**3 - 2 * s**2 + s),
-                                       period * (s**3 - s**2), (6 * s - 6 * s**2) / period,
-                                       3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s])
-        self._segment = np.zeros((7, n))  # rows joint_kernels.HERMITE_*
-        self._k = substeps
+        seg.h01, seg.h10 = 3 * s**2 - 2 * s**3, period * (s**3 - 2 * s**2 + s)
+        seg.h11, seg.dh01 = period * (s**3 - s**2), (6 * s - 6 * s**2) / period
+        seg.dh10, seg.dh11 = 3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s
+        seg.k = substeps
 
     def make_command(self) -> JointCommand:
         """A preallocated command."""
@@ -129,11 +228,12 @@ class HermiteInterpolator:
 
     def reset(self, q: Array) -> None:
         """Hold ``q`` at rest (shape (n,) [rad])."""
-        seg = self._segment
-        seg[:] = 0.0
-        seg[joint_kernels.HERMITE_Q] = q
-        seg[joint_kernels.HERMITE_P1] = q
-        self._k = self.substeps
+        seg = self._seg
+        for name in ("p0", "v0", "p1", "v1", "dp", "q", "qd"):
+            getattr(seg, name)[:] = 0.0
+        seg.q = q
+        seg.p1 = q
+        seg.k = self.substeps
 
     def set_target(self, q: Array, qd: Array) -> None:
         """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each.
@@ -141,19 +241,18 @@ class HermiteInterpolator:
         A setpoint of the wrong size or not finite is ignored, like a missed one: the current
         segment runs to its end, then the end is held (``STARVED``); no command is ever NaN.
         """
-        if joint_kernels.hermite_start(self._segment, q, qd):
-            self._k = 0
+        start_segment(self.record, q, qd)
 
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
         """Advance one servo period and write the command into ``out.q``, ``out.qd``."""
-        k = self._k
-        if k < self.substeps:
-            self._k = k + 1
-        code = joint_kernels.hermite_step(self._segment, self._basis, k, out.q, out.qd)
-        return _STATUS[code]
+        return _STATUS[next_command(self.record, out.q, out.qd)]
+
+    def warm_up(self) -> None:
+        """Load (or compile) the compiled steps on a copy of the segment (nothing changes)."""
+        seg, cmd = self.record.copy(), self.make_command()
+        start_segment(seg, seg["q"][0], seg["qd"][0])
+        next_command(seg, cmd.q, cmd.qd)
 
 
-#: InterpolatorStatus by the code of ``joint_kernels.hermite_step``.
-_STATUS = {joint_kernels.HERMITE_WORKING: InterpolatorStatus.WORKING,
-           joint_kernels.HERMITE_FINISHED: InterpolatorStatus.FINISHED,
-           joint_kernels.HERMITE_STARVED: InterpolatorStatus.STARVED}
+#: The statuses by value (a dictionary lookup is cheaper than the enum's constructor).
+_STATUS = {int(s): s for s in InterpolatorStatus}

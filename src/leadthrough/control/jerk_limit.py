@@ -138,6 +138,9 @@ class JerkLimitedInterpolator:
         self._inp.target_velocity = qd.tolist()
         self._inp.target_acceleration = self._acc.tolist()
 
+    def warm_up(self) -> None:
+        """Nothing to prepare (``ruckig`` is compiled ahead of time)."""
+
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
         """Advance one servo period and write the command into ``out.q``, ``out.qd``."""
         result = self._otg.update(self._inp, self._out)

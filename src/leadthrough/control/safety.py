@@ -1,6 +1,6 @@
 """Safety layer of hand guiding: states, faults, and the log of every transition.
 
-States::
+States (:mod:`leadthrough.control.safety_states`)::
 
     IDLE ──deadman pressed──▶ GUIDING ──deadman released──▶ STOPPING ──at rest──▶ IDLE
       any state ──fault──▶ FAULT (latched) ──clear_fault() at rest──▶ IDLE
@@ -23,25 +23,28 @@ Every transition is logged as an :class:`Event` (time, from, to, cause, fault, v
 The log is a preallocated ring of the last ``max_events`` transitions (older ones dropped,
 counted in ``events_dropped``): logging allocates nothing; :attr:`SafetySupervisor.events`
 builds the :class:`Event` objects when asked.
+
+The rules are compiled (:mod:`leadthrough.control.safety_rules`) and run on the supervisor's
+record, so that the guiding cycle runs them inside its own compiled call; the methods here run
+the same functions, one call each.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import IntEnum
 
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control import safety_kernels as sk
+from leadthrough.control import safety_rules as rules
 from leadthrough.control.limits import CartesianLimits
+from leadthrough.control.safety_states import Cause, Fault, State
 from leadthrough.errors import ControlError, check_fields
 from leadthrough.robot.description import Robot
+from leadthrough.state_records import new_record, view
 
 __all__ = [
-    "FAULT_BY_CODE",
-    "STATE_BY_CODE",
     "Cause",
     "Event",
     "Fault",
@@ -52,59 +55,6 @@ __all__ = [
 
 Array = NDArray[np.float64]
 _INF3 = (math.inf,) * 3
-
-
-class State(IntEnum):
-    """State of the guiding controller."""
-
-    IDLE = 0
-    GUIDING = 1
-    STOPPING = 2
-    FAULT = 3
-
-
-class Fault(IntEnum):
-    """Why the controller is in FAULT (``NONE`` otherwise)."""
-
-    NONE = 0
-    #: t, q, current or wrench not finite, or an input array of the wrong size (value: NaN,
-    #: index: -1).
-    NONFINITE_INPUT = 1
-    #: Measured joint position outside its limits by more than the tolerance (value: q [rad]).
-    POSITION_RANGE = 2
-    #: |measured current| above max_current·factor (value: current [A]).
-    CURRENT_RANGE = 3
-    #: Sequence number not advancing for ``stale_cycles`` cycles (value: the sequence number).
-    STALE_FEEDBACK = 4
-    #: |q_measured − q_commanded| above the limit (value: the error [rad]).
-    FOLLOWING_ERROR = 5
-    #: ‖force‖ or ‖torque‖ of the estimated wrench above the threshold (value: the norm, index
-    #: 0 force, 1 torque).
-    COLLISION = 6
-    #: A commanded joint within the margin of its limit and moving toward it (value: q [rad]).
-    JOINT_LIMIT = 7
-    #: The TCP plus its braking distance would leave the workspace box (value: clearance [m]).
-    WORKSPACE = 8
-    #: Manipulability below the stop threshold and falling (value: μ).
-    SINGULARITY = 9
-    #: The IK residual above its limit (value: ‖log6‖ [m, rad]).
-    TRACKING = 10
-    #: ``update`` called before the first ``reset`` (no commanded position yet).
-    NOT_STARTED = 11
-    #: The force estimator latched a fault since the last cycle (a non-finite or wrong-size
-    #: sample between the controller's cycles, or an overflow; value: the estimator's status).
-    ESTIMATOR = 12
-
-
-class Cause(IntEnum):
-    """Cause of a state transition."""
-
-    DEADMAN_PRESSED = 0
-    DEADMAN_RELEASED = 1
-    STOPPED = 2
-    FAULT = 3
-    FAULT_CLEARED = 4
-    RESET = 5
 
 
 @dataclass(frozen=True)
@@ -208,105 +158,95 @@ class SafetyConfig:
 class SafetySupervisor:
     """The state machine and the fault checks (no motion: the guiding controller moves).
 
-    The state and the rules are compiled (:mod:`leadthrough.control.safety_kernels`), so that
-    the guiding cycle runs them inside its own compiled call; these methods run the same
-    functions on the same state, one call each.
-
     Args:
         robot: The robot (joint limits, max currents).
         config: Thresholds.
         limits: Cartesian limits (braking distance for the workspace box).
+
+    Attributes:
+        record: The supervisor's record (:func:`~leadthrough.control.safety_rules.supervisor_dtype`:
+            settings and state), read by field.
+        event_ring: The last ``max_events`` transitions (``safety_rules.EVENT_DTYPE``).
     """
 
     def __init__(self, robot: Robot, config: SafetyConfig, limits: CartesianLimits) -> None:
         self.config = cfg = config
         self.limits = limits
-        n = robot.n
-        #: Packed state (see :mod:`~leadthrough.control.safety_kernels`): int64 flags.
-        self.flags = flags = np.zeros(sk.FLAG_SLOTS, dtype=np.int64)
-        #: The float state, one buffer: its views are ``values`` (values and settings),
-        #: ``joints`` (per-joint bounds, shape (JOINT_ROWS, n)) and ``event_ring`` (the last
-        #: ``max_events`` transitions).
-        self.buffer = np.zeros(sk.safety_size(n, cfg.max_events))
-        values, joints, self.event_ring = sk.safety_views(self.buffer, n)
-        self.values, self.joints = values, joints
-        joints[sk.MIDDLE] = 0.5 * (robot.lower_limits + robot.upper_limits)
-        joints[sk.HALF_RANGE] = (0.5 * (robot.upper_limits - robot.lower_limits)
+        self.record = new_record(rules.supervisor_dtype(robot.n))
+        self.event_ring = np.zeros(cfg.max_events, dtype=rules.EVENT_DTYPE)
+        s = self._s = view(self.record)
+        s.position_middle = 0.5 * (robot.lower_limits + robot.upper_limits)
+        s.position_half_range = (0.5 * (robot.upper_limits - robot.lower_limits)
                                  + cfg.position_tolerance)
-        joints[sk.MAX_CURRENT] = robot.max_current * cfg.current_range_factor
-        joints[sk.LOWER_MARGIN] = robot.lower_limits + cfg.joint_limit_margin
-        joints[sk.UPPER_MARGIN] = robot.upper_limits - cfg.joint_limit_margin
-        values[sk.FEEDBACK_LIMITS:sk.FEEDBACK_LIMITS + 3] = (
-            cfg.following_error_limit, cfg.max_force, cfg.max_torque)
-        values[sk.MU_STOP] = cfg.stop_manipulability
-        values[sk.SCALE_SPAN] = cfg.slow_manipulability - cfg.stop_manipulability
-        values[sk.MIN_SCALE] = cfg.min_speed_scale
-        values[sk.TRACKING_LIMIT] = cfg.tracking_error_limit
-        values[sk.WORKSPACE_MARGIN] = cfg.workspace_margin
-        values[sk.MAX_LINEAR_ACCELERATION] = limits.max_linear_acceleration
-        values[sk.BOX_LOW:sk.BOX_LOW + 3] = cfg.workspace_min
-        values[sk.BOX_HIGH:sk.BOX_HIGH + 3] = cfg.workspace_max
-        values[sk.FAULT_VALUE] = math.nan
-        values[sk.MU_PREVIOUS] = math.nan
-        flags[sk.STATE] = State.IDLE
-        flags[sk.FAULT_CODE] = Fault.NONE
-        flags[sk.FAULT_INDEX] = -1
-        flags[sk.REQUIRE_EDGE] = int(cfg.require_deadman_edge)
-        flags[sk.ARMED] = 1 - flags[sk.REQUIRE_EDGE]
-        flags[sk.STALE_CYCLES] = cfg.stale_cycles
-        flags[sk.HAS_BOX] = int(bool(np.isfinite(values[sk.BOX_LOW:sk.BOX_HIGH + 3]).any()))
-        flags[sk.INPUTS_FINITE] = 1
+        s.max_current = robot.max_current * cfg.current_range_factor
+        s.lower_margin = robot.lower_limits + cfg.joint_limit_margin
+        s.upper_margin = robot.upper_limits - cfg.joint_limit_margin
+        s.following_limit = cfg.following_error_limit
+        s.max_force, s.max_torque = cfg.max_force, cfg.max_torque
+        s.stop_manipulability = cfg.stop_manipulability
+        s.slow_span = cfg.slow_manipulability - cfg.stop_manipulability
+        s.min_speed_scale = cfg.min_speed_scale
+        s.tracking_limit = cfg.tracking_error_limit
+        s.workspace_margin = cfg.workspace_margin
+        s.max_linear_acceleration = limits.max_linear_acceleration
+        s.box_low, s.box_high = cfg.workspace_min, cfg.workspace_max
+        s.has_box = bool(np.isfinite(cfg.workspace_min + cfg.workspace_max).any())
+        s.stale_cycles = cfg.stale_cycles
+        s.require_edge = cfg.require_deadman_edge
+        s.state, s.fault, s.fault_index = State.IDLE, Fault.NONE, -1
+        s.fault_value = s.mu_previous = math.nan
+        s.armed = not cfg.require_deadman_edge
+        s.inputs_finite = True
 
     # ----------------------------------------------------------------- state
     @property
     def state(self) -> State:
         """The current state."""
-        return STATE_BY_CODE[self.flags[sk.STATE]]
+        return State(self._s.state)
 
     @property
     def fault(self) -> Fault:
         """The latched fault (``Fault.NONE`` unless in FAULT)."""
-        return FAULT_BY_CODE[self.flags[sk.FAULT_CODE]]
+        return Fault(self._s.fault)
 
     @property
     def fault_value(self) -> float:
         """The latched fault's offending value (see :class:`Fault`), NaN if none."""
-        return float(self.values[sk.FAULT_VALUE])
+        return float(self._s.fault_value)
 
     @property
     def fault_index(self) -> int:
         """The latched fault's joint or axis index, -1 if none."""
-        return int(self.flags[sk.FAULT_INDEX])
+        return int(self._s.fault_index)
 
     @property
     def inputs_finite(self) -> bool:
         """Whether t, q, current and wrench of the last ``check_feedback`` were all finite."""
-        return bool(self.flags[sk.INPUTS_FINITE])
+        return bool(self._s.inputs_finite)
 
     @property
     def events(self) -> list[Event]:
         """The logged transitions, oldest first (at most ``max_events``)."""
-        ring, count = self.event_ring, int(self.flags[sk.EVENT_COUNT])
-        cap = ring.shape[0]
+        ring, count = self.event_ring, int(self._s.event_count)
+        cap = ring.size
         rows = (ring[k % cap] for k in range(max(0, count - cap), count))
-        return [Event(float(r[sk.EVENT_T]), STATE_BY_CODE[int(r[sk.EVENT_FROM])],
-                      STATE_BY_CODE[int(r[sk.EVENT_TO])], Cause(int(r[sk.EVENT_CAUSE])),
-                      FAULT_BY_CODE[int(r[sk.EVENT_FAULT])], float(r[sk.EVENT_VALUE]),
-                      int(r[sk.EVENT_INDEX])) for r in rows]
+        return [Event(float(e["t"]), State(e["from_state"]), State(e["to_state"]),
+                      Cause(e["cause"]), Fault(e["fault"]), float(e["value"]), int(e["index"]))
+                for e in rows]
 
     @property
     def events_dropped(self) -> int:
         """Number of transitions dropped from the bounded log (the oldest)."""
-        return max(0, int(self.flags[sk.EVENT_COUNT]) - self.event_ring.shape[0])
+        return max(0, int(self._s.event_count) - self.event_ring.size)
 
     # ----------------------------------------------------------------- transitions
     def reset(self, t: float) -> None:
         """Back to IDLE, fault cleared, counters restarted (logged as RESET)."""
-        sk.reset(self.flags, self.values, self.event_ring, t)
+        rules.reset(self.record[0], self.event_ring, t)
 
     def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
         """Enter FAULT (no-op if already there: the first fault is kept)."""
-        sk.trip(self.flags, self.values, self.event_ring, t, int(fault), value, index)
+        rules.trip(self.record[0], self.event_ring, t, int(fault), value, index)
 
     def clear_fault(self, t: float, at_rest: bool) -> bool:
         """Leave FAULT for IDLE, only once the commanded motion is at rest.
@@ -314,15 +254,15 @@ class SafetySupervisor:
         Returns:
             Whether the fault was cleared.
         """
-        return bool(sk.clear_fault(self.flags, self.values, self.event_ring, t, at_rest))
+        return bool(rules.clear_fault(self.record[0], self.event_ring, t, at_rest))
 
     def deadman(self, t: float, held: bool) -> None:
         """IDLE → GUIDING on a press, GUIDING → STOPPING on a release."""
-        sk.deadman(self.flags, self.event_ring, t, held)
+        rules.deadman(self.record[0], self.event_ring, t, held)
 
     def stopped(self, t: float, at_rest: bool) -> None:
         """STOPPING → IDLE once the commanded motion is at rest."""
-        sk.stopped(self.flags, self.event_ring, t, at_rest)
+        rules.stopped(self.record[0], self.event_ring, t, at_rest)
 
     # ----------------------------------------------------------------- checks
     def check_feedback(self, t: float, sequence: int, q: Array, current: Array, wrench: Array,
@@ -337,8 +277,8 @@ class SafetySupervisor:
             wrench: Estimated wrench [N, N·m], shape (6,), force first (any frame: norms only).
             q_commanded: Joint position commanded for now [rad], shape (n,).
         """
-        sk.check_feedback(self.flags, self.values, self.joints, self.event_ring, t, sequence,
-                          q, current, wrench, q_commanded)
+        rules.check_feedback(self.record[0], self.event_ring, t, sequence, q, current, wrench,
+                             q_commanded)
 
     def check_motion(self, t: float, manipulability: float, q_commanded: Array,
                      qd_commanded: Array, residual: float) -> None:
@@ -351,19 +291,19 @@ class SafetySupervisor:
             qd_commanded: Commanded joint velocity of the last cycle [rad/s], shape (n,).
             residual: IK residual ‖log6(T(q)⁻¹·T_target)‖ [m, rad].
         """
-        sk.check_motion(self.flags, self.values, self.joints, self.event_ring, t,
-                        manipulability, q_commanded, qd_commanded, residual)
+        rules.check_motion(self.record[0], self.event_ring, t, manipulability, q_commanded,
+                           qd_commanded, residual)
 
     def speed_scale(self, manipulability: float) -> float:
         """Factor of the speed limits near a singularity: (μ − μ_stop)/(μ_slow − μ_stop) of
         ``stop_manipulability`` and ``slow_manipulability``, clipped to
         [``min_speed_scale``, 1]."""
-        return float(sk.speed_scale(self.values, manipulability))
+        return float(rules.speed_scale(self.record[0], manipulability))
 
     @property
     def has_box(self) -> bool:
         """Whether a workspace box is configured (a finite face)."""
-        return bool(self.flags[sk.HAS_BOX])
+        return bool(self._s.has_box)
 
     def workspace_clearance(self, position: Array, linear_speed: float,
                             stop_time: float = 0.0) -> float:
@@ -372,19 +312,13 @@ class SafetySupervisor:
         Args:
             position: TCP position in the base frame [m], shape (3,).
             linear_speed: ‖v‖ of the TCP [m/s].
-            stop_time: Lower bound on the time a stop takes [s] (the joints' own, see
-                :meth:`CartesianLimits.braking_distance`).
+            stop_time: Lower bound on the time a stop takes [s] (the joints' own).
 
         Returns:
             min over the faces of (distance to the face) − margin − braking distance; negative:
-            the TCP could not stop inside the box (less the margin). +inf without a box.
+            the TCP could not stop inside the box (less the margin). +inf without a box. The
+            braking distance is ½·‖v‖·max(‖v‖/a_max, ``stop_time``).
         """
-        return float(sk.workspace_clearance(self.flags, self.values,
-                                            np.asarray(position, dtype=float), linear_speed,
-                                            stop_time))
-
-
-#: The states by code (a tuple lookup is cheaper than the enum's constructor).
-STATE_BY_CODE: tuple[State, ...] = tuple(State)
-#: The faults by code.
-FAULT_BY_CODE: tuple[Fault, ...] = tuple(Fault)
+        return float(rules.workspace_clearance(self.record[0],
+                                               np.asarray(position, dtype=float),
+                                               linear_speed, stop_time))

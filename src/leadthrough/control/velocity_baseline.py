@@ -12,7 +12,8 @@ exists only to reproduce Fig. 4 and shares :class:`AdmittanceLaw` with the virtu
 that the guiding controller can swap them.
 
 The gains are not given in the paper; the defaults (0.0025 m/(s·N), 0.0025 rad/(s·N·m),
-T = 0.2 s) give 0.1 m/s for a steady 40 N push.
+T = 0.2 s) give 0.1 m/s for a steady 40 N push. :func:`velocity_baseline` is the law (compiled:
+Numba, ``nopython``, cached on disk) that the guiding cycle runs with ``controller="velocity"``.
 """
 
 from __future__ import annotations
@@ -21,12 +22,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.control.guiding_kernel import LAW_VELOCITY, velocity_baseline_step
-from leadthrough.errors import ControlError, check_fields, check_period
+from leadthrough.errors import ControlError, check_fields
 
-__all__ = ["VelocityBaseline", "VelocityBaselineConfig"]
+__all__ = ["VelocityBaselineConfig", "velocity_baseline"]
 
 Array = NDArray[np.float64]
 
@@ -51,37 +52,23 @@ class VelocityBaselineConfig:
              "finite and > 0 s"),
         ], ControlError)
 
+    def alpha(self, dt: float) -> float:
+        """1 − e^(−dt/T) for a cycle of ``dt`` [s]."""
+        return 1.0 - math.exp(-dt / self.time_constant)
 
-class VelocityBaseline:
-    """First-order velocity law [14]; an :class:`AdmittanceLaw` (ignores the friction).
+
+@njit(cache=True, nogil=True)
+def velocity_baseline(twist: Array, wrench: Array, gain: Array, alpha: float,
+                           out: Array) -> None:
+    """The velocity baseline's first-order lag, v⁺ = v + α·(K·F̂ − v) per axis: the desired
+    twist after one cycle.
 
     Args:
-        config: Gains and time constant.
-        dt: Controller cycle [s].
-
-    Raises:
-        ControlError: ``dt`` not finite and positive.
+        twist: Twist of the last cycle, shape (6,).
+        wrench: Estimated wrench, shape (6,).
+        gain: K per axis, shape (6,).
+        alpha: 1 − e^(−dt/T).
+        out: Desired twist, shape (6,); must not alias an input.
     """
-
-    def __init__(self, config: VelocityBaselineConfig | None = None, dt: float = 0.01) -> None:
-        check_period("dt", dt, ControlError)
-        self.config = cfg = config if config is not None else VelocityBaselineConfig()
-        self.dt = dt
-        self.law_id = LAW_VELOCITY
-        #: K_i per axis.
-        self.coefficients = np.asarray(cfg.gain, dtype=float)
-        #: 1 − e^(−dt/T).
-        self.alpha = 1.0 - math.exp(-dt / cfg.time_constant)
-
-    def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
-             out: Array) -> None:
-        """Desired twist after one cycle: v⁺ = v + (1 − e^(−dt/T))·(K·F̂ − v).
-
-        Args:
-            twist: Commanded twist of the last cycle, shape (6,) [m/s, rad/s].
-            wrench: Estimated operator wrench F̂, shape (6,) [N, N·m].
-            friction: Ignored (no dead band in [14]).
-            stopping_friction: Ignored.
-            out: Desired twist, shape (6,), written in place; must not alias an input.
-        """
-        velocity_baseline_step(twist, wrench, self.coefficients, self.alpha, out)
+    for i in range(6):
+        out[i] = (gain[i] * wrench[i] - twist[i]) * alpha + twist[i]

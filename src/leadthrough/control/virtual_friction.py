@@ -1,7 +1,7 @@
 """Virtual mass and virtual friction, the paper's force-following law (eq. 31–33).
 
-Per Cartesian axis i (see :mod:`leadthrough.control.admittance` for the axis order) the TCP
-behaves like a mass M_i on a surface with dry friction:
+Per Cartesian axis i (linear first, :data:`leadthrough.control.guiding_types.AXIS_NAMES`) the
+TCP behaves like a mass M_i on a surface with dry friction:
 
 * eq. 31: M_i·v̇_i = F̂_i − f_i, with F̂_i the estimated operator force (torque) and v_i the
   commanded velocity;
@@ -21,7 +21,9 @@ friction produces no motion at all, the paper's claim.
 Defaults are the paper's Table IV: 1000 kg and 1000 kg·m², δ = 15 N and 15 N·m,
 δ_s = 50 N and 50 N·m. The speed and acceleration limits of Table IV are in
 :class:`leadthrough.control.limits.CartesianLimits`; the automatic friction of eq. 36 in
-:mod:`leadthrough.control.auto_friction`.
+:mod:`leadthrough.control.auto_friction`. :func:`virtual_friction` is the law (compiled: Numba,
+``nopython``, cached on disk) that the guiding cycle runs
+(:mod:`leadthrough.control.guiding_cycle`).
 """
 
 from __future__ import annotations
@@ -30,13 +32,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.control import kernels
-from leadthrough.control.guiding_kernel import LAW_VIRTUAL_FRICTION
-from leadthrough.errors import ControlError, check_fields, check_period
+from leadthrough.errors import ControlError, check_fields
 
-__all__ = ["VirtualFriction", "VirtualFrictionConfig"]
+__all__ = ["VirtualFrictionConfig", "virtual_friction"]
 
 Array = NDArray[np.float64]
 
@@ -72,38 +73,31 @@ class VirtualFrictionConfig:
              "6 finite values >= friction [N, N·m]"),
         ], ControlError)
 
+    def dt_over_mass(self, dt: float) -> Array:
+        """dt/M_i per axis for a cycle of ``dt`` [s] [s/kg, s/(kg·m²)], shape (6,)."""
+        return dt / np.asarray(self.mass, dtype=float)
 
-class VirtualFriction:
-    """The virtual mass / virtual friction law (eq. 31–33); an :class:`AdmittanceLaw`.
+
+@njit(cache=True, nogil=True)
+def virtual_friction(twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
+                     dt_over_mass: Array, out: Array) -> None:
+    """Eq. 31–33 with the stopping friction, one Euler step per axis: the desired twist after
+    one cycle (see the module docstring).
 
     Args:
-        config: Masses (the friction values of the config are defaults for the caller; ``step``
-            takes the friction explicitly so that eq. 36 can set it per cycle).
-        dt: Controller cycle [s].
-
-    Raises:
-        ControlError: ``dt`` not finite and positive.
+        twist: Twist of the last cycle, shape (6,).
+        wrench: Estimated wrench, shape (6,).
+        friction: δ, shape (6,).
+        stopping_friction: δ_s, shape (6,).
+        dt_over_mass: dt/M per axis [s/kg, s/(kg·m²)], shape (6,).
+        out: Desired twist, shape (6,); must not alias an input.
     """
-
-    def __init__(self, config: VirtualFrictionConfig | None = None, dt: float = 0.01) -> None:
-        check_period("dt", dt, ControlError)
-        self.config = cfg = config if config is not None else VirtualFrictionConfig()
-        self.dt = dt
-        self.law_id = LAW_VIRTUAL_FRICTION
-        #: dt/M_i per axis [s/kg, s/(kg·m²)].
-        self.coefficients = dt / np.asarray(cfg.mass, dtype=float)
-        self.alpha = 0.0
-
-    def step(self, twist: Array, wrench: Array, friction: Array, stopping_friction: Array,
-             out: Array) -> None:
-        """Desired twist after one cycle (eq. 31–33, with the stopping friction).
-
-        Args:
-            twist: Commanded twist of the last cycle, shape (6,) [m/s, rad/s].
-            wrench: Estimated operator wrench F̂, shape (6,) [N, N·m].
-            friction: δ, shape (6,) [N, N·m], ≥ 0.
-            stopping_friction: δ_s, shape (6,) [N, N·m], ≥ δ.
-            out: Desired twist, shape (6,), written in place; must not alias an input.
-        """
-        kernels.virtual_friction_step(twist, wrench, friction, stopping_friction,
-                                      self.coefficients, out)
+    for i in range(6):
+        v, w, d = twist[i], wrench[i], friction[i]
+        if v == 0.0:
+            f = min(max(w, -d), d)            # eq. 33: static friction up to δ
+        else:
+            mag = stopping_friction[i] if abs(w) < d else d
+            f = mag if v > 0.0 else -mag      # eq. 32
+        new = (w - f) * dt_over_mass[i] + v   # eq. 31
+        out[i] = 0.0 if new * v < 0.0 else new

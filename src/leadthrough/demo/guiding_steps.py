@@ -4,7 +4,7 @@ Fig. 5), on the simulated robot with calibrated parameters."""
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,17 +16,18 @@ from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
+from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
 from leadthrough.session.record import SessionLog, save_session
-from leadthrough.session.sim_session import (
+from leadthrough.sim.calibration_set import CalibrationSet, record_excitation
+from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.robot import SimConfig
+from leadthrough.sim.session import (
     SimSession,
     SimSessionConfig,
     light_guiding,
     run_sim_session,
 )
-from leadthrough.sim.calibration_set import CalibrationSet, record_excitation
-from leadthrough.sim.mujoco_model import Payload
-from leadthrough.sim.robot import SimConfig
 
 __all__ = ["PAPER_WEIGHTS_N", "PAPER_WORST", "PAYLOAD_RUN_S", "GuidingDemo", "PayloadRow",
            "payload_table", "run_guiding_demo"]
@@ -119,8 +120,8 @@ def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
     plan += [("diagonal", "virtual-friction"), ("seam", "virtual-friction")]
     for op, ctl in plan:
         guiding = light_guiding() if op in ("push-x", "seam") else GuidingConfig()
-        s = run_sim_session(robot, params, SimSessionConfig(operator=op, controller=ctl,
-                                                            seed=seed, guiding=guiding))
+        loop = LoopConfig(guiding=replace(guiding, controller=ctl))
+        s = run_sim_session(robot, params, SimSessionConfig(operator=op, seed=seed, loop=loop))
         sessions[f"{op}/{ctl}"] = s
         save_session(s.result.log, out / f"session_{op}_{ctl}.parquet")
         sm = s.summary

@@ -11,7 +11,7 @@ from leadthrough.demo.run import GUIDING_METHOD, DemoResult
 from leadthrough.fileio import atomic_write_text
 from leadthrough.identification.comparison import table2_markdown
 from leadthrough.report import Figure, Report, Section, Table, write_html, write_markdown
-from leadthrough.session.sim_session import PUSH_MASS_KG
+from leadthrough.sim.session import PUSH_MASS_KG
 
 __all__ = ["summary_dict", "write_demo_report"]
 

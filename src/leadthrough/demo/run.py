@@ -41,8 +41,10 @@ from leadthrough.identification.params_file import ParamsFile, save_params
 from leadthrough.identification.plots import plot_torque_fit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot.description import Robot
-from leadthrough.session.sim_session import guide_start_pose
+from leadthrough.robot.poses import guide_start_pose
 from leadthrough.sim.calibration_set import (
+    CalibrationSet,
+    SimRecording,
     compare_on_calibration_set,
     record_calibration_set,
     record_friction_sweep,
@@ -106,9 +108,34 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
     """Run all steps, writing into ``out`` (which must exist)."""
     t_start = time.perf_counter()
     res = DemoResult(robot=robot.name, seed=seed, quick=quick)
-    q0 = np.clip(np.resize(np.array(DEMO_POSE), robot.n), robot.lower_limits, robot.upper_limits)
-
     say("[1/6] excitation design (after checking the model and the simulator) ...")
+    _checks(res, robot, seed, quick, say)
+    say("[2/6] recordings at 1 kHz (identification and held-out trajectories) ...")
+    cal, sweep = _recordings(res, robot, seed, quick, out, say)
+    say("[3/6] calibration: " + ", ".join(METHODS) + " ...")
+    params, guiding_params = _calibration(res, robot, seed, quick, out, cal, sweep, say)
+    say("[4/6] payload test (Table III): weight from motion with the unloaded model ...")
+    res.payload = payload_table(robot, cal, {m: pf.params for m, pf in params.items()}, seed,
+                                20.0 if quick else PAYLOAD_RUN_S)
+    for k, row in enumerate(res.payload[GUIDING_METHOD]):
+        cells = ", ".join(f"{m} {rows[k].estimated_n:7.2f} N ({rows[k].error_pct:+.2f} %)"
+                          for m, rows in res.payload.items())
+        say(f"      {row.true_n:7.2f} N: {cells}")
+    say(f"[5/6] guiding sessions ({GUIDING_METHOD} parameters with the friction sweep) ...")
+    res.guiding = run_guiding_demo(robot, guiding_params, seed, out, say)
+    res.files["fig4"] = res.guiding.fig4
+    res.files["fig5"] = res.guiding.fig5
+    say("[6/6] teach-in of the welding-seam session ...")
+    _teach(res, robot, out, say)
+    res.total_s = time.perf_counter() - t_start
+    return res
+
+
+def _checks(res: DemoResult, robot: Robot, seed: int, quick: bool,
+            say: Callable[[str], None]) -> None:
+    """Step 1's checks: the regressor against Pinocchio and MuJoCo, the simulator's currents
+    against the drive model at rest and under a push."""
+    q0 = np.clip(np.resize(np.array(DEMO_POSE), robot.n), robot.lower_limits, robot.upper_limits)
     reg = check_regressor(robot, samples=200 if quick else 1000, seed=seed)
     config = SimConfig(seed=seed)
     hold = check_hold(robot, config, q0)
@@ -125,10 +152,14 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
                  "current_error_sigma": hold.error_in_sigma.tolist()},
         "push_50N_x": {"current_error_sigma": push.error_in_sigma.tolist()},
     }
+
+
+def _recordings(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Path,
+                say: Callable[[str], None]) -> tuple[CalibrationSet, SimRecording]:
+    """Step 2: the excitation, its held-out twin and the friction sweep, recorded."""
     duration = 20.0 if quick else 60.0
     exc_cfg = ExcitationConfig(starts=1 if quick else 2, seed=0,
                                max_iterations=60 if quick else 100)
-    say("[2/6] recordings at 1 kHz (identification and held-out trajectories) ...")
     cal = record_calibration_set(robot, seed=seed, duration=duration, excitation_config=exc_cfg,
                                  progress=lambda s: say("      " + s))
     res.condition_number = cal.excitation.condition_number
@@ -141,8 +172,14 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
                                                            out / "friction_sweep.parquet")
     say(f"      friction sweep recorded: {sweep.measured.duration:.0f} s, "
         f"{len(FrictionSweepConfig().speeds)} speeds out and back")
+    return cal, sweep
 
-    say("[3/6] calibration: " + ", ".join(METHODS) + " ...")
+
+def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Path,
+                 cal: CalibrationSet, sweep: SimRecording, say: Callable[[str], None]
+                 ) -> tuple[dict[str, ParamsFile], ParamsFile]:
+    """Step 3: Table II with all methods, Fig. 3, and the guiding parameters (with the
+    sweep). Returns the params of Table III's methods and the guiding params."""
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
                                                  polish_iterations=150 if quick else 300))
     comparison = compare_on_calibration_set(robot, cal, METHODS, cfg,
@@ -163,7 +200,6 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
     path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
                        guided.result.params, guided.result.stats, seed)
     res.files["params (guiding: consistent + friction sweep)"] = path
-    guiding_params = ParamsFile.from_result(guided.result, path, seed)
     res.sweep_rms = guided.sweep.rms.tolist()
     say("      guiding parameters: consistent with the friction sweep (fit RMS "
         + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m)")
@@ -171,24 +207,7 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},
         title=f"{robot.name} (simulated), held-out trajectory")
-
-    say("[4/6] payload test (Table III): weight from motion with the unloaded model ...")
-    res.payload = payload_table(robot, cal, {m: pf.params for m, pf in params.items()}, seed,
-                                20.0 if quick else PAYLOAD_RUN_S)
-    for k, row in enumerate(res.payload[GUIDING_METHOD]):
-        cells = ", ".join(f"{m} {rows[k].estimated_n:7.2f} N ({rows[k].error_pct:+.2f} %)"
-                          for m, rows in res.payload.items())
-        say(f"      {row.true_n:7.2f} N: {cells}")
-
-    say(f"[5/6] guiding sessions ({GUIDING_METHOD} parameters with the friction sweep) ...")
-    res.guiding = run_guiding_demo(robot, guiding_params, seed, out, say)
-    res.files["fig4"] = res.guiding.fig4
-    res.files["fig5"] = res.guiding.fig5
-
-    say("[6/6] teach-in of the welding-seam session ...")
-    _teach(res, robot, out, say)
-    res.total_s = time.perf_counter() - t_start
-    return res
+    return params, ParamsFile.from_result(guided.result, path, seed)
 
 
 def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None]) -> None:

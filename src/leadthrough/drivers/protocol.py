@@ -34,7 +34,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Driver", "DriverFeedback", "JointCommand"]
+__all__ = ["Driver", "DriverFeedback", "JointCommand", "WrappedDriver"]
 
 Array = NDArray[np.float64]
 
@@ -136,3 +136,50 @@ class Driver(Protocol):
         """Wait for the next servo period: a simulation advances one ``dt`` and returns at
         once; a real controller blocks until its next cycle."""
         ...
+
+
+class WrappedDriver:
+    """A driver that passes everything to the driver it wraps; subclasses override what they
+    add to (e.g. :meth:`read`, to record or probe each sample).
+
+    Args:
+        driver: The driver doing the work.
+    """
+
+    def __init__(self, driver: Driver) -> None:
+        self._driver = driver
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return self._driver.n
+
+    @property
+    def dt(self) -> float:
+        """Servo period [s]."""
+        return self._driver.dt
+
+    @property
+    def simulated(self) -> bool:
+        """That of the wrapped driver."""
+        return self._driver.simulated
+
+    def make_feedback(self) -> DriverFeedback:
+        """A feedback of the wrapped driver."""
+        return self._driver.make_feedback()
+
+    def make_command(self) -> JointCommand:
+        """A command of the wrapped driver."""
+        return self._driver.make_command()
+
+    def read(self, fb: DriverFeedback) -> bool:
+        """Read from the wrapped driver."""
+        return self._driver.read(fb)
+
+    def write(self, cmd: JointCommand) -> None:
+        """Write to the wrapped driver."""
+        self._driver.write(cmd)
+
+    def step(self) -> None:
+        """Step the wrapped driver."""
+        self._driver.step()

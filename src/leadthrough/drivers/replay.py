@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
+from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand, WrappedDriver
 from leadthrough.errors import DataError
 
 __all__ = ["FeedbackTrace", "RecordingDriver", "ReplayDriver"]
@@ -56,7 +56,7 @@ class FeedbackTrace:
         return int(self.t.size)
 
 
-class RecordingDriver:
+class RecordingDriver(WrappedDriver):
     """A driver that records every read of the driver it wraps.
 
     Args:
@@ -71,7 +71,7 @@ class RecordingDriver:
     def __init__(self, driver: Driver, capacity: int) -> None:
         if capacity < 1:
             raise DataError("must be >= 1", field="capacity", value=capacity, expected=">= 1")
-        self._driver = driver
+        super().__init__(driver)
         n = driver.n
         self._t = np.full(capacity, np.nan)
         self._q = np.full((capacity, n), np.nan)
@@ -79,29 +79,6 @@ class RecordingDriver:
         self._sequence = np.full(capacity, -1, dtype=np.int64)
         self._fresh = np.zeros(capacity, dtype=bool)
         self._k = 0
-
-    @property
-    def n(self) -> int:
-        """Number of joints."""
-        return self._driver.n
-
-    @property
-    def dt(self) -> float:
-        """Servo period [s]."""
-        return self._driver.dt
-
-    @property
-    def simulated(self) -> bool:
-        """That of the wrapped driver."""
-        return self._driver.simulated
-
-    def make_feedback(self) -> DriverFeedback:
-        """A feedback of the wrapped driver."""
-        return self._driver.make_feedback()
-
-    def make_command(self) -> JointCommand:
-        """A command of the wrapped driver."""
-        return self._driver.make_command()
 
     def read(self, fb: DriverFeedback) -> bool:
         """Read from the wrapped driver and keep the sample."""
@@ -116,14 +93,6 @@ class RecordingDriver:
                 self._sequence[k] = fb.sequence
             self._k = k + 1
         return fresh
-
-    def write(self, cmd: JointCommand) -> None:
-        """Write to the wrapped driver."""
-        self._driver.write(cmd)
-
-    def step(self) -> None:
-        """Step the wrapped driver."""
-        self._driver.step()
 
     def trace(self) -> FeedbackTrace:
         """The reads so far (copies)."""

@@ -142,31 +142,8 @@ def compute_base_parameters(
     if include_rotor:
         K = np.concatenate([K, rotor_columns(qdd)], axis=2)
     W = K.reshape(-1, K.shape[2])
-    # Rank from a column-pivoted QR of the column-normalised regressor.
-    norms = np.linalg.norm(W, axis=0)
-    # Columns that are zero up to round-off (parameters with no effect at all).
-    norms[norms <= 1e-10 * norms.max()] = 0.0
-    scale = np.where(norms > 0.0, norms, 1.0)
-    Wn = np.where(norms > 0.0, W / scale, 0.0)
-    _, R, _ = scipy.linalg.qr(Wn, mode="economic", pivoting=True)
-    diag = np.abs(np.diag(R))
-    rank = int(np.sum(diag > tol * diag[0]))
-    # Choose the independent columns greedily in natural parameter order, so that parameters of
-    # outer links are regrouped into inner ones (the textbook grouping, readable coefficients).
-    chosen: list[int] = []
-    basis = np.zeros((Wn.shape[0], 0))
-    for j in range(Wn.shape[1]):
-        if norms[j] == 0.0:
-            continue
-        col = Wn[:, j] - basis @ (basis.T @ Wn[:, j])
-        col -= basis @ (basis.T @ col)  # re-orthogonalise once for accuracy
-        nrm = float(np.linalg.norm(col))
-        if nrm > np.sqrt(tol):
-            chosen.append(j)
-            basis = np.column_stack([basis, col / nrm])
-        if len(chosen) == rank:
-            break
-    ind = np.asarray(chosen, dtype=np.intp)
+    ind = _independent_columns(W, tol)
+    rank = ind.size
     dep = np.setdiff1d(np.arange(W.shape[1]), ind).astype(np.intp)
     if dep.size:
         regroup, *_ = scipy.linalg.lstsq(W[:, ind], W[:, dep])
@@ -180,9 +157,52 @@ def compute_base_parameters(
     std_names = tuple(standard_parameter_names(model)
                       + ([f"{model.names[j]}.Mj" for j in range(1, model.njoints)]
                          if include_rotor else []))
+    names, exprs = _base_names(std_names, ind, dep, regroup)
+    return BaseParameters(
+        standard_names=std_names,
+        independent=ind,
+        dependent=dep,
+        combination=C,
+        names=tuple(names),
+        expressions=tuple(exprs),
+    )
+
+
+def _independent_columns(W: NDArray[np.float64], tol: float) -> NDArray[np.intp]:
+    """The columns of a stacked regressor that span it: the rank from a column-pivoted QR of
+    the column-normalised regressor, the columns chosen greedily in natural parameter order, so
+    that parameters of outer links are regrouped into inner ones (the textbook grouping,
+    readable coefficients)."""
+    norms = np.linalg.norm(W, axis=0)
+    # Columns that are zero up to round-off (parameters with no effect at all).
+    norms[norms <= 1e-10 * norms.max()] = 0.0
+    scale = np.where(norms > 0.0, norms, 1.0)
+    Wn = np.where(norms > 0.0, W / scale, 0.0)
+    _, R, _ = scipy.linalg.qr(Wn, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > tol * diag[0]))
+    chosen: list[int] = []
+    basis = np.zeros((Wn.shape[0], 0))
+    for j in range(Wn.shape[1]):
+        if norms[j] == 0.0:
+            continue
+        col = Wn[:, j] - basis @ (basis.T @ Wn[:, j])
+        col -= basis @ (basis.T @ col)  # re-orthogonalise once for accuracy
+        nrm = float(np.linalg.norm(col))
+        if nrm > np.sqrt(tol):
+            chosen.append(j)
+            basis = np.column_stack([basis, col / nrm])
+        if len(chosen) == rank:
+            break
+    return np.asarray(chosen, dtype=np.intp)
+
+
+def _base_names(std_names: tuple[str, ...], ind: NDArray[np.intp], dep: NDArray[np.intp],
+                regroup: NDArray[np.float64]) -> tuple[list[str], list[str]]:
+    """Each base parameter's name (primed when it regroups others) and its expression."""
     names: list[str] = []
     exprs: list[str] = []
-    for k in range(rank):
+    for k in range(ind.size):
         terms = [std_names[ind[k]]]
         for j, c in zip(dep, regroup[k], strict=True):
             if c != 0.0:
@@ -192,11 +212,4 @@ def compute_base_parameters(
                              else f"{sign} {mag:.6g}·{std_names[j]}")
         names.append(std_names[ind[k]] + ("'" if len(terms) > 1 else ""))
         exprs.append(" ".join(terms))
-    return BaseParameters(
-        standard_names=std_names,
-        independent=ind,
-        dependent=dep,
-        combination=C,
-        names=tuple(names),
-        expressions=tuple(exprs),
-    )
+    return names, exprs

@@ -11,23 +11,35 @@
 * :func:`cbrt_friction`: baseline [22], eq. 8: Fc·sgn(q̇) + β·q̇ + γ·q̇^{1/3}.
 * :func:`rotor_inertia_torque`: eq. 16, M_j·q̈ with M_j the reflected rotor inertia.
 
+Eq. 15 is defined once, here, per sample and compiled (:func:`stribeck_decay`,
+:func:`stribeck_terms`, :func:`eq15_friction`: Numba, cached on disk; NumPy ufuncs that also run
+inside compiled code on scalars). The offline model, the identification's regressor columns and
+the real-time estimator (:mod:`leadthrough.estimation`) all call them.
+
 All functions broadcast over samples: inputs of shape (N, n) with parameters of shape (n,).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numba import njit, vectorize
 from numpy.typing import NDArray
 
 __all__ = [
     "StribeckParameters",
     "cbrt_friction",
     "coulomb_viscous_friction",
+    "eq15_friction",
+    "friction_dtype",
     "rotor_inertia_torque",
+    "stribeck_decay",
     "stribeck_friction",
     "stribeck_shapes",
+    "stribeck_terms",
 ]
 
 Array = NDArray[np.float64]
@@ -54,6 +66,64 @@ class StribeckParameters:
     f4: Array
 
 
+def friction_dtype(n: int) -> np.dtype[Any]:
+    """The friction parameters of ``n`` joints as a record, for compiled per-sample code.
+
+    Fields (per joint, shape (n,), except ``stribeck``): ``coulomb`` f1 [N·m], ``viscous``
+    f4 [N·m·s/rad], ``motor_stribeck`` f2 [N·m], ``motor_rate`` R/q̇sm [s/rad],
+    ``gear_stribeck`` f3 [N·m], ``gear_rate`` 1/q̇sg [s/rad], ``cbrt`` γ of [22]'s cube-root
+    term [N·m·(s/rad)^{1/3}]; ``stribeck``: eq. 15 (else the baselines' Coulomb + viscous
+    (+ cube root) model, with the Stribeck fields zero).
+    """
+    f8 = np.float64
+    return np.dtype([("coulomb", f8, (n,)), ("viscous", f8, (n,)),
+                     ("motor_stribeck", f8, (n,)), ("motor_rate", f8, (n,)),
+                     ("gear_stribeck", f8, (n,)), ("gear_rate", f8, (n,)),
+                     ("cbrt", f8, (n,)), ("stribeck", np.bool_)])
+
+
+@vectorize(["float64(float64)"], cache=True, nopython=True)
+def stribeck_decay(ratio: float) -> float:  # pragma: no cover (compiled)
+    """The Stribeck decay of eq. 15, exp(−x²), of a speed ratio x = q̇/q̇s (a NumPy ufunc)."""
+    return math.exp(-ratio * ratio)
+
+
+@njit(cache=True, nogil=True)
+def stribeck_terms(speed: float, f2: float, motor_rate: float, f3: float,
+                   gear_rate: float) -> float:
+    """The Stribeck part of eq. 15's friction level at a joint speed q̇ [N·m]:
+    f2·exp(−(R·q̇/q̇sm)²) + f3·exp(−(q̇/q̇sg)²).
+
+    Args:
+        speed: q̇ [rad/s].
+        f2: Motor-side Stribeck amplitude [N·m].
+        motor_rate: R/q̇sm [s/rad].
+        f3: Gear-side Stribeck amplitude [N·m].
+        gear_rate: 1/q̇sg [s/rad].
+    """
+    return f2 * stribeck_decay(speed * motor_rate) + f3 * stribeck_decay(speed * gear_rate)
+
+
+@vectorize(["float64(float64, float64, float64, float64, float64, float64, float64, float64)"],
+           cache=True, nopython=True)
+def eq15_friction(qd: float, sign: float, f1: float, f2: float, motor_rate: float, f3: float,
+                  gear_rate: float, f4: float) -> float:  # pragma: no cover (compiled)
+    """Eq. 15 for a given friction direction [N·m] (a NumPy ufunc):
+    f1·s + f4·q̇ + s·(f2·exp(−(R·q̇/q̇sm)²) + f3·exp(−(q̇/q̇sg)²)).
+
+    Args:
+        qd: q̇ [rad/s].
+        sign: The friction's direction s: sgn(q̇) offline, a smoothed sign in real time.
+        f1: Coulomb friction [N·m].
+        f2: Motor-side Stribeck amplitude [N·m].
+        motor_rate: R/q̇sm [s/rad].
+        f3: Gear-side Stribeck amplitude [N·m].
+        gear_rate: 1/q̇sg [s/rad].
+        f4: Viscous friction [N·m·s/rad].
+    """
+    return sign * f1 + qd * f4 + sign * stribeck_terms(qd, f2, motor_rate, f3, gear_rate)
+
+
 def stribeck_shapes(
     qd: Array, gear_ratio: Array, qd_sm: Array, qd_sg: Array
 ) -> tuple[Array, Array, Array]:
@@ -69,8 +139,8 @@ def stribeck_shapes(
         sgn(q̇), exp(−(R·q̇/q̇sm)²)·sgn(q̇) and exp(−(q̇/q̇sg)²)·sgn(q̇), each shape (N, n).
     """
     s = np.sign(qd)
-    motor = np.exp(-np.square(gear_ratio * qd / qd_sm)) * s
-    gear = np.exp(-np.square(qd / qd_sg)) * s
+    motor = stribeck_decay(gear_ratio * qd / qd_sm) * s
+    gear = stribeck_decay(qd / qd_sg) * s
     return s, motor, gear
 
 
@@ -85,8 +155,8 @@ def stribeck_friction(qd: Array, gear_ratio: Array, p: StribeckParameters) -> Ar
     Returns:
         Friction torque [N·m], same shape as ``qd``.
     """
-    s, motor, gear = stribeck_shapes(qd, gear_ratio, p.qd_sm, p.qd_sg)
-    return p.f1 * s + p.f2 * motor + p.f3 * gear + p.f4 * qd
+    return np.asarray(eq15_friction(qd, np.sign(qd), p.f1, p.f2, gear_ratio / p.qd_sm, p.f3,
+                                    1.0 / p.qd_sg, p.f4))
 
 
 def coulomb_viscous_friction(qd: Array, fc: Array, fv: Array) -> Array:

@@ -21,23 +21,23 @@ blowing up. The force-only fit (``axes="force"``) is damped instead by the TCP's
 arm, which a wrist singularity leaves intact (``kernels.wrench_from_torque``). The frame is the
 base (axes of the base, at the TCP) or the tool.
 
-Per sample, ``update`` makes two compiled calls (:mod:`leadthrough.estimation.fused`: the
-state lives in a few packed arrays) around two or four Pinocchio calls (RNEA or
+Per sample, ``update`` makes two compiled calls (:mod:`leadthrough.estimation.estimator_step`:
+the state lives in one named record) around two or four Pinocchio calls (RNEA or
 CRBA/Coriolis/gravity, and the TCP Jacobian); ``benchmarks/estimator_speed.py`` measures it.
 
 ``update`` validates nothing but the input's sizes and finiteness (configuration is checked once
 at construction), never raises, never reads the clock: a non-finite sample (q, current, t, and
 ``qd_cmd`` when the friction follows the command), or a result that is not finite (an input
-too large for the filters), sets ``Status.FAULT_NONFINITE``; input arrays of the wrong size set
-``Status.FAULT_INPUT_SIZE``. Either keeps the last valid output and latches until ``reset``.
+too large for the filters), sets ``EstimatorStatus.FAULT_NONFINITE``; an input or output made for
+another robot sets ``EstimatorStatus.FAULT_INPUT_SIZE``. Either keeps the last valid output and
+latches until ``reset``.
 Missed samples (t advanced by k ≥ 2 periods) are bridged: the differentiator steps through q
 interpolated over the gap, so the jump of q is not read as one period's velocity.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from enum import IntEnum
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -45,32 +45,28 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import MAX_PRESLIDING_RAD, DriveModelParameters
 from leadthrough.errors import DataError, check_fields
-from leadthrough.estimation import fused, kernels
-from leadthrough.estimation.filters import FirstOrderLowPass, StateVariableDifferentiator
+from leadthrough.estimation.estimator_step import (
+    EstimatorStatus,
+    estimator_dtype,
+    finish_sample,
+    input_dtype,
+    output_dtype,
+    read_sample,
+)
+from leadthrough.estimation.filters import differentiator_coefficients, low_pass_alpha
 from leadthrough.estimation.identified_model import IdentifiedModel
 from leadthrough.robot.description import Robot
+from leadthrough.state_records import RecordView, field, new_record, view
 
 __all__ = [
     "EstimatorConfig",
     "EstimatorInput",
     "EstimatorOutput",
+    "EstimatorStatus",
     "ExternalForceEstimator",
-    "Status",
 ]
 
 Array = NDArray[np.float64]
-
-
-class Status(IntEnum):
-    """Result of one update."""
-
-    OK = 0
-    WARMING_UP = 1
-    TARING = 2
-    #: A non-finite input, or a result that overflowed (latched until ``reset``).
-    FAULT_NONFINITE = -1
-    #: ``q``, ``current`` (or ``qd_cmd``, when used) not of shape (n,) (latched until ``reset``).
-    FAULT_INPUT_SIZE = -2
 
 
 @dataclass(frozen=True)
@@ -112,7 +108,7 @@ class EstimatorConfig:
             friction then has memory (eq. 15 as the steady state of a LuGre/Dahl model, see
             ``presliding_kernels.presliding_friction_step``): after a stop, the drives keep the
             friction they had while moving, and so does the model.
-        presliding_rad: z₀ of the ``"command"`` friction while a joint is commanded to move
+        presliding_length: z₀ of the ``"command"`` friction while a joint is commanded to move
             [rad]: the friction turns over a commanded displacement of a few z₀, which is the
             gear's presliding plus the servo's lag. A smaller z₀ turns the model's friction
             ahead of the gear's, a larger one behind it: on the simulated er20 (gear presliding
@@ -146,7 +142,7 @@ class EstimatorConfig:
     tare_s: float = 0.0
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
-    presliding_rad: float = 4e-4
+    presliding_length: float = 4e-4
     presliding_play_counts: float = 2.5
     friction_weighting: float = 0.0
 
@@ -167,7 +163,8 @@ class EstimatorConfig:
             ("standstill_velocity", self.standstill_velocity > 0, "> 0 rad/s"),
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
-            ("presliding_rad", 0 < self.presliding_rad <= MAX_PRESLIDING_RAD,
+            ("presliding_length",
+             0 < self.presliding_length <= MAX_PRESLIDING_RAD,
              f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad"),
             ("presliding_play_counts", 0 <= self.presliding_play_counts < 1e6,
              "0 <= width < 1e6 counts"),
@@ -179,46 +176,49 @@ class EstimatorConfig:
         ])
 
 
-@dataclass
-class EstimatorInput:
-    """One sample (write into the arrays in place).
+class EstimatorInput(RecordView):
+    """One sample (``ExternalForceEstimator.make_input``; fill the arrays in place).
 
-    Attributes:
-        t: Time [s] (an advance of k ≥ 2 periods since the last sample: k − 1 samples were
-            missed, and the differentiator bridges them).
-        q: Joint positions [rad], shape (n,).
-        current: Motor currents [A], shape (n,).
-        qd_cmd: Joint velocity commanded to the servo for this period [rad/s], shape (n,)
-            (used with ``friction_velocity="command"``).
+    Args:
+        n: Number of joints.
     """
 
-    t: float
-    q: Array
-    current: Array
-    qd_cmd: Array = field(default_factory=lambda: np.zeros(0))
+    __slots__ = ()
+
+    t = field("t", "Time [s] (an advance of k ≥ 2 periods since the last sample: k − 1 samples "
+                   "were missed, and the differentiator bridges them).", float)
+    q = field[Array]("q", "Joint positions [rad], shape (n,).")
+    current = field[Array]("current", "Motor currents [A], shape (n,).")
+    qd_cmd = field[Array]("qd_cmd", "Joint velocity commanded to the servo for this period "
+                                    "[rad/s], shape (n,) (used with "
+                                    "``friction_velocity=\"command\"``).")
+
+    def __init__(self, n: int) -> None:
+        super().__init__(input_dtype(n))
 
 
-@dataclass
-class EstimatorOutput:
-    """The estimate, filled by ``update``.
+class EstimatorOutput(RecordView):
+    """The estimate, filled by ``update`` (``ExternalForceEstimator.make_output``).
 
-    Attributes:
-        tau_ext: External joint torque [N·m], shape (n,).
-        wrench: External wrench at the TCP [N, N·m], shape (6,) (force first), in the
-            configured frame.
-        manipulability: μ = √det(J Jᵀ) at the current pose.
-        damping: λ used in the pseudo-inverse [m] (``axes="force"``: from the shortest lever
-            arm, see ``EstimatorConfig.min_force_lever``).
-        qd: Estimated joint velocities [rad/s], shape (n,).
-        status: Status of the last update.
+    Args:
+        n: Number of joints.
     """
 
-    tau_ext: Array
-    wrench: Array
-    manipulability: float = 0.0
-    damping: float = 0.0
-    qd: Array = field(default_factory=lambda: np.zeros(0))
-    status: Status = Status.WARMING_UP
+    __slots__ = ()
+
+    tau_ext = field[Array]("tau_ext", "External joint torque [N·m], shape (n,).")
+    wrench = field[Array]("wrench", "External wrench at the TCP [N, N·m], shape (6,) (force "
+                                    "first), in the configured frame.")
+    qd = field[Array]("qd", "Estimated joint velocities [rad/s], shape (n,).")
+    manipulability = field("manipulability", "μ = √det(J Jᵀ) at the current pose.", float)
+    damping = field("damping", "λ used in the pseudo-inverse [m] (``axes=\"force\"``: from the "
+                               "shortest lever arm, see ``EstimatorConfig.min_force_lever``).",
+                    float)
+    status = field("status", "Status of the last update.", EstimatorStatus)
+
+    def __init__(self, n: int) -> None:
+        super().__init__(output_dtype(n))
+        self.status = EstimatorStatus.WARMING_UP
 
 
 class ExternalForceEstimator:
@@ -231,6 +231,10 @@ class ExternalForceEstimator:
         config: Settings.
         noise_std: σ of τ_ω per joint [N·m] (params file ``[noise] std``); weights of the
             ``axes="force"`` fit (default: equal weights).
+
+    Attributes:
+        record: The estimator's record (:func:`~leadthrough.estimation.estimator_step.
+            estimator_dtype`): settings, constants and state, read by field.
     """
 
     def __init__(self, robot: Robot, params: DriveModelParameters, noise_mean: Array,
@@ -247,97 +251,114 @@ class ExternalForceEstimator:
             raise DataError("wrong size or not positive", field="noise_std", value=std.tolist(),
                             expected=f"{n} positive values")
         self.robot = robot
-        self.model = mdl = IdentifiedModel(robot, params, cfg.standstill_velocity)
+        self.model = mdl = IdentifiedModel(robot, params)
         self._ref = pin.LOCAL_WORLD_ALIGNED if cfg.frame == "base" else pin.LOCAL
-        # packed state of the compiled sample (leadthrough.estimation.fused)
-        const = self._const = np.zeros((fused.CONST_ROWS, n))
-        const[:kernels.FRICTION_ROWS] = mdl.friction_rows
-        const[fused.TORQUE_PER_AMP] = robot.torque_per_amp
-        const[fused.STD] = std
-        const[fused.ROTOR] = mdl.rotor
-        const[fused.OFFSET] = mdl.offset
-        const[fused.NOISE_MEAN] = noise_mean if cfg.remove_mean_noise else 0.0
-        const[fused.REST_PRESLIDING] = (params.presliding if params.presliding.size
-                                        else cfg.presliding_rad)
-        const[fused.HALF_PLAY] = 0.5 * cfg.presliding_play_counts * robot.encoder_resolution
-        st = self._settings = np.zeros(fused.SETTINGS_SLOTS)
-        st[fused.SVF:fused.SVF + 7] = StateVariableDifferentiator(
-            n, cfg.velocity_cutoff_hz, cfg.dt).coef
-        st[fused.DT] = cfg.dt
-        st[fused.PRESLIDING_RAD] = cfg.presliding_rad
-        st[fused.ENVELOPE_DECAY] = float(np.exp(-cfg.dt * np.pi * cfg.output_cutoff_hz))
-        st[fused.KAPPA] = cfg.friction_weighting
-        st[fused.ALPHA] = FirstOrderLowPass(n, cfg.output_cutoff_hz, cfg.dt).alpha
-        st[fused.OBSERVER_GAIN] = 2.0 * np.pi * cfg.output_cutoff_hz
-        st[fused.MU0] = cfg.manipulability_threshold
-        st[fused.MAX_DAMPING] = cfg.max_damping
-        st[fused.MIN_LEVER] = cfg.min_force_lever
-        c = self._counters = np.zeros(fused.COUNTER_SLOTS, dtype=np.int64)
-        c[fused.WARM] = round(cfg.warm_up_s / cfg.dt)
-        c[fused.STRIBECK] = mdl.stribeck
-        c[fused.FRICTION_COMMAND] = cfg.friction_velocity == "command"
-        c[fused.WEIGH] = cfg.friction_weighting > 0
-        c[fused.DIRECT] = cfg.method == "direct"
-        c[fused.FORCE_ONLY] = cfg.axes == "force"
-        self._state = np.zeros((fused.STATE_ROWS, n))
+        self.record = new_record(estimator_dtype(n))
+        s = self._s = view(self.record)
+        s.friction = mdl.friction[0]
+        s.inverse_standstill_velocity = 1.0 / cfg.standstill_velocity
+        s.torque_per_amp = robot.torque_per_amp
+        s.noise_std = std
+        s.rotor_inertia = mdl.rotor
+        s.offset = mdl.offset
+        s.noise_mean = noise_mean if cfg.remove_mean_noise else 0.0
+        s.rest_presliding = (params.presliding if params.presliding.size
+                             else cfg.presliding_length)
+        s.play_half_width = 0.5 * cfg.presliding_play_counts * robot.encoder_resolution
+        self._configure(cfg)
         # views handed to Pinocchio every sample
-        self._q, self._qd, self._qdd = (self._state[r] for r in (fused.POS, fused.VEL,
-                                                                 fused.ACC))
+        self._q, self._qd, self._qdd = s.q_filtered, s.qd_filtered, s.qdd_filtered
         self._unused = np.zeros((n, n))
-        self._scratch = np.zeros((2, 6, 6))
-        self._info = np.zeros(2)
-        self._last_wrench = np.zeros(6)
+        self._layouts = (input_dtype(n), output_dtype(n))
+        self._direct = cfg.method == "direct"
         self._tare_len = round(cfg.tare_s / cfg.dt)
         self.reset(np.zeros(n))
 
+    def _configure(self, cfg: EstimatorConfig) -> None:
+        """The record's settings."""
+        s = self._s
+        s.dt = cfg.dt
+        s.differentiator = differentiator_coefficients(cfg.velocity_cutoff_hz, cfg.dt)[0]
+        s.low_pass_alpha = low_pass_alpha(cfg.output_cutoff_hz, cfg.dt)
+        s.observer_gain = 2.0 * np.pi * cfg.output_cutoff_hz
+        s.direct = cfg.method == "direct"
+        s.force_only = cfg.axes == "force"
+        s.manipulability_threshold = cfg.manipulability_threshold
+        s.max_damping = cfg.max_damping
+        s.min_force_lever = cfg.min_force_lever
+        s.friction_follows_command = cfg.friction_velocity == "command"
+        s.command_presliding = cfg.presliding_length
+        s.weigh_by_friction = cfg.friction_weighting > 0
+        s.friction_weighting = cfg.friction_weighting
+        s.envelope_decay = float(np.exp(-cfg.dt * np.pi * cfg.output_cutoff_hz))
+        s.warm_up_samples = round(cfg.warm_up_s / cfg.dt)
+
     def make_input(self) -> EstimatorInput:
         """A preallocated input."""
-        n = self.robot.n
-        return EstimatorInput(t=0.0, q=np.zeros(n), current=np.zeros(n), qd_cmd=np.zeros(n))
+        return EstimatorInput(self.robot.n)
 
     def make_output(self) -> EstimatorOutput:
         """A preallocated output."""
-        n = self.robot.n
-        return EstimatorOutput(tau_ext=np.zeros(n), wrench=np.zeros(6), qd=np.zeros(n))
+        return EstimatorOutput(self.robot.n)
 
     def reset(self, q: Array) -> None:
         """Restart at rest at ``q``: clears a latched fault and the tare (re-tares if set)."""
-        s, c = self._state, self._counters
-        s[:] = 0.0
-        s[fused.POS] = q
-        np.divide(1.0, self._const[fused.STD], out=s[fused.WEIGHT])
-        c[fused.TARE_LEFT] = c[fused.TARE_TAKEN] = self._tare_len
-        c[fused.REZERO_LEFT] = c[fused.SAMPLES] = c[fused.FAULT] = 0
-        c[fused.FIRST] = 1
-        c[fused.STATUS] = fused.STATUS_WARMING_UP
-        self._last_wrench[:] = 0.0
+        s = self._s
+        for name in _STATE_FIELDS:
+            getattr(s, name)[:] = 0.0
+        s.last_t = 0.0
+        s.q_filtered = q
+        s.joint_weight = 1.0 / s.noise_std
+        s.tare_left = s.tare_taken = self._tare_len
+        s.rezero_left = s.samples = 0
+        s.faulted = False
+        s.first = True
+        s.status = EstimatorStatus.WARMING_UP
 
-    def update(self, inp: EstimatorInput, out: EstimatorOutput) -> Status:
+    def warm_up(self) -> None:
+        """Load (or compile) the sample's compiled functions, on copies of the records: the next
+        sample then runs at its steady-state speed. Call it before a real-time loop starts; it
+        changes nothing of the estimator's state."""
+        est = self.record.copy()
+        inp, out = self.make_input(), self.make_output()
+        inp.q[:] = self._q
+        read_sample(inp.record, est, out.record)
+        mdl, q = self.model, est["q_filtered"][0]
+        jacobian = pin.computeFrameJacobian(mdl.model, mdl.data, q, self.robot.tcp_frame_id,
+                                            self._ref)
+        finish_sample(q, self._unused, self._unused, q, jacobian, est, out.record)
+
+    def update(self, inp: EstimatorInput, out: EstimatorOutput) -> EstimatorStatus:
         """Process one sample; fills ``out``; never raises."""
-        st, c, s, k, info = (self._settings, self._counters, self._state, self._const,
-                             self._info)
-        if not fused.sample_front(inp.q, inp.current, inp.qd_cmd, inp.t, k, st, c, s):
-            out.tau_ext[:] = s[fused.LAST_TAU]
-            out.wrench[:] = self._last_wrench
-            out.status = _STATUS[c[fused.STATUS]]
-            return out.status
+        # a tuple compares its items by identity first: fast for the layouts of make_input
+        if (inp.record.dtype, out.record.dtype) != self._layouts:
+            return self._wrong_size(out)
+        est, o = self.record, out.record
+        if not read_sample(inp.record, est, o):
+            return _STATUS[o["status"][0]]
         mdl = self.model
         m, d, q, u = mdl.model, mdl.data, self._q, self._unused
-        J = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
-        if c[fused.DIRECT]:
+        jacobian = pin.computeFrameJacobian(m, d, q, self.robot.tcp_frame_id, self._ref)
+        if self._direct:
             rnea = pin.rnea(m, d, q, self._qd, self._qdd)
-            fused.sample_back(rnea, u, u, q, J, k, st, c, s, out.tau_ext, out.wrench, out.qd,
-                              self._last_wrench, self._scratch, info)
+            finish_sample(rnea, u, u, q, jacobian, est, o)
         else:
-            M = pin.crba(m, d, q)  # upper triangle only
-            C = pin.computeCoriolisMatrix(m, d, q, self._qd)
-            g = pin.computeGeneralizedGravity(m, d, q)
-            fused.sample_back(q, M, C, g, J, k, st, c, s, out.tau_ext, out.wrench, out.qd,
-                              self._last_wrench, self._scratch, info)
-        out.manipulability = info[0]
-        out.damping = info[1]
-        out.status = _STATUS[c[fused.STATUS]]
-        return out.status
+            mass = pin.crba(m, d, q)  # upper triangle only
+            coriolis = pin.computeCoriolisMatrix(m, d, q, self._qd)
+            gravity = pin.computeGeneralizedGravity(m, d, q)
+            finish_sample(q, mass, coriolis, gravity, jacobian, est, o)
+        return _STATUS[o["status"][0]]
+
+    def _wrong_size(self, out: EstimatorOutput) -> EstimatorStatus:
+        """An input or output of another robot: ``FAULT_INPUT_SIZE``, latched."""
+        s = self._s
+        s.faulted = True
+        s.status = EstimatorStatus.FAULT_INPUT_SIZE
+        if out.record.dtype == self._layouts[1]:
+            out.tau_ext[:] = s.last_tau_ext
+            out.wrench[:] = s.last_wrench
+            out.status = EstimatorStatus.FAULT_INPUT_SIZE
+        return EstimatorStatus.FAULT_INPUT_SIZE
 
     def rezero(self, samples: int) -> None:
         """Zero-velocity update: average τ_ext over the next ``samples`` samples and subtract
@@ -350,20 +371,19 @@ class ExternalForceEstimator:
         Args:
             samples: Window length [samples], >= 1 (NaN or less: 1; capped at 2³¹).
         """
-        self._state[fused.REZERO_SUM] = 0.0
-        c = self._counters
+        s = self._s
+        s.rezero_sum = 0.0
         # no exception for any argument: NaN or < 1 is one sample, a huge window is capped
-        c[fused.REZERO_LEFT] = c[fused.REZERO_TAKEN] = (
-            int(min(samples, _MAX_WINDOW)) if samples >= 1 else 1)
+        s.rezero_left = s.rezero_taken = int(min(samples, _MAX_WINDOW)) if samples >= 1 else 1
 
     def cancel_rezero(self) -> None:
         """Abandon a :meth:`rezero` in progress (the tare is kept as it was)."""
-        self._counters[fused.REZERO_LEFT] = 0
+        self._s.rezero_left = 0
 
     @property
     def rezeroing(self) -> bool:
         """A :meth:`rezero` is in progress."""
-        return bool(self._counters[fused.REZERO_LEFT] > 0)
+        return bool(self._s.rezero_left > 0)
 
     def tare(self, duration_s: float) -> None:
         """Start taring now: average τ_ext over ``duration_s`` and subtract it from then on.
@@ -377,20 +397,26 @@ class ExternalForceEstimator:
         if not (np.isfinite(duration_s) and duration_s > 0):
             raise DataError("tare duration must be > 0", field="duration_s", value=duration_s,
                             expected="> 0 s")
-        self._state[fused.TARE_SUM] = 0.0
-        c = self._counters
-        c[fused.TARE_LEFT] = c[fused.TARE_TAKEN] = max(1, round(duration_s / self.config.dt))
+        s = self._s
+        s.tare_sum = 0.0
+        s.tare_left = s.tare_taken = max(1, round(duration_s / self.config.dt))
 
     @property
     def tare_torque(self) -> Array:
         """The joint torque subtracted by taring [N·m], shape (n,) (a copy)."""
-        return self._state[fused.TARE].copy()
+        return np.array(self._s.tare)
 
+
+#: The statuses by value (a dictionary lookup is cheaper than the enum's constructor).
+_STATUS = {int(s): s for s in EstimatorStatus}
 
 #: Longest re-zero window [samples] (about 25 days at 1 kHz).
 _MAX_WINDOW = 2**31
 
-#: Status by the compiled sample's code.
-_STATUS = {fused.STATUS_OK: Status.OK, fused.STATUS_WARMING_UP: Status.WARMING_UP,
-           fused.STATUS_TARING: Status.TARING, fused.STATUS_FAULT: Status.FAULT_NONFINITE,
-           fused.STATUS_FAULT_SIZE: Status.FAULT_INPUT_SIZE}
+#: The per-joint state the reset clears.
+_STATE_FIELDS = (
+    "q_filtered", "qd_filtered", "qdd_filtered", "last_q", "gap_q", "drive_torque",
+    "friction_torque", "friction_state", "friction_level", "friction_sign",
+    "friction_envelope", "play", "play_increment", "joint_weight", "residual_low_pass",
+    "observer_p0", "observer_integral", "observer_residual", "observer_momentum", "tare",
+    "tare_sum", "rezero_sum", "last_tau_ext", "last_wrench")

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -107,79 +108,109 @@ def estimate_payload(
         raise DataError("unknown method", field="method", value=method,
                         expected="'motion' or 'static'")
     data = rec if isinstance(rec, ProcessedData) else preprocess(rec, robot, preprocess_config)
-    n = robot.n
-    model = robot.model
-    last = n  # joint index of the last link in the Pinocchio model
     if method == "motion":
-        K = link_regressor_batch(model, data.q, data.qd, data.qdd)[:, :, 10 * (last - 1):]
-        residual = data.torque - model_torque(robot, params, data.q, data.qd, data.qdd)
-        used = data.moving
-        cols = np.arange(10 + n)
-        if refit_friction:
-            # gear friction grows with the transmitted load: re-fit each joint's Coulomb term
-            coulomb = np.zeros((data.samples, n, n))
-            coulomb[:, np.arange(n), np.arange(n)] = np.sign(data.qd)
-            K = np.concatenate([K, coulomb], axis=2)
-        else:
-            cols = np.arange(10)
+        system = _motion_system(data, robot, params, refit_friction)
     else:
-        still = np.all(np.abs(data.qd) < static_velocity, axis=1)
-        # keep only samples preceded by settle_s of rest: samples since the last moving one
-        idx = np.arange(still.size)
-        last_moving = np.maximum.accumulate(np.where(still, -1, idx))
-        still &= idx - last_moving >= round(settle_s * data.rate_hz)
-        if still.sum() < 10:
-            raise DataError("too few static samples", source=data.source, field="q̇",
-                            value=int(still.sum()),
-                            expected=f">= 10 samples with all |q̇| < {static_velocity} rad/s")
-        # at rest: no friction and no inertial terms; the model's static torque is gravity
-        K = link_regressor_batch(model, data.q[still], 0 * data.qd[still],
-                                 0 * data.qdd[still])[:, :, 10 * (last - 1):]
-        static_model = model_torque(robot, _without_friction(params), data.q[still],
-                                    0 * data.qd[still], 0 * data.qdd[still])
-        residual = data.torque[still] - static_model
-        used = np.ones(residual.shape, dtype=bool)
-        cols = np.arange(4)  # m, m·c
-    A = K[used][:, cols]
-    b = residual[used]
+        system = _static_system(data, robot, params, static_velocity, settle_s)
+    A = system.regressor[system.used][:, system.columns]
+    b = system.residual[system.used]
     norms = np.linalg.norm(A, axis=0)
     if norms[0] <= 0:
         raise DataError("the payload mass is not observable in this recording",
                         source=data.source, field="q", expected="motion or poses under gravity")
-    keep = norms > 1e-9 * norms.max()
-    sol = np.zeros(cols.size)
-    An = A[:, keep] / norms[keep]
-    fit, *_ = np.linalg.lstsq(An, b, rcond=None)
-    sol[keep] = fit / norms[keep]
-    # standard error of the mass (column 0 is always kept: norms[0] > 0), for residuals that
-    # are correlated in time: the variance of independent samples, times the largest
-    # (1 + ρ)/(1 − ρ) over the joints (ρ the lag-1 autocorrelation of a joint's residual)
-    r = b - An @ fit
-    dof = max(b.size - An.shape[1], 1)
-    sigma2 = float(np.sum(r**2)) / dof * _correlation_factor(r, used)
-    mass_std = float(np.sqrt(sigma2 * np.linalg.pinv(An.T @ An)[0, 0])) / norms[0]
-    # identifiability of the CoM: the three first-moment columns must be well conditioned
-    sv = np.linalg.svd(A[:, 1:4] / np.maximum(norms[1:4], 1e-300), compute_uv=False)
+    sol, keep, mass_std = _fit(A, b, norms, system.used)
     mass = float(sol[0])
     if mass < -SIGNIFICANT_SIGMAS * mass_std:
         where = f"{data.source}: " if data.source else ""
         warnings.warn(f"{where}the estimated payload mass is negative ({mass:.3f} ± "
                       f"{mass_std:.3f} kg): no payload is attached, or the unloaded model does "
                       "not fit this recording", DataWarning, stacklevel=2)
+    # identifiability of the CoM: the three first-moment columns must be well conditioned
+    sv = np.linalg.svd(A[:, 1:4] / np.maximum(norms[1:4], 1e-300), compute_uv=False)
     com = None
     # the CoM is a first moment divided by the mass: only where the mass is clearly nonzero
     if mass > SIGNIFICANT_SIGMAS * mass_std and sv[-1] > 1e-3 * sv[0] and np.all(keep[1:4]):
-        c_joint = sol[1:4] / mass
-        frame = model.frames[robot.tcp_frame_id]
-        com = np.asarray(frame.placement.actInv(c_joint))
+        frame = robot.model.frames[robot.tcp_frame_id]
+        com = np.asarray(frame.placement.actInv(sol[1:4] / mass))
+    used, residual = system.used, system.residual
     fitted = np.zeros_like(residual)
     fitted[used] = A @ sol
     err = np.where(used, residual - fitted, 0.0)
     rms = np.sqrt((err**2).sum(axis=0) / np.maximum(used.sum(axis=0), 1))
-    g = float(np.linalg.norm(model.gravity.linear))
+    g = float(np.linalg.norm(robot.model.gravity.linear))
     return PayloadEstimate(method=method, mass_kg=mass, mass_std_kg=mass_std,
                            weight_n=mass * g, com_tcp=com,
                            samples=int(used.sum()), residual_rms=rms)
+
+
+class _PayloadSystem(NamedTuple):
+    """The payload's linear system: regressor (samples, n, columns), residual torque of the
+    unloaded model (samples, n), which entries are used, which columns are fitted (the last
+    link's m, m·c, inertia, and re-fitted Coulomb terms)."""
+
+    regressor: Array
+    residual: Array
+    used: NDArray[np.bool_]
+    columns: NDArray[np.int64]
+
+
+def _motion_system(data: ProcessedData, robot: Robot, params: DriveModelParameters,
+                   refit_friction: bool) -> _PayloadSystem:
+    """In motion: the last link's 10 parameters (and, refitted, each joint's Coulomb term) from
+    the moving samples."""
+    n, model = robot.n, robot.model
+    last = n  # joint index of the last link in the Pinocchio model
+    K = link_regressor_batch(model, data.q, data.qd, data.qdd)[:, :, 10 * (last - 1):]
+    residual = data.torque - model_torque(robot, params, data.q, data.qd, data.qdd)
+    cols = np.arange(10 + n)
+    if refit_friction:
+        # gear friction grows with the transmitted load: re-fit each joint's Coulomb term
+        coulomb = np.zeros((data.samples, n, n))
+        coulomb[:, np.arange(n), np.arange(n)] = np.sign(data.qd)
+        K = np.concatenate([K, coulomb], axis=2)
+    else:
+        cols = np.arange(10)
+    return _PayloadSystem(K, residual, data.moving, cols)
+
+
+def _static_system(data: ProcessedData, robot: Robot, params: DriveModelParameters,
+                   static_velocity: float, settle_s: float) -> _PayloadSystem:
+    """At rest (after ``settle_s`` of it): the last link's m and m·c from gravity alone."""
+    still = np.all(np.abs(data.qd) < static_velocity, axis=1)
+    # keep only samples preceded by settle_s of rest: samples since the last moving one
+    idx = np.arange(still.size)
+    last_moving = np.maximum.accumulate(np.where(still, -1, idx))
+    still &= idx - last_moving >= round(settle_s * data.rate_hz)
+    if still.sum() < 10:
+        raise DataError("too few static samples", source=data.source, field="q̇",
+                        value=int(still.sum()),
+                        expected=f">= 10 samples with all |q̇| < {static_velocity} rad/s")
+    # at rest: no friction and no inertial terms; the model's static torque is gravity
+    zero = 0 * data.qd[still]
+    K = link_regressor_batch(robot.model, data.q[still], zero, zero)[:, :, 10 * (robot.n - 1):]
+    static_model = model_torque(robot, _without_friction(params), data.q[still], zero, zero)
+    residual = data.torque[still] - static_model
+    return _PayloadSystem(K, residual, np.ones(residual.shape, dtype=bool), np.arange(4))
+
+
+def _fit(A: Array, b: Array, norms: Array, used: NDArray[np.bool_]
+         ) -> tuple[Array, NDArray[np.bool_], float]:
+    """Least squares on the columns scaled to unit norm (columns of no norm dropped): the
+    solution, the kept columns and the mass's standard error.
+
+    For residuals correlated in time the standard error is that of independent samples times
+    the largest (1 + ρ)/(1 − ρ) over the joints (ρ the lag-1 autocorrelation of a joint's
+    residual); column 0 (the mass) is always kept (its norm is > 0)."""
+    keep = norms > 1e-9 * norms.max()
+    sol = np.zeros(A.shape[1])
+    An = A[:, keep] / norms[keep]
+    fit, *_ = np.linalg.lstsq(An, b, rcond=None)
+    sol[keep] = fit / norms[keep]
+    r = b - An @ fit
+    dof = max(b.size - An.shape[1], 1)
+    sigma2 = float(np.sum(r**2)) / dof * _correlation_factor(r, used)
+    mass_std = float(np.sqrt(sigma2 * np.linalg.pinv(An.T @ An)[0, 0])) / norms[0]
+    return sol, keep, mass_std
 
 
 def _correlation_factor(residual: Array, used: NDArray[np.bool_]) -> float:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import StribeckParameters, stribeck_shapes
+from leadthrough.dynamics.friction import StribeckParameters, stribeck_decay, stribeck_shapes
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent_convex import (
@@ -82,8 +82,8 @@ class _Joint:
 
     def stribeck(self, qd_sm: Array, qd_sg: Array) -> tuple[Array, Array]:
         """Columns exp(−(R q̇/q̇sm)²)·sgn and exp(−(q̇/q̇sg)²)·sgn, shapes (G, N)."""
-        gm = np.exp(-np.square(self.R * self.qd[None, :] / np.atleast_1d(qd_sm)[:, None]))
-        gg = np.exp(-np.square(self.qd[None, :] / np.atleast_1d(qd_sg)[:, None]))
+        gm = stribeck_decay(self.R * self.qd[None, :] / np.atleast_1d(qd_sm)[:, None])
+        gg = stribeck_decay(self.qd[None, :] / np.atleast_1d(qd_sg)[:, None])
         return gm * self.s, gg * self.s
 
     def columns(self, qd_sm: float, qd_sg: float) -> Array:

@@ -182,6 +182,23 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise DataError(f"not valid TOML: {e}", source=path) from e
+    meta, model = _read_meta(path, doc, robot)
+    joints = _JointTables(path, robot, model, _table(path, doc, "joints"),
+                          _table(path, doc, "links"))
+    noise_mean, noise_std = _read_noise(path, _table(path, doc, "noise"), robot.n)
+    seed = meta.get("sim_seed")
+    if seed is not None and not is_sim_seed(seed):
+        raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,
+                        expected="an integer >= 0 (the simulated robot instance)")
+    return ParamsFile(robot=robot.name, method=str(meta.get("method", "")),
+                      params=joints.parameters(), noise_mean=noise_mean, noise_std=noise_std,
+                      J=_nonnegative(path, "meta.J", meta.get("J")), path=path,
+                      sim_seed=seed)
+
+
+def _read_meta(path: Path, doc: dict[str, Any], robot: Robot
+               ) -> tuple[dict[str, Any], FrictionModel]:
+    """The ``[meta]`` table, checked to belong to ``robot``, and its friction model."""
     meta = _table(path, doc, "meta")
     if meta.get("robot") != robot.name:
         raise DataError("params file belongs to another robot", source=path, field="meta.robot",
@@ -193,67 +210,11 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         raise DataError("unknown friction model", source=path, field="meta.friction_model",
                         value=meta.get("friction_model"),
                         expected=f"one of {[m.value for m in FrictionModel]}") from e
-    joints = _table(path, doc, "joints")
-    links = _table(path, doc, "links")
-    n = robot.n
-    keys = _FRICTION_KEYS[model]
-    fr = {key: np.zeros(n) for key in (*keys, "rotor_inertia")}
-    offset = np.zeros(n)
-    presliding = np.zeros(n)
-    has_offset = False
-    has_presliding = 0
-    phi = np.zeros(10 * n)
-    for table, name in ((joints, "joints"), (links, "links")):
-        extra = sorted(set(table) - set(robot.joint_names))
-        if extra:
-            raise DataError("not a joint of the robot", source=path, field=f"{name}.{extra[0]}",
-                            expected=f"tables for the joints {list(robot.joint_names)} only")
-    joint_keys = {*fr, "offset", "presliding"}
-    for k, jn in enumerate(robot.joint_names):
-        jt = joints.get(jn)
-        lt = links.get(jn)
-        if not isinstance(jt, dict) or not isinstance(lt, dict):
-            raise DataError("missing joint", source=path, field=f"joints.{jn} / links.{jn}",
-                            expected="a table per joint of the robot")
-        for table, name, allowed in ((jt, "joints", joint_keys),
-                                     (lt, "links", set(LINK_PARAMETER_NAMES))):
-            unknown = sorted(set(table) - allowed)
-            if unknown:
-                raise DataError("unknown field", source=path, field=f"{name}.{jn}.{unknown[0]}",
-                                expected=f"one of {sorted(allowed)}")
-        if "offset" in jt:
-            offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
-            has_offset = True
-        if "presliding" in jt:
-            presliding[k] = _number(path, f"joints.{jn}.presliding", jt["presliding"])
-            if not 0 < presliding[k] <= MAX_PRESLIDING_RAD:
-                raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
-                                value=presliding[k],
-                                expected=f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad")
-            has_presliding += 1
-        for key in fr:
-            if key not in jt:
-                raise DataError("missing", source=path, field=f"joints.{jn}.{key}",
-                                expected="the field to be present")
-            fr[key][k] = _number(path, f"joints.{jn}.{key}", jt[key])
-            if model is FrictionModel.STRIBECK and key != "rotor_inertia":
-                # the paper's bounds (friction > 0, met by the solvers to their tolerance);
-                # the velocities divide
-                strict = key in ("qd_sm", "qd_sg")
-                if fr[key][k] < -FRICTION_TOLERANCE or (strict and fr[key][k] <= 0):
-                    raise DataError("out of range", source=path, field=f"joints.{jn}.{key}",
-                                    value=fr[key][k],
-                                    expected="> 0 [rad/s]" if strict else ">= 0 [N·m, N·m·s]")
-        for i, p in enumerate(LINK_PARAMETER_NAMES):
-            if p not in lt:
-                raise DataError("missing", source=path, field=f"links.{jn}.{p}",
-                                expected="the field to be present")
-            phi[10 * k + i] = _number(path, f"links.{jn}.{p}", lt[p])
-    if has_presliding not in (0, n):
-        raise DataError("presliding given for some joints only", source=path,
-                        field="joints.*.presliding", value=has_presliding,
-                        expected=f"all {n} joints or none")
-    noise = _table(path, doc, "noise")
+    return meta, model
+
+
+def _read_noise(path: Path, noise: dict[str, Any], n: int) -> tuple[Array, Array]:
+    """τ̄_ω and σ per joint from the ``[noise]`` table (σ > 0)."""
     arrays = {}
     for key in ("mean", "std"):
         v = noise.get(key)
@@ -265,26 +226,96 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         j = int(np.argmax(arrays["std"] <= 0))
         raise DataError("out of range", source=path, field=f"noise.std[{j}]",
                         value=float(arrays["std"][j]), expected="> 0 N·m (the residual's σ)")
-    if model is FrictionModel.STRIBECK:
-        params = DriveModelParameters(
-            phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
-            stribeck=StribeckParameters(**{key: fr[key] for key in keys}),
-            offset=offset if has_offset else np.zeros(0),
-            presliding=presliding if has_presliding else np.zeros(0))
-    else:
-        params = DriveModelParameters(
-            phi=phi, friction_model=model, rotor_inertia=fr["rotor_inertia"],
-            coulomb=fr["coulomb"], viscous=fr["viscous"],
-            cbrt=fr.get("cbrt", np.zeros(n)), offset=offset if has_offset else np.zeros(0),
-            presliding=presliding if has_presliding else np.zeros(0))
-    seed = meta.get("sim_seed")
-    if seed is not None and not is_sim_seed(seed):
-        raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,
-                        expected="an integer >= 0 (the simulated robot instance)")
-    return ParamsFile(robot=robot.name, method=str(meta.get("method", "")), params=params,
-                      noise_mean=arrays["mean"], noise_std=arrays["std"],
-                      J=_nonnegative(path, "meta.J", meta.get("J")), path=path,
-                      sim_seed=seed)
+    return arrays["mean"], arrays["std"]
+
+
+class _JointTables:
+    """The ``[joints.*]`` and ``[links.*]`` tables of a params file, read and checked."""
+
+    def __init__(self, path: Path, robot: Robot, model: FrictionModel, joints: dict[str, Any],
+                 links: dict[str, Any]) -> None:
+        self.path, self.model, n = path, model, robot.n
+        self.keys = _FRICTION_KEYS[model]
+        self.drive = {key: np.zeros(n) for key in (*self.keys, "rotor_inertia")}
+        self.offset, self.presliding = np.zeros(n), np.zeros(n)
+        self.has_offset, self.presliding_joints = False, 0
+        self.phi = np.zeros(10 * n)
+        for table, name in ((joints, "joints"), (links, "links")):
+            extra = sorted(set(table) - set(robot.joint_names))
+            if extra:
+                raise DataError("not a joint of the robot", source=path,
+                                field=f"{name}.{extra[0]}",
+                                expected=f"tables for the joints {list(robot.joint_names)} only")
+        for k, jn in enumerate(robot.joint_names):
+            jt, lt = joints.get(jn), links.get(jn)
+            if not isinstance(jt, dict) or not isinstance(lt, dict):
+                raise DataError("missing joint", source=path, field=f"joints.{jn} / links.{jn}",
+                                expected="a table per joint of the robot")
+            self._read_joint(k, jn, jt)
+            self._read_link(k, jn, lt)
+        if self.presliding_joints not in (0, n):
+            raise DataError("presliding given for some joints only", source=path,
+                            field="joints.*.presliding", value=self.presliding_joints,
+                            expected=f"all {n} joints or none")
+
+    def _read_joint(self, k: int, jn: str, jt: dict[str, Any]) -> None:
+        path = self.path
+        _only(path, f"joints.{jn}", jt, {*self.drive, "offset", "presliding"})
+        if "offset" in jt:
+            self.offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
+            self.has_offset = True
+        if "presliding" in jt:
+            z0 = self.presliding[k] = _number(path, f"joints.{jn}.presliding", jt["presliding"])
+            if not 0 < z0 <= MAX_PRESLIDING_RAD:
+                raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
+                                value=z0, expected=f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad")
+            self.presliding_joints += 1
+        for key, values in self.drive.items():
+            values[k] = _number(path, f"joints.{jn}.{key}", _required(path, f"joints.{jn}", jt,
+                                                                       key))
+            if self.model is FrictionModel.STRIBECK and key != "rotor_inertia":
+                # the paper's bounds (friction > 0, met by the solvers to their tolerance);
+                # the velocities divide
+                strict = key in ("qd_sm", "qd_sg")
+                if values[k] < -FRICTION_TOLERANCE or (strict and values[k] <= 0):
+                    raise DataError("out of range", source=path, field=f"joints.{jn}.{key}",
+                                    value=values[k],
+                                    expected="> 0 [rad/s]" if strict else ">= 0 [N·m, N·m·s]")
+
+    def _read_link(self, k: int, jn: str, lt: dict[str, Any]) -> None:
+        _only(self.path, f"links.{jn}", lt, set(LINK_PARAMETER_NAMES))
+        for i, p in enumerate(LINK_PARAMETER_NAMES):
+            self.phi[10 * k + i] = _number(self.path, f"links.{jn}.{p}",
+                                           _required(self.path, f"links.{jn}", lt, p))
+
+    def parameters(self) -> DriveModelParameters:
+        """The model parameters the tables hold."""
+        fr, n = self.drive, self.phi.size // 10
+        offset = self.offset if self.has_offset else np.zeros(0)
+        presliding = self.presliding if self.presliding_joints else np.zeros(0)
+        if self.model is FrictionModel.STRIBECK:
+            return DriveModelParameters(
+                phi=self.phi, friction_model=self.model, rotor_inertia=fr["rotor_inertia"],
+                stribeck=StribeckParameters(**{key: fr[key] for key in self.keys}),
+                offset=offset, presliding=presliding)
+        return DriveModelParameters(
+            phi=self.phi, friction_model=self.model, rotor_inertia=fr["rotor_inertia"],
+            coulomb=fr["coulomb"], viscous=fr["viscous"], cbrt=fr.get("cbrt", np.zeros(n)),
+            offset=offset, presliding=presliding)
+
+
+def _only(path: Path, where: str, table: dict[str, Any], allowed: set[str]) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise DataError("unknown field", source=path, field=f"{where}.{unknown[0]}",
+                        expected=f"one of {sorted(allowed)}")
+
+
+def _required(path: Path, where: str, table: dict[str, Any], key: str) -> Any:
+    if key not in table:
+        raise DataError("missing", source=path, field=f"{where}.{key}",
+                        expected="the field to be present")
+    return table[key]
 
 
 def _nonnegative(path: Path, field: str, value: object) -> float:

@@ -13,7 +13,7 @@ such moves works). Per joint:
 2. **Model.** The friction at rest is a Dahl state: F = g·s, with s ∈ [−1, 1] driven by the
    joint's displacement, ds = (sgn(dq) − s)·|dq|/z₀ (:func:`dahl_states`, the estimator's
    friction at rest,
-   :func:`leadthrough.estimation.presliding_kernels.presliding_friction_step`). The encoder
+   :func:`leadthrough.dynamics.presliding.presliding_friction_step`). The encoder
    goes through a play operator of ``play_counts`` counts first, as in the estimator:
    quantisation chatter at rest would otherwise wear the state down.
 3. **Fit.** ΔF = g·Δs(z₀) over all pairs: for each z₀ of a log grid, g is linear least squares
@@ -38,8 +38,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
+from leadthrough.dynamics.presliding import dahl_step, play_step
 from leadthrough.errors import DataError, check_fields
-from leadthrough.estimation import presliding_kernels
 from leadthrough.robot.description import Robot
 
 __all__ = ["PreslidingAnalysisConfig", "PreslidingFit", "RestPairs", "dahl_states",
@@ -136,8 +136,8 @@ def dahl_states(q: Array, half_width: Array, presliding: Array) -> Array:
     """The normalised Dahl friction state s of every sample (F = g·s), from rest at s = 0.
 
     The estimator's friction at rest, replayed: the same play operator
-    (:func:`~leadthrough.estimation.presliding_kernels.play_step`) and step
-    (:func:`~leadthrough.estimation.presliding_kernels.dahl_step`).
+    (:func:`~leadthrough.dynamics.presliding.play_step`) and step
+    (:func:`~leadthrough.dynamics.presliding.dahl_step`).
 
     Args:
         q: Joint positions [rad], shape (N, n).
@@ -153,10 +153,10 @@ def dahl_states(q: Array, half_width: Array, presliding: Array) -> Array:
     increment = np.zeros(n)
     s = np.zeros(n)
     for i in range(N):
-        presliding_kernels.play_step(q[i], half_width, play, increment)
+        play_step(q[i], half_width, play, increment)
         for j in range(n):
             if increment[j] != 0.0:
-                s[j] = presliding_kernels.dahl_step(s[j], increment[j], 1.0, presliding[j])
+                s[j] = dahl_step(s[j], increment[j], 1.0, presliding[j])
         out[i] = s
     return out
 

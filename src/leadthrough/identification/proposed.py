@@ -30,7 +30,7 @@ import numpy as np
 import scipy.optimize
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import StribeckParameters
+from leadthrough.dynamics.friction import StribeckParameters, stribeck_decay
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
 from leadthrough.errors import check_fields
 from leadthrough.identification.observations import Observations
@@ -245,8 +245,8 @@ class _Problem:
         tau = np.einsum("knr,pr->pkn", self.Kb, beta, optimize=True)
         fr = self.friction(X)
         s, qd = self.sgn, self.qd
-        gm = np.exp(-np.square(self.R * qd / fr["qd_sm"][:, None, :])) * s
-        gg = np.exp(-np.square(qd / fr["qd_sg"][:, None, :])) * s
+        gm = stribeck_decay(self.R * qd / fr["qd_sm"][:, None, :]) * s
+        gg = stribeck_decay(qd / fr["qd_sg"][:, None, :]) * s
         tau += (fr["f1"][:, None, :] * s + fr["f2"][:, None, :] * gm
                 + fr["f3"][:, None, :] * gg + fr["f4"][:, None, :] * qd
                 + fr["M"][:, None, :] * self.qdd)

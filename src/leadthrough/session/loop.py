@@ -11,8 +11,10 @@ Per servo period (``driver.dt``, 1 ms):
    turns it into 1 ms position + velocity commands;
 4. the row is recorded (preallocated arrays) and the compute time of steps 2–3 is measured.
 
-The enabling input is held only once the estimator reports OK (after its warm-up and tare):
-guiding with an estimate that has not settled would start the robot on filter transients.
+Before the first period the compiled code of all three parts is loaded (``warm_up``), so that
+no cycle compiles. The enabling input is held only once the estimator reports OK (after its
+warm-up and tare): guiding with an estimate that has not settled would start the robot on filter
+transients.
 
 The loop itself reads the clock, to pace (``paced=True``) and to measure; the algorithms it
 drives never do. It never raises once running: a driver or controller problem shows as a
@@ -37,14 +39,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from leadthrough.control.guiding import GuidingController, GuidingInput
+from leadthrough.control.guiding import GuidingController
 from leadthrough.control.interpolation import JointInterpolator
 from leadthrough.control.safety import Event
-from leadthrough.drivers.protocol import Driver
+from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
 from leadthrough.errors import ControlError
-from leadthrough.estimation.estimator import EstimatorInput, ExternalForceEstimator, Status
-from leadthrough.session.record import SessionEvent, SessionLog
-from leadthrough.sim.operator import Mark
+from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
+from leadthrough.session.record import Mark, SessionEvent, SessionLog
 
 __all__ = ["LoopResult", "run_session"]
 
@@ -91,8 +92,8 @@ def run_session(
         duration_s: Session length [s].
         deadman: Enabling input as a function of time (default: held throughout).
         marks: Operator "mark point" presses, recorded as events.
-        applied_wrench: Simulator truth: the wrench applied this period (base frame), recorded
-            for plots; None for a real robot.
+        applied_wrench: A simulator's truth: the wrench applied this period (base frame),
+            recorded for comparison; None for a real robot.
         paced: Pace the loop to the wall clock (real time) instead of running flat out.
         settings: Recorded in the session file.
 
@@ -103,6 +104,41 @@ def run_session(
         ControlError: Mismatched periods or frames (checked before anything runs), or no
             feedback on the first read.
     """
+    every = _check_setup(driver, estimator, controller, duration_s)
+    dt = driver.dt
+    steps = round(duration_s / dt)
+    loop = _Loop(driver, estimator, controller, interpolator, every, deadman, applied_wrench)
+    rec = _Buffers(steps, driver.n, applied_wrench is not None)
+    t_start = loop.start()
+    cycle_us = np.zeros(steps // every + 1)
+    servo_us = np.zeros(steps)
+    gc_was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        wall0 = time.perf_counter()
+        for i in range(steps):
+            deadline = wall0 + (i + 1) * dt if paced else None
+            t_loop = t_start + (i + 1) * dt   # the loop's clock: advances on stale feedback too
+            servo_us[i] = loop.period(i, t_loop, deadline)
+            loop.store(rec, i, t_loop)
+    finally:
+        if gc_was_enabled:
+            gc.enable()
+    is_cycle = np.arange(steps) % every == 0
+    cycle_us[:int(is_cycle.sum())] = servo_us[is_cycle]
+    events = [_transition(e) for e in controller.events]
+    events += [SessionEvent(t=m.t, kind="mark", label=m.label) for m in marks
+               if m.t <= rec.time[-1]]
+    events.sort(key=lambda e: e.t)
+    log = rec.to_log(controller.robot.name, events, settings or {})
+    return LoopResult(log=log, cycle_us=cycle_us[:int(is_cycle.sum())],
+                      servo_us=servo_us[~is_cycle])
+
+
+def _check_setup(driver: Driver, estimator: ExternalForceEstimator,
+                 controller: GuidingController, duration_s: float) -> int:
+    """The loop's settings checked against each other; returns the servo periods per
+    controller cycle."""
     dt = driver.dt
     every = round(controller.config.dt / dt)
     if every < 1 or abs(every * dt - controller.config.dt) > 1e-9:
@@ -116,78 +152,94 @@ def run_session(
     if not (np.isfinite(duration_s) and duration_s > 0):
         raise ControlError("must be > 0", field="duration_s", value=duration_s,
                            expected="> 0 s")
-    n, steps = driver.n, round(duration_s / dt)
-    settle_s, cycle_s = controller.config.settle_s, controller.config.dt
-    rezero_samples = round(controller.config.rezero_s / dt)
-    rec = _Buffers(steps, n, applied_wrench is not None)
-    fb, cmd = driver.make_feedback(), driver.make_command()
-    e_out, c_out = estimator.make_output(), controller.make_output()
-    # the inputs share the arrays they are read from (the driver fills fb in place, cmd holds
-    # the command sent this period until the interpolator writes the next one at its end, and
-    # neither the estimator nor the controller writes its inputs): no copies in the cycle
-    e_in = EstimatorInput(t=0.0, q=fb.q, current=fb.current, qd_cmd=cmd.qd)
-    c_in = GuidingInput(t=0.0, sequence=0, q=fb.q, current=fb.current, wrench_base=e_out.wrench)
-    driver.step()
-    if not driver.read(fb):
-        raise ControlError("no feedback on the first read (the robot must report a position "
-                           "to start from)", field="driver", value=type(driver).__name__,
-                           expected="a fresh sample on the first read")
-    q0 = fb.q.copy()
-    estimator.reset(q0)
-    controller.reset(q0, fb.t)
-    interpolator.reset(q0)
-    interpolator.update(cmd)
-    cycle_us = np.zeros(steps // every + 1)
-    servo_us = np.zeros(steps)
-    k_cycle = 0
-    t_start = fb.t
-    gc_was_enabled = gc.isenabled()
-    gc.disable()
-    try:
-        wall0 = time.perf_counter()
-        for i in range(steps):
-            driver.write(cmd)
-            if paced:
-                _sleep_until(wall0 + (i + 1) * dt)
-            driver.step()
-            fresh = driver.read(fb)
-            # the loop's clock: advances even if the feedback is stale
-            t_loop = t_start + (i + 1) * dt
-            t0 = time.perf_counter()
-            if fresh:
-                e_in.t = fb.t
-                estimator.update(e_in, e_out)
-            is_cycle = i % every == 0
-            if is_cycle:
-                c_in.t = t_loop
-                c_in.sequence = fb.sequence
-                held = True if deadman is None else deadman(t_loop)
-                c_in.deadman = held and e_out.status == Status.OK
-                c_in.estimator_status = int(e_out.status)
-                controller.update(c_in, c_out)
-                if rezero_samples:
-                    _zero_velocity_update(estimator, c_out.rest_s, settle_s, cycle_s,
-                                          rezero_samples)
-                interpolator.set_target(c_out.q, c_out.qd)
-            interpolator.update(cmd)
-            elapsed = (time.perf_counter() - t0) * 1e6
-            if is_cycle:
-                cycle_us[k_cycle] = elapsed
-                k_cycle += 1
-            servo_us[i] = elapsed
-            rec.store(i, t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
-                      c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
-                      int(c_out.fault), applied_wrench() if applied_wrench is not None else None)
-    finally:
-        if gc_was_enabled:
-            gc.enable()
-    events = [_transition(e) for e in controller.events]
-    events += [SessionEvent(t=m.t, kind="mark", label=m.label) for m in marks
-               if m.t <= rec.time[-1]]
-    events.sort(key=lambda e: e.t)
-    log = rec.to_log(controller.robot.name, events, settings or {})
-    return LoopResult(log=log, cycle_us=cycle_us[:k_cycle],
-                      servo_us=servo_us[np.arange(steps) % every != 0])
+    return every
+
+
+class _Loop:
+    """One servo period of the loop at a time (preallocated inputs and outputs)."""
+
+    def __init__(self, driver: Driver, estimator: ExternalForceEstimator,
+                 controller: GuidingController, interpolator: JointInterpolator, every: int,
+                 deadman: Callable[[float], bool] | None,
+                 applied_wrench: Callable[[], Array] | None) -> None:
+        self.driver, self.estimator, self.controller = driver, estimator, controller
+        self.interpolator, self.every = interpolator, every
+        self.deadman, self.applied_wrench = deadman, applied_wrench
+        self.e_in, self.e_out = estimator.make_input(), estimator.make_output()
+        # the feedback's arrays are the estimator input's and the command's velocity is its
+        # qd_cmd (the command sent this period until the interpolator writes the next at its
+        # end): the driver fills what the estimator reads, with no copies in the period
+        self.e_in.q[:] = self.e_in.current[:] = np.nan
+        self.fb = DriverFeedback(t=float("nan"), q=self.e_in.q, current=self.e_in.current,
+                                 sequence=-1)
+        self.cmd = JointCommand(q=np.zeros(driver.n), qd=self.e_in.qd_cmd)
+        self.c_in, self.c_out = controller.make_input(), controller.make_output()
+        cfg = controller.config
+        self.settle_s, self.cycle_s = cfg.settle_s, cfg.dt
+        self.rezero_samples = round(cfg.rezero_s / driver.dt)
+
+    def start(self) -> float:
+        """The first sample: every part reset there, their compiled code loaded; returns the
+        sample's time [s]."""
+        driver, fb = self.driver, self.fb
+        driver.step()
+        if not driver.read(fb):
+            raise ControlError("no feedback on the first read (the robot must report a "
+                               "position to start from)", field="driver",
+                               value=type(driver).__name__,
+                               expected="a fresh sample on the first read")
+        q0 = fb.q.copy()
+        self.estimator.reset(q0)
+        self.controller.reset(q0, fb.t)
+        self.interpolator.reset(q0)
+        for part in (self.estimator, self.controller, self.interpolator):
+            part.warm_up()
+        self.interpolator.update(self.cmd)
+        return fb.t
+
+    def period(self, i: int, t_loop: float, deadline: float | None) -> float:
+        """Servo period ``i``: send the command, step, read, estimate, every ``every``
+        periods the controller cycle, interpolate. Returns the compute time [µs]."""
+        driver, fb, cmd = self.driver, self.fb, self.cmd
+        driver.write(cmd)
+        if deadline is not None:
+            _sleep_until(deadline)
+        driver.step()
+        fresh = driver.read(fb)
+        t0 = time.perf_counter()
+        if fresh:
+            self.e_in.t = fb.t
+            self.estimator.update(self.e_in, self.e_out)
+        if i % self.every == 0:
+            self._cycle(t_loop)
+        self.interpolator.update(cmd)
+        return (time.perf_counter() - t0) * 1e6
+
+    def _cycle(self, t_loop: float) -> None:
+        """The controller cycle and its setpoint for the interpolator."""
+        c_in, c_out, e_out, fb = self.c_in, self.c_out, self.e_out, self.fb
+        c_in.t = t_loop
+        c_in.sequence = fb.sequence
+        c_in.q[:] = fb.q
+        c_in.current[:] = fb.current
+        c_in.wrench_base[:] = e_out.wrench
+        status = e_out.status
+        held = True if self.deadman is None else self.deadman(t_loop)
+        c_in.deadman = held and status == EstimatorStatus.OK
+        c_in.estimator_status = int(status)
+        self.controller.update(c_in, c_out)
+        if self.rezero_samples:
+            _zero_velocity_update(self.estimator, c_out.rest_s, self.settle_s, self.cycle_s,
+                                  self.rezero_samples)
+        self.interpolator.set_target(c_out.q, c_out.qd)
+
+    def store(self, rec: _Buffers, i: int, t_loop: float) -> None:
+        """Record servo period ``i``."""
+        fb, cmd, e_out, c_out = self.fb, self.cmd, self.e_out, self.c_out
+        rec.store(i, t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
+                  c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
+                  int(c_out.fault),
+                  self.applied_wrench() if self.applied_wrench is not None else None)
 
 
 def _zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,

@@ -27,13 +27,26 @@ from numpy.typing import NDArray
 from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write, require_file
 
-__all__ = ["SessionEvent", "SessionLog", "load_session", "save_session"]
+__all__ = ["Mark", "SessionEvent", "SessionLog", "load_session", "save_session"]
 
 Array = NDArray[np.float64]
 _WRENCH = ("fx", "fy", "fz", "tx", "ty", "tz")
 _TWIST = ("vx", "vy", "vz", "wx", "wy", "wz")
 _META_KEY = b"leadthrough.session"
 FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Mark:
+    """The operator presses the "mark point" button.
+
+    Attributes:
+        t: Time of the press [s] (the session's clock).
+        label: Name of the marked point, e.g. ``"P1"``.
+    """
+
+    t: float
+    label: str
 
 
 @dataclass(frozen=True)

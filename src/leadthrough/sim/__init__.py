@@ -1,5 +1,7 @@
-"""The simulated robot (MuJoCo plant, rich drive train, position servo, noisy sensors)."""
+"""The simulated robot (MuJoCo plant, rich drive train, position servo, noisy sensors), its
+driver with fault injection, scripted operators, and guiding sessions on it."""
 
+from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, SimDriver
 from leadthrough.sim.drivetrain import DriveTrainConfig, DriveTrainTruth
 from leadthrough.sim.mujoco_model import Payload, build_mujoco_model
 from leadthrough.sim.operator import ConstantWrench, Mark, NoOperator, Operator, ScriptedOperator
@@ -7,6 +9,7 @@ from leadthrough.sim.operator_scripts import OPERATOR_NAMES, make_operator
 from leadthrough.sim.robot import Feedback, SimConfig, SimRobot, SimTruth
 from leadthrough.sim.run import SimLog, SimTruthLog, hold, run_trajectory
 from leadthrough.sim.sensors import SensorConfig
+from leadthrough.sim.session import SimSession, SimSessionConfig, replay_session, run_sim_session
 
 __all__ = [
     "OPERATOR_NAMES",
@@ -14,6 +17,8 @@ __all__ = [
     "DriveTrainConfig",
     "DriveTrainTruth",
     "Feedback",
+    "InjectedFault",
+    "InjectedFaultKind",
     "Mark",
     "NoOperator",
     "Operator",
@@ -21,12 +26,17 @@ __all__ = [
     "ScriptedOperator",
     "SensorConfig",
     "SimConfig",
+    "SimDriver",
     "SimLog",
     "SimRobot",
+    "SimSession",
+    "SimSessionConfig",
     "SimTruth",
     "SimTruthLog",
     "build_mujoco_model",
     "hold",
     "make_operator",
+    "replay_session",
+    "run_sim_session",
     "run_trajectory",
 ]

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leadthrough.errors import SimulationError
+from leadthrough.session.record import Mark
 
 __all__ = ["ConstantWrench", "Mark", "NoOperator", "Operator", "ScriptedOperator", "vector3"]
 
@@ -36,19 +37,6 @@ class Operator(Protocol):
             tcp_position_base: TCP position in the base frame [m], shape (3,).
         """
         ...
-
-
-@dataclass(frozen=True)
-class Mark:
-    """The operator presses the "mark point" button.
-
-    Attributes:
-        t: Time of the press [s] (simulation time, the clock of :meth:`Operator.wrench`).
-        label: Name of the marked point, e.g. ``"P1"``.
-    """
-
-    t: float
-    label: str
 
 
 @runtime_checkable

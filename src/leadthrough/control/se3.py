@@ -1,4 +1,4 @@
-"""Rigid-motion operations of the guiding cycle, compiled (Numba, ``nopython``, cached on disk).
+"""Rigid motions of the guiding cycle, compiled (Numba, ``nopython``, cached on disk).
 
 The guiding cycle works on poses given as a rotation R, shape (3, 3), and a position p [m],
 shape (3,) (no ``pin.SE3`` objects: building one costs more than the arithmetic). These are the
@@ -11,6 +11,7 @@ turn too.
   unit time: the IK's error and residual;
 * :func:`integrate_tool`: T·exp6(ν·dt), a twist in tool axes held for dt;
 * :func:`integrate_base`: a twist in base axes at the TCP held for dt: p + v·dt, exp3(ω·dt)·R;
+* :func:`rotate_to_tool` / :func:`rotate_to_base`: a twist or wrench between base and tool axes;
 * :func:`copy_pose`.
 """
 
@@ -22,7 +23,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["copy_pose", "integrate_base", "integrate_tool", "log6_between"]
+__all__ = ["copy_pose", "integrate_base", "integrate_tool", "log6_between", "rotate_to_base",
+           "rotate_to_tool"]
 
 Array = NDArray[np.float64]
 
@@ -204,3 +206,27 @@ def copy_pose(rotation: Array, position: Array, rotation_out: Array, position_ou
         for c in range(3):
             rotation_out[r, c] = rotation[r, c]
         position_out[r] = position[r]
+
+
+@njit(cache=True, nogil=True)
+def rotate_to_tool(rotation: Array, base: Array, tool: Array) -> None:
+    """A twist or wrench from base axes to tool axes: Rᵀ applied to each half (may not alias).
+
+    Args:
+        rotation: R, tool axes in the base frame, shape (3, 3).
+        base: 6-vector in base axes.
+        tool: Output 6-vector in tool axes.
+    """
+    for i in (0, 3):
+        for r in range(3):
+            tool[i + r] = (rotation[0, r] * base[i] + rotation[1, r] * base[i + 1]
+                           + rotation[2, r] * base[i + 2])
+
+
+@njit(cache=True, nogil=True)
+def rotate_to_base(rotation: Array, tool: Array, base: Array) -> None:
+    """A twist or wrench from tool axes to base axes: R applied to each half (may not alias)."""
+    for i in (0, 3):
+        for r in range(3):
+            base[i + r] = (rotation[r, 0] * tool[i] + rotation[r, 1] * tool[i + 1]
+                           + rotation[r, 2] * tool[i + 2])

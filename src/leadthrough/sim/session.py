@@ -1,5 +1,6 @@
-"""A guiding session on the simulated robot: simulator + scripted operator + estimator +
-controller, wired together and run by :func:`~leadthrough.session.loop.run_session`.
+"""A guiding session on the simulated robot: simulator + scripted operator, driving the loop that
+a real robot runs (:func:`~leadthrough.session.loop_config.build_loop`,
+:func:`~leadthrough.session.loop.run_session`).
 
 The parameters come from calibration (a params file), never from the simulator's truth: the
 simulated robot is a different, richer plant than the identified model.
@@ -7,31 +8,30 @@ simulated robot is a different, richer plant than the identified model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from leadthrough.control.guiding import GuidingConfig, GuidingController
-from leadthrough.control.interpolation import HermiteInterpolator
+from leadthrough.control.guiding import GuidingConfig
 from leadthrough.data.recording import is_sim_seed
 from leadthrough.drivers.protocol import Driver
 from leadthrough.drivers.replay import FeedbackTrace, RecordingDriver, ReplayDriver
-from leadthrough.drivers.sim_driver import Fault, SimDriver
 from leadthrough.errors import ControlError, DataError, check_fields
-from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
+from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import LoopResult, run_session
+from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import SessionSummary, summarize
+from leadthrough.sim.driver import InjectedFault, SimDriver
 from leadthrough.sim.operator_scripts import make_operator
 from leadthrough.sim.robot import SimConfig, SimRobot
 
-__all__ = ["DEFAULT_SIM_SEED", "PUSH_MASS_KG", "LoopParts", "SimSession", "SimSessionConfig",
-           "build_loop", "guide_start_pose", "light_guiding", "replay_session",
-           "run_sim_session", "sim_robot_seed"]
+__all__ = ["DEFAULT_SIM_SEED", "PUSH_MASS_KG", "SimSession", "SimSessionConfig",
+           "light_guiding", "replay_session", "run_sim_session", "sim_robot_seed"]
 
 #: Virtual mass [kg] of the push demonstrations: 40 N for 3 s then reaches the 0.2 m/s cap
 #: ((40 − 15) N / 100 kg = 0.25 m/s²). With Table IV's 1000 kg it reaches 0.075 m/s.
@@ -47,7 +47,6 @@ class SimSessionConfig:
     Attributes:
         operator: Operator script name (``rest``, ``push-x``, ``diagonal``, ``random``,
             ``seam``).
-        controller: ``"virtual-friction"`` (the paper) or ``"velocity"`` ([14]).
         duration_s: Session length [s]; None: the script's own length.
         seed: Simulated robot instance (its true parameters): the one the params were
             identified on, or the force estimate is made with another robot's model.
@@ -55,28 +54,21 @@ class SimSessionConfig:
         operator_seed: Seed of the operator's random pushes (``random``); None: ``seed``.
             Vary this, not ``seed``, for other push sequences on the same robot.
         q0: Start pose [rad], shape (n,); None: :func:`guide_start_pose`.
-        estimator: Estimator settings (``frame`` must be ``"base"``); the friction follows the
-            commanded velocity (see ``EstimatorConfig.friction_velocity``) and the force fit
-            weighs the joints by their friction's uncertainty (``friction_weighting``).
-        guiding: Controller settings.
+        loop: The loop's settings: the estimator's and the controller's (the law:
+            ``loop.guiding.controller``).
         paced: Run in real time instead of as fast as possible.
         faults: Feedback faults injected by the simulated driver (safety tests).
     """
 
     operator: str = "push-x"
-    controller: str = "virtual-friction"
     duration_s: float | None = None
     seed: int = 1
     run: int = 500
     operator_seed: int | None = None
     q0: tuple[float, ...] | None = None
-    estimator: EstimatorConfig = field(
-        default_factory=lambda: EstimatorConfig(axes="force", tare_s=0.5,
-                                                friction_velocity="command",
-                                                friction_weighting=1.0))
-    guiding: GuidingConfig = field(default_factory=GuidingConfig)
+    loop: LoopConfig = field(default_factory=LoopConfig)
     paced: bool = False
-    faults: tuple[Fault, ...] = ()
+    faults: tuple[InjectedFault, ...] = ()
 
     def __post_init__(self) -> None:
         check_fields("session", self, [
@@ -151,57 +143,9 @@ def sim_robot_seed(requested: int | None, params: ParamsFile) -> int:
     return params.sim_seed
 
 
-def guide_start_pose(robot: Robot) -> Array:
-    """A comfortable, non-singular start pose for a 6R arm [rad], shape (n,): the elbow bent by
-    0.9 rad and the wrist by −1.2 rad from the neutral pose (clipped into the limits). For the
-    er20 the TCP is then 0.87 m out and 0.81 m up with the tool pointing forward, about half way
-    to the edge of the workspace, so a push of half a metre in any direction stays clear of the
-    stretched-arm singularity."""
-    q = robot.neutral()
-    if robot.n >= 5:
-        q[2] += 0.9
-        q[4] -= 1.2
-    return np.clip(q, robot.lower_limits + 0.05, robot.upper_limits - 0.05)
-
-
-class LoopParts(NamedTuple):
-    """The computing side of a session's loop, built from its settings.
-
-    Attributes:
-        estimator: External force estimator (base frame, at the servo period).
-        controller: Guiding controller.
-        interpolator: Controller cycle → servo period interpolation.
-    """
-
-    estimator: ExternalForceEstimator
-    controller: GuidingController
-    interpolator: HermiteInterpolator
-
-
-def build_loop(robot: Robot, params: ParamsFile, config: SimSessionConfig, dt: float
-               ) -> LoopParts:
-    """Estimator, controller and interpolator of a session, fresh (nothing run yet).
-
-    Args:
-        robot: The robot.
-        params: Identified parameters.
-        config: Session settings.
-        dt: Servo period of the driver [s].
-
-    Raises:
-        ControlError, DataError: Invalid settings.
-    """
-    est_cfg = replace(config.estimator, dt=dt, frame="base")
-    estimator = ExternalForceEstimator(robot, params.params, params.noise_mean, est_cfg,
-                                       noise_std=params.noise_std)
-    guiding = replace(config.guiding, controller=config.controller)
-    controller = GuidingController(robot, guiding, params.noise_mean, params.noise_std)
-    interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / dt))
-    return LoopParts(estimator, controller, interpolator)
-
-
 def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
-                    record_feedback: bool = False) -> SimSession:
+                    record_feedback: bool = False,
+                    wrap_driver: Callable[[Driver], Driver] | None = None) -> SimSession:
     """Run one guiding session on the simulated robot.
 
     Args:
@@ -210,6 +154,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         config: Session settings.
         record_feedback: Keep every read of the driver in ``SimSession.feedback`` (for
             :func:`replay_session`).
+        wrap_driver: Wraps the driver the loop talks to (e.g. to probe every servo period).
 
     Returns:
         The session and its summary.
@@ -231,10 +176,12 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     recorder = (RecordingDriver(sim_driver, round(duration / sim_driver.dt) + 1)
                 if record_feedback else None)
     driver: Driver = sim_driver if recorder is None else recorder
-    parts = build_loop(robot, params, config, driver.dt)
+    if wrap_driver is not None:
+        driver = wrap_driver(driver)
+    parts = build_loop(robot, params, config.loop, driver.dt)
     est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
-        "operator": config.operator, "controller": config.controller, "seed": config.seed,
+        "operator": config.operator, "controller": guiding.controller, "seed": config.seed,
         "run": config.run, "operator_seed": op_seed, "duration_s": duration,
         "params_method": params.method,
         "estimator": {"method": est_cfg.method, "axes": est_cfg.axes,
@@ -255,7 +202,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
 
 
 def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
-                   feedback: FeedbackTrace) -> LoopResult:
+                   feedback: FeedbackTrace,
+                   wrap_driver: Callable[[Driver], Driver] | None = None) -> LoopResult:
     """Run a session's loop again on its recorded feedback, without the simulator.
 
     With the settings and parameters of the recording, the loop computes exactly what it
@@ -267,11 +215,13 @@ def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         params: Identified parameters of the recorded session.
         config: Settings of the recorded session.
         feedback: ``SimSession.feedback`` of a session run with ``record_feedback=True``.
+        wrap_driver: Wraps the replay driver (e.g. to probe every servo period).
 
     Raises:
         ControlError, DataError: Invalid settings or trace.
     """
-    driver = ReplayDriver(feedback)
-    parts = build_loop(robot, params, config, driver.dt)
+    replay = ReplayDriver(feedback)
+    driver: Driver = replay if wrap_driver is None else wrap_driver(replay)
+    parts = build_loop(robot, params, config.loop, driver.dt)
     duration = (feedback.reads - 1) * driver.dt
     return run_session(driver, parts.estimator, parts.controller, parts.interpolator, duration)

@@ -1,16 +1,23 @@
-"""Compiled kernels of the friction with memory (presliding): the play operator on the encoder,
-the Dahl step, and the estimator's per-sample friction that uses them (Numba, ``nopython``,
-cached on disk). The same kernels replay a presliding test in
-:mod:`leadthrough.identification.presliding`, so the fit and the estimator run one model.
+"""Drive friction with memory (presliding): the play operator on the encoder, the Dahl step, and
+eq. 15 as the steady state of a LuGre/Dahl friction state, per sample.
 
-Friction parameter rows (``fp``) as in :mod:`leadthrough.estimation.kernels`.
+At standstill a gear's friction is a state that turns over a displacement of a few z₀ (its
+presliding length) and keeps its value when the motion stops (Dahl 1968; Canudas de Wit et al.
+1995). The real-time estimator (:mod:`leadthrough.estimation`) drives this model every sample,
+and the presliding test (:mod:`leadthrough.identification.presliding`) fits z₀ with the same
+functions, so the fit and the estimator run one model. Compiled (Numba, ``nopython``, cached on
+disk); eq. 15 itself comes from :mod:`leadthrough.dynamics.friction`.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+
+from leadthrough.dynamics.friction import stribeck_terms
 
 __all__ = ["dahl_step", "play_step", "presliding_friction_step"]
 
@@ -58,8 +65,8 @@ def dahl_step(state: float, displacement: float, level: float, presliding: float
 
 
 @njit(cache=True, nogil=True)
-def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: bool,
-                             dt: float, command_presliding: float, rest_presliding: Array,
+def presliding_friction_step(qd: Array, increment: Array, fp: Any, dt: float,
+                             command_presliding: float, rest_presliding: Array,
                              state: Array, out: Array, level: Array) -> None:
     """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
 
@@ -84,8 +91,8 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: b
         qd: Joint velocities commanded to the servo [rad/s], shape (n,) (0: at rest).
         increment: Measured displacement of this step, after the play operator [rad], shape
             (n,) (used where ``qd`` is 0).
-        fp: Friction parameter rows, shape (8, n).
-        stribeck: Use the Stribeck rows (eq. 15) instead of the cube-root row.
+        fp: The friction parameters (a record of :func:`~leadthrough.dynamics.friction.
+            friction_dtype`).
         dt: Step [s].
         command_presliding: z₀ of the commanded motion [rad].
         rest_presliding: z₀ per joint at rest [rad], shape (n,).
@@ -95,13 +102,13 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: b
     """
     for j in range(qd.size):
         v = qd[j]
-        g = fp[1, j]
+        g = fp.coulomb[j]
         g0 = g
-        if stribeck:
-            a = v * fp[3, j]
-            b = v * fp[5, j]
-            g += fp[4, j] * np.exp(-a * a) + fp[6, j] * np.exp(-b * b)
-            g0 += fp[4, j] + fp[6, j]
+        if fp.stribeck:
+            g += stribeck_terms(v, fp.motor_stribeck[j], fp.motor_rate[j], fp.gear_stribeck[j],
+                                fp.gear_rate[j])
+            g0 += stribeck_terms(0.0, fp.motor_stribeck[j], fp.motor_rate[j],
+                                 fp.gear_stribeck[j], fp.gear_rate[j])
         level[j] = g
         if v != 0.0:
             if g > 0.0:
@@ -110,7 +117,7 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Array, stribeck: b
                     -g0 * abs(v) * dt / (command_presliding * g))
         elif increment[j] != 0.0 and g0 > 0.0:
             state[j] = dahl_step(state[j], increment[j], g0, rest_presliding[j])
-        f = state[j] + v * fp[2, j]
-        if not stribeck:
-            f += fp[7, j] * np.cbrt(v)
+        f = state[j] + v * fp.viscous[j]
+        if not fp.stribeck:
+            f += fp.cbrt[j] * np.cbrt(v)
         out[j] = f

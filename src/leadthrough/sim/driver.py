@@ -28,10 +28,10 @@ from leadthrough.drivers.protocol import DriverFeedback, JointCommand
 from leadthrough.errors import SimulationError
 from leadthrough.sim.robot import SimRobot
 
-__all__ = ["Fault", "FaultKind", "SimDriver"]
+__all__ = ["InjectedFault", "InjectedFaultKind", "SimDriver"]
 
 
-class FaultKind(StrEnum):
+class InjectedFaultKind(StrEnum):
     """Kinds of injected feedback fault (see the module doc)."""
 
     STALE = "stale"
@@ -41,7 +41,7 @@ class FaultKind(StrEnum):
 
 
 @dataclass(frozen=True)
-class Fault:
+class InjectedFault:
     """A feedback fault active for samples with ``t_start <= t < t_end``.
 
     Attributes:
@@ -52,7 +52,7 @@ class Fault:
         offset: Position offset for ``q_offset`` [rad].
     """
 
-    kind: FaultKind
+    kind: InjectedFaultKind
     t_start: float = 0.0
     t_end: float = math.inf
     joint: int | None = None
@@ -60,10 +60,11 @@ class Fault:
 
     def __post_init__(self) -> None:
         try:
-            object.__setattr__(self, "kind", FaultKind(self.kind))
+            object.__setattr__(self, "kind", InjectedFaultKind(self.kind))
         except ValueError as e:
             raise SimulationError("unknown fault kind", field="fault.kind", value=self.kind,
-                                  expected="one of " + ", ".join(k.value for k in FaultKind)) from e
+                                  expected="one of " + ", ".join(
+                                      k.value for k in InjectedFaultKind)) from e
         if not (math.isfinite(self.t_start) and self.t_end > self.t_start):
             raise SimulationError("bad fault window", field="fault.t_start/t_end",
                                   value=(self.t_start, self.t_end),
@@ -93,7 +94,7 @@ class SimDriver:
         self._n = sim.robot.n
         self._dt = float(sim.config.timestep)
         self._last_seq = 0
-        self._faults: list[Fault] = []
+        self._faults: list[InjectedFault] = []
 
     @property
     def n(self) -> int:
@@ -116,7 +117,7 @@ class SimDriver:
         return self.sim.time
 
     @property
-    def faults(self) -> tuple[Fault, ...]:
+    def faults(self) -> tuple[InjectedFault, ...]:
         """The injected faults."""
         return tuple(self._faults)
 
@@ -128,7 +129,7 @@ class SimDriver:
         """A zero command for this robot (fill ``q`` before writing it)."""
         return JointCommand.zeros(self._n)
 
-    def inject(self, fault: Fault) -> None:
+    def inject(self, fault: InjectedFault) -> None:
         """Schedule a feedback fault (see the module doc).
 
         Args:
@@ -160,7 +161,7 @@ class SimDriver:
         if sample.sequence == 0 or sample.sequence == self._last_seq:
             return False
         active = [f for f in self._faults if f.active(sample.t)]
-        if any(f.kind is FaultKind.STALE for f in active):
+        if any(f.kind is InjectedFaultKind.STALE for f in active):
             return False
         self._last_seq = sample.sequence
         fb.t = sample.t
@@ -169,11 +170,11 @@ class SimDriver:
         fb.current[:] = sample.current
         for f in active:
             idx = slice(None) if f.joint is None else f.joint
-            if f.kind is FaultKind.NAN_Q:
+            if f.kind is InjectedFaultKind.NAN_Q:
                 fb.q[idx] = np.nan
-            elif f.kind is FaultKind.NAN_CURRENT:
+            elif f.kind is InjectedFaultKind.NAN_CURRENT:
                 fb.current[idx] = np.nan
-            elif f.kind is FaultKind.Q_OFFSET:
+            elif f.kind is InjectedFaultKind.Q_OFFSET:
                 fb.q[idx] += f.offset
         return True
 

@@ -1,0 +1,78 @@
+"""A release: the operator's hand letting go of the tool at rest.
+
+The paper applies a larger "stopping friction" once the force is removed (eq. 32–33,
+:mod:`leadthrough.control.virtual_friction`). At rest the guiding controller extends that: for a
+while after every stop and every release, breaking away takes the stopping friction (see
+``GuidingConfig.settle_s``), because the drives' friction then unloads and the force estimate
+swings the other way, by up to twice the released force.
+
+A release is detected per axis on the estimated wrench (:func:`release_step`, compiled: Numba,
+``nopython``, cached on disk, run by the guiding cycle): the smoothed force falls back from its
+peak by :data:`RELEASE_DROP` × δ or more within about :data:`RELEASE_WINDOW_S` (the peak
+forgets slow drifts, so the estimate's slow drift under a steady hand is not a release).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = ["RELEASE_DROP", "RELEASE_SMOOTHING_S", "RELEASE_WINDOW_S", "release_step"]
+
+Array = NDArray[np.float64]
+
+#: A release at rest: the (smoothed) force on an axis falls back from its peak by this fraction
+#: of that axis's friction δ or more.
+RELEASE_DROP = 0.5
+#: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
+#: below δ must not look like a release).
+RELEASE_SMOOTHING_S = 0.05
+#: Time constant with which the release's peak forgets slow changes [s]: letting go drops the
+#: estimate within ~0.2 s (the estimator's 3 Hz filter), while under a steady hand at rest the
+#: estimate drifts by up to ~10 N/s as the drives' static friction takes up or gives back
+#: load; such a drift must not renew the stopping friction again and again.
+RELEASE_WINDOW_S = 0.3
+
+
+@njit(cache=True, nogil=True)
+def release_step(wrench: Array, friction: Array, drop: float, alpha: float, forget: float,
+                 smooth: Array, peak: Array, moving: bool) -> bool:
+    """A release at rest: on some axis the smoothed w_i held a peak of at least ``drop``·δ_i
+    and fell back from it, toward zero or beyond, by ``drop``·δ_i or more (a smaller hold
+    needs no settling: the estimate's swing after letting go stays below δ). Letting go is
+    quick; the peak forgets slow changes (it relaxes toward w_i by the factor ``forget`` per
+    cycle), so that the estimate's slow drift at rest under a steady hand is not a release.
+
+    Args:
+        wrench: Estimated wrench in the controller's frame, shape (6,).
+        friction: δ per axis, shape (6,).
+        drop: Fraction of δ that counts as a release.
+        alpha: Weight of the new sample in the first-order smoothing, in (0, 1].
+        forget: Per-cycle factor of the peak's relaxation, in [0, 1] (1: never forgets).
+        smooth: Smoothed wrench, shape (6,); updated in place.
+        peak: Signed smoothed w_i of largest magnitude since the tool came to rest or since
+            the last release, relaxed by ``forget``, shape (6,); updated in place.
+        moving: The tool moves: the peak follows the smoothed wrench (a release counts only
+            from rest).
+
+    Returns:
+        Whether some axis was released this cycle.
+    """
+    released = False
+    for i in range(wrench.size):
+        smooth[i] += alpha * (wrench[i] - smooth[i])
+        w = smooth[i]
+        p = w + (peak[i] - w) * forget
+        back = p - w if p >= 0.0 else w - p      # how far w fell back from the peak
+        level = drop * friction[i]
+        if back >= level and abs(p) >= level:
+            released = True
+            peak[i] = w
+        elif abs(w) > abs(p):
+            peak[i] = w
+        else:
+            peak[i] = p
+        if moving:
+            peak[i] = w
+    return released

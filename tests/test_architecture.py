@@ -1,0 +1,105 @@
+"""The package's shape: the layers as the folders draw them, short functions, named state.
+
+* the driver protocol and the real-time loop load nothing of the simulator (MuJoCo);
+* no package of the pipeline imports the simulator, the CLI, the demo or the report, and no
+  layer imports a later one (the real-time control does not import the estimator, the estimator
+  not the controller, identification not estimation);
+* no function in ``src/`` is longer than 80 lines;
+* no module defines slot indices (``A, B, C = range(3)``): state is named fields.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parent.parent / "src" / "leadthrough"
+
+#: Package → packages of leadthrough it may not import (besides the simulator and the apps).
+FORBIDDEN: dict[str, tuple[str, ...]] = {
+    "robot": ("dynamics", "excitation", "data", "identification", "estimation", "control",
+              "session", "drivers", "teach"),
+    "dynamics": ("excitation", "data", "identification", "estimation", "control", "session",
+                 "drivers", "teach"),
+    "identification": ("estimation", "control", "session", "drivers", "teach"),
+    "estimation": ("control", "session", "drivers", "teach"),
+    "control": ("estimation", "identification", "session", "drivers", "teach"),
+    "drivers": ("dynamics", "excitation", "identification", "estimation", "control", "session",
+                "teach"),
+    "session": ("teach",),
+    "teach": ("control", "estimation", "identification", "drivers"),
+}
+#: The simulator and the apps (the apps wire everything together).
+APPS = ("sim", "cli", "demo", "report")
+#: Only these import them.
+MAY_IMPORT_APPS = (*APPS, "__main__")
+
+
+def _modules() -> list[Path]:
+    return sorted(p for p in SRC.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+        elif isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+    return {n for n in names if n == "leadthrough" or n.startswith("leadthrough.")}
+
+
+def _package(path: Path) -> str:
+    rel = path.relative_to(SRC).parts
+    return rel[0] if len(rel) > 1 else rel[0].removesuffix(".py")
+
+
+@pytest.mark.parametrize("module", ["leadthrough.drivers.protocol", "leadthrough.session.loop",
+                                    "leadthrough.session.loop_config"])
+def test_the_real_time_side_loads_nothing_of_the_simulator(module: str) -> None:
+    code = (f"import sys, {module}; bad = [m for m in sys.modules if m == 'mujoco' or "
+            "m.startswith('leadthrough.sim')]; print(bad); sys.exit(1 if bad else 0)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_layers_import_only_what_the_pipeline_allows() -> None:
+    wrong = []
+    for path in _modules():
+        pkg = _package(path)
+        for name in _imports(path):
+            target = name.split(".")[1] if "." in name else ""
+            if target in APPS and pkg not in MAY_IMPORT_APPS:
+                wrong.append(f"{path.relative_to(SRC)} imports {name}")
+            if target in FORBIDDEN.get(pkg, ()):
+                wrong.append(f"{path.relative_to(SRC)} imports {name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_no_function_is_longer_than_80_lines() -> None:
+    long = []
+    for path in _modules():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > 80:
+                    long.append(f"{path.relative_to(SRC)}:{node.lineno} {node.name} ({lines})")
+    assert not long, "\n".join(long)
+
+
+def test_state_is_named_not_indexed_by_slot_constants() -> None:
+    """No ``NAME_A, NAME_B, ... = range(k)`` slot tables (the records name their fields)."""
+    slots = []
+    for path in _modules():
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call) \
+                    and isinstance(node.value.func, ast.Name) and node.value.func.id == "range" \
+                    and isinstance(node.targets[0], ast.Tuple):
+                slots.append(f"{path.relative_to(SRC)}:{node.lineno}")
+    assert not slots, "\n".join(slots)
