@@ -16,8 +16,10 @@ from leadthrough import __version__
 from leadthrough.cli import (
     calibration_cmds,
     demo_cmd,
+    emulate_cmd,
     guide_cmd,
     payload_cmd,
+    pendant_cmd,
     robots_cmd,
     teach_cmd,
 )
@@ -36,6 +38,8 @@ _EPILOG = """examples:
   leadthrough payload loaded.parquet --robot er20 --params params.toml
   leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
+  leadthrough emulate ur-rtde --robot ur5 --seed 1   an emulated controller on its real protocol
+  leadthrough pendant                   the live browser pendant on the simulated robot
 """
 
 
@@ -64,7 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     payload_cmd.register(sub)
     guide_cmd.register(sub)
     teach_cmd.register(sub)
+    pendant_cmd.register(sub)
     demo_cmd.register(sub)
+    emulate_cmd.register(sub)
     return parser
 
 
