@@ -125,6 +125,10 @@ def _register_identify(sub: Any) -> None:
     p.add_argument("--friction-sweep", type=Path, default=None, metavar="REC",
                    help="recording of a friction sweep (excite --sweep, then record): the "
                         "friction curve is measured from it (consistent method only)")
+    p.add_argument("--load-friction", action=argparse.BooleanOptionalAction,
+                   default=IdentifyConfig.load_friction,
+                   help="also identify the load-dependent Coulomb friction f_cL (level "
+                        "f_c0 + f_cL·|τ_load|; ols-cv, ols-cbrt and consistent without a sweep)")
     p.add_argument("--presliding-test", type=Path, default=None, metavar="REC",
                    help="recording of a presliding test (excite --presliding, then record): "
                         "each joint's presliding length z0 is measured from it and written to "
@@ -184,7 +188,9 @@ def _identify_config(args: argparse.Namespace) -> IdentifyConfig:
     proposed = ProposedConfig(seed=getattr(args, "seed", 0),
                               bound=bound if bound is not None else 0.3)
     return IdentifyConfig(preprocess=pre, proposed=proposed,
-                          consistent=ConsistentConfig(bound=bound))
+                          consistent=ConsistentConfig(bound=bound),
+                          load_friction=getattr(args, "load_friction",
+                                                IdentifyConfig.load_friction))
 
 
 def stats_json(robot: Robot, stats: ResidualStats) -> dict[str, Any]:

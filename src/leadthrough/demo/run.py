@@ -181,8 +181,11 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
                  ) -> tuple[dict[str, ParamsFile], ParamsFile]:
     """Step 3: Table II with all methods, Fig. 3, and the guiding parameters (with the
     sweep). Returns the params of Table III's methods and the guiding params."""
+    # Table II compares the methods on eq. 21 as the paper writes it: no load-dependent friction
+    # (``proposed`` has none), so every method fits the same model
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
-                                                 polish_iterations=150 if quick else 300))
+                                                 polish_iterations=150 if quick else 300),
+                         load_friction=False)
     comparison = compare_on_calibration_set(robot, cal, METHODS, cfg,
                                             progress=lambda s: say("      " + s))
     comp = comparison.comparison
