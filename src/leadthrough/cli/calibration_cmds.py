@@ -17,6 +17,7 @@ from leadthrough.cli.arg_checks import (
     check_trajectory_limits,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
+from leadthrough.cli.record_robot import add_driver_arguments, record_on_robot
 from leadthrough.data.io import load_recording, save_recording
 from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
@@ -87,20 +88,28 @@ def _register_excite(sub: Any) -> None:
 
 
 def _register_record(sub: Any) -> None:
-    p = sub.add_parser("record", help="run a trajectory on the simulated robot",
+    p = sub.add_parser("record", help="run a trajectory on the simulated robot or a robot",
                        formatter_class=_RAW,
-                       description="Run a joint trajectory on the simulated robot (position "
-                                   "mode) and log q and motor current at 1 kHz.",
-                       epilog="example: leadthrough record --robot er20 --trajectory traj.csv "
-                              "-o rec.parquet")
+                       description="Run a joint trajectory (an excitation, a friction sweep or a "
+                                   "presliding test from `excite`) and log q and the motor "
+                                   "currents (or joint torques): on the simulated robot at 1 kHz, "
+                                   "or with --driver on a robot controller at its own cycle, "
+                                   "after a slow approach to the trajectory's start.",
+                       epilog="examples:\n  leadthrough record --robot er20 --trajectory traj.csv "
+                              "-o rec.parquet\n  leadthrough record --driver fanuc-j519 --host "
+                              "192.168.1.10 --robot er20 --trajectory traj.csv -o rec.parquet")
     p.add_argument("--robot", default="er20")
     p.add_argument("--trajectory", type=Path, required=True, help="trajectory CSV")
-    p.add_argument("--seed", type=int, default=0, help="robot instance (true parameters)")
-    p.add_argument("--run", type=int, default=0, help="recording number (sensor noise)")
-    p.add_argument("--payload-mass", type=float, default=None, help="payload at the TCP [kg]")
+    p.add_argument("--seed", type=int, default=None,
+                   help="simulated robot instance (true parameters; default 0)")
+    p.add_argument("--run", type=int, default=None,
+                   help="simulated recording number (sensor noise; default 0)")
+    p.add_argument("--payload-mass", type=float, default=None,
+                   help="simulated payload at the TCP [kg]")
     p.add_argument("--payload-com", type=float, nargs=3, default=None,
                    metavar=("X", "Y", "Z"),
                    help="payload CoM in the TCP frame [m] (with --payload-mass; default 0 0 0.05)")
+    add_driver_arguments(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="recording .parquet/.csv")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_record)
@@ -281,7 +290,10 @@ def run_record(args: argparse.Namespace) -> int:
         raise DataError("joint count does not match the robot", source=args.trajectory,
                         field="q", value=traj.q.shape[1], expected=f"{robot.n}")
     check_trajectory_limits(args.trajectory, traj, robot)
-    config = SimConfig(seed=args.seed, run=args.run)
+    if args.driver is not None:
+        return record_on_robot(args, robot, traj)
+    args.seed = 0 if args.seed is None else args.seed
+    config = SimConfig(seed=args.seed, run=0 if args.run is None else args.run)
     t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
     q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
     qd_cmd = np.column_stack([np.interp(t, traj.time, traj.qd[:, j]) for j in range(robot.n)])
@@ -301,7 +313,7 @@ def run_record(args: argparse.Namespace) -> int:
                     robot=robot.name, sim_seed=args.seed)
     save_recording(rec, args.output)
     out = {"robot": robot.name, "samples": rec.samples, "duration_s": rec.duration,
-           "seed": args.seed, "run": args.run, "payload_mass_kg": args.payload_mass,
+           "seed": args.seed, "run": config.run, "payload_mass_kg": args.payload_mass,
            "max_tracking_error_rad": float(np.max(np.abs(log.truth.q - q_cmd))),
            "output": str(args.output)}
     if args.json:
