@@ -17,6 +17,7 @@ from leadthrough.cli import (
     calibration_cmds,
     demo_cmd,
     emulate_cmd,
+    friction_refresh_cmd,
     guide_cmd,
     payload_cmd,
     pendant_cmd,
@@ -65,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     robots_cmd.register(sub)
     calibration_cmds.register(sub)
+    friction_refresh_cmd.register(sub)
     payload_cmd.register(sub)
     guide_cmd.register(sub)
     teach_cmd.register(sub)

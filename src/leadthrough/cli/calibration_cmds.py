@@ -76,6 +76,10 @@ def _register_excite(sub: Any) -> None:
     p.add_argument("--sweep", action="store_true",
                    help="instead, a friction sweep: constant-velocity passes out and back at "
                         "10 speeds, all joints at once (about 45 s)")
+    p.add_argument("--friction-check", action="store_true",
+                   help="instead, a friction check (4 speeds out and back, ~15 s) for "
+                        "refresh-friction: run it before guiding on a robot whose friction "
+                        "has drifted since its calibration (warm, or cold)")
     p.add_argument("--presliding", action="store_true",
                    help="instead, a presliding test: out-and-back excursions of 0.03–1.5 mrad "
                         "at rest, all joints at once (about 80 s)")
@@ -238,7 +242,7 @@ def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
     check_output(args.output, (".csv",))
     robot = load_robot(args.robot)
-    if args.sweep or args.presliding:
+    if args.sweep or args.presliding or args.friction_check:
         return excite_friction_experiment(args, robot)
     if args.start is not None:
         raise DataError("a start pose is for the friction experiments only", field="--start",
