@@ -76,7 +76,8 @@ def _record_wire(kind: str, robot: str, seed: int, traj: Path, out: Path) -> dic
         emu.terminate()
         report, _ = emu.communicate(timeout=20)
     if rec.returncode != 0:
-        raise SystemExit(f"record --driver {kind} failed:\n{stderr}")
+        raise RuntimeError(f"record --driver {kind} failed: {stderr.strip()}; emulator: "
+                           f"{' '.join(report.split())}")
     info: dict[str, Any] = json.loads(stdout)
     info["emulator"] = {k.strip(): v.strip() for k, _, v in
                         (line.partition(":") for line in report.splitlines() if ":" in line)}
@@ -111,7 +112,11 @@ def main() -> None:
             (kind, work / f"{kind}.parquet", {}) for kind in args.kinds]:
         if name in KINDS:
             t0 = time.perf_counter()
-            info = _record_wire(name, robot, args.seed, traj, rec)
+            try:
+                info = _record_wire(name, robot, args.seed, traj, rec)
+            except RuntimeError as e:
+                print(e, flush=True)
+                continue
             info["wall_s"] = time.perf_counter() - t0
         params = work / f"{name.replace(' ', '_')}.toml"
         _run("identify", str(rec), "--robot", robot, "--method", args.method, "-o", str(params))
