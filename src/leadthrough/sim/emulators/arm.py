@@ -31,6 +31,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.robot.description import Robot
+from leadthrough.sim.emulators.operator import EmulatedOperator
 from leadthrough.sim.robot import Feedback, SimConfig, SimRobot
 
 __all__ = ["ArmPhase", "CommandRecord", "EmulatedArm", "MotionLimits", "StopKind"]
@@ -110,9 +111,10 @@ class EmulatedArm:
     """
 
     def __init__(self, robot: Robot, seed: int, cycle: float, limits: MotionLimits,
-                 q0: Array | None = None) -> None:
+                 q0: Array | None = None, operator: EmulatedOperator | None = None) -> None:
         self.robot = robot
-        self.sim = SimRobot(robot, SimConfig(seed=seed), q0=q0)
+        self.operator = operator
+        self.sim = SimRobot(robot, SimConfig(seed=seed), q0=q0, operator=operator)
         self.dt = float(self.sim.config.timestep)
         self.steps = max(1, round(cycle / self.dt))
         self.cycle = self.steps * self.dt
@@ -190,6 +192,8 @@ class EmulatedArm:
             return False
         self._advance(q)
         self.phase = ArmPhase.RUNNING
+        if self.operator is not None:
+            self.operator.stream_started(self.sim.time)
         return True
 
     def refuse(self, q: tuple[float, ...], t: float, reason: str) -> None:
@@ -248,6 +252,8 @@ class EmulatedArm:
                 self.phase = (ArmPhase.IDLE if self.stop_kind is StopKind.REQUEST
                               else ArmPhase.FAULT)
                 self._to, self._v = self._q.copy(), np.zeros(self.robot.n)
+        if self.operator is not None and self.operator.due(self.sim.time):
+            self.operator.start(self.sim.time, self.tcp_position(self._q))
         self.sim.command(self._q, self._qd)
         self.sim.step()
 
@@ -265,6 +271,11 @@ class EmulatedArm:
     def sample(self) -> Feedback:
         """The newest sample (time, encoder positions, measured currents, sequence)."""
         return self.sim.read()
+
+    def tcp_position(self, q: Array) -> Array:
+        """TCP position at ``q`` [m], base frame, shape (3,)."""
+        pin.framesForwardKinematics(self.robot.model, self._pin, q)
+        return np.array(self._pin.oMf[self.robot.tcp_frame_id].translation)
 
     def tcp_pose(self, q: Array) -> tuple[float, ...]:
         """TCP pose at ``q``: X Y Z [mm] and fixed-axis X-Y-Z angles (roll, pitch, yaw) [deg].
