@@ -26,8 +26,13 @@ CPU would show) median / p99 / max [µs], with periods later than one period. No
 loop-only phases are cut into 1 s blocks; a phase differs "beyond noise" when its work median,
 work p99, done p99 or share of late periods lies outside the range of that figure over those
 blocks.
-The machine's load and the process's memory are printed too (a frozen browser must not make the
-server hoard messages without bound).
+The machine's load and the pendant process's memory are printed too (a frozen browser must not
+make the server hoard messages without bound).
+
+Result (README, "Live pendant", 2026-11-25, 2-core machine at load 8–10): with the loop under
+``--rt-priority 50`` every phase is within noise (browser 4 late periods of 18017, frozen
+browser 0.1 %, loop alone 0.0–0.1 %); with the loop in a thread of the pendant's process, as
+before, a connected client made 1.6–2.7 % of the periods late (Python's interpreter lock).
 
     python benchmarks/pendant_isolation.py [--phase-s 18] [--port 8097]
 """
