@@ -31,10 +31,12 @@ from leadthrough.pendant.messages import (
 )
 from leadthrough.session.loop import ServoPeriods
 
-__all__ = ["NOTICES_KEPT", "RequestHandler"]
+__all__ = ["MAX_MARKS", "NOTICES_KEPT", "RequestHandler"]
 
 #: Notices a snapshot carries (the latest).
 NOTICES_KEPT = 20
+#: Marks a session takes (a snapshot carries them all; the shared record has a fixed size).
+MAX_MARKS = 1000
 
 
 class RequestHandler:
@@ -91,6 +93,9 @@ class RequestHandler:
                 self.notice("warning", "no fault to clear")
             elif not ctl.clear_fault(t):
                 self.notice("warning", "fault not cleared: the robot is still stopping")
+        elif isinstance(req, MarkPoint) and len(self.marks) >= MAX_MARKS:
+            self.notice("warning", f"not marked: {MAX_MARKS} marks is the most a session "
+                                   "keeps (export, then restart)")
         elif isinstance(req, MarkPoint):
             self.marks = (*self.marks, MarkedPoint(req.label, t, self.loop.fb.q.copy()))
             self.notice("info", f"marked {req.label} at {t:.2f} s")
