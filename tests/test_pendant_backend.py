@@ -302,3 +302,17 @@ def test_the_shipped_parameters_guide_the_simulated_er20(er20: Robot) -> None:
     rest = run_sim_session(er20, params, SimSessionConfig(operator="rest", duration_s=4.0,
                                                           loop=loop))
     assert np.all(rest.result.log.twist_cmd_base == 0.0)
+
+
+def test_marks_stop_at_the_limit_with_a_notice() -> None:
+    from types import SimpleNamespace
+
+    from leadthrough.pendant.loop_requests import MAX_MARKS, RequestHandler
+    loop = SimpleNamespace(fb=SimpleNamespace(q=np.zeros(6)))
+    handler = RequestHandler(None, loop, None)  # type: ignore[arg-type]
+    for k in range(MAX_MARKS + 1):
+        handler.apply(MarkPoint(f"W{k + 1}"), float(k))
+    assert len(handler.marks) == MAX_MARKS
+    assert handler.notices[-1].text.startswith(f"not marked: {MAX_MARKS} marks")
+    handler.apply(InjectFault(InjectedFaultKind.STALE, 0.0, 1.0), 0.0)      # not a simulator
+    assert handler.notices[-1].text == "not a simulator: InjectFault refused"
