@@ -104,7 +104,7 @@ def test_an_unwritten_record_reads_as_none() -> None:
 
 
 #: The pendant's process: starts a guided session pushed along y, says so, then is killed
-#: (``kill``) or exits without stopping the loop (``exit``).
+#: (``kill``) or, told to on its standard input, exits without stopping the loop (``exit``).
 PARENT = """
 import sys, time
 from leadthrough.control.safety import State
@@ -118,7 +118,7 @@ if __name__ == "__main__":
     time.sleep(1.0)                                   # the estimator's tare
     sim.live.send(SetEnable(True))
     sim.hand.push([0.0, 40.0, 0.0])
-    end = time.monotonic() + 20
+    end = time.monotonic() + 60
     while time.monotonic() < end:
         snap = sim.live.snapshot()
         if snap.state == State.GUIDING and snap.speed > 0.05:
@@ -126,6 +126,7 @@ if __name__ == "__main__":
         time.sleep(0.01)
     print(sim.live.pid, snap.state.name, flush=True)
     if sys.argv[1] == "exit":
+        sys.stdin.readline()
         sys.exit(0)
     time.sleep(600)
 """
@@ -145,7 +146,8 @@ def test_the_loop_stops_when_the_pendant_goes(how: str, tmp_path: Path) -> None:
     script.write_text(textwrap.dedent(PARENT))
     env = {**os.environ, "PYTHONPATH": str(SRC)}
     parent = subprocess.Popen([sys.executable, str(script), how], env=env,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
     child = 0
     try:
         assert parent.stdout is not None
@@ -155,7 +157,7 @@ def test_the_loop_stops_when_the_pendant_goes(how: str, tmp_path: Path) -> None:
         assert state == "GUIDING" and not _gone(child)
         if how == "kill":
             parent.send_signal(signal.SIGKILL)
-        _, err = parent.communicate(timeout=60)       # the child shares the parent's stderr
+        _, err = parent.communicate("\n", timeout=60)       # the child shares the parent's stderr
         deadline = time.monotonic() + 10
         while not _gone(child) and time.monotonic() < deadline:
             time.sleep(0.05)
