@@ -1,10 +1,15 @@
-"""The pendant's link to the loop (``leadthrough.pendant.backend``) on the simulated robot:
-requests at cycle boundaries, notices, marks, the live recording and its export, the taught
-point list, and the shipped parameters that the simulated sessions run with."""
+"""The pendant's link to the loop (``leadthrough.pendant.backend``) on the simulated robot, the
+loop in a process of its own: requests at cycle boundaries (enable, mark, adjust, clear a
+fault, the simulator's push and fault), notices, marks, the live recording and its export, the
+loop's process ending (why it stopped; a crash shows a lost link), the taught point list, and
+the shipped parameters that the simulated sessions run with. The lifetime of the two processes
+and the shared memory's consistency are in ``test_pendant_process.py``."""
 
 from __future__ import annotations
 
 import json
+import os
+import signal
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -15,8 +20,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.safety import Fault, State
-from leadthrough.errors import TeachError
+from leadthrough.errors import ControlError, TeachError
 from leadthrough.pendant.backend import (
     Adjust,
     ClearFault,
@@ -28,13 +34,14 @@ from leadthrough.pendant.backend import (
 )
 from leadthrough.pendant.export import POINTS_FORMAT, export_taught
 from leadthrough.pendant.live_recording import LiveRecording
-from leadthrough.pendant.simulated import SimulatedPendantSession, simulated_session
+from leadthrough.pendant.simulated import InjectFault, SimulatedPendantSession, simulated_session
+from leadthrough.pendant.status_view import StatusExtras, status_html
 from leadthrough.pendant.taught_points import TaughtPoints
 from leadthrough.pendant.transitions import describe
 from leadthrough.robot import Robot
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.record import load_session
-from leadthrough.sim.driver import InjectedFault, InjectedFaultKind
+from leadthrough.sim.driver import InjectedFaultKind
 from leadthrough.sim.guiding_params import shipped_guiding_params
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
 from leadthrough.teach import teach_session
@@ -69,6 +76,7 @@ def sim(er20: Robot) -> Iterator[SimulatedPendantSession]:
         yield s
     finally:
         s.live.stop()
+        s.live.close()
 
 
 def test_guiding_a_push_marking_and_stopping(sim: SimulatedPendantSession,
@@ -132,9 +140,9 @@ def test_a_fault_latches_until_cleared_at_rest(sim: SimulatedPendantSession) -> 
     live = sim.live
     live.send(SetEnable(True))
     guiding = until(live, lambda s: s.state == State.GUIDING, 0.1, "GUIDING")
-    live.driver.inject(InjectedFault(InjectedFaultKind.STALE, t_start=guiding.time + 0.05,  # type: ignore[attr-defined]
-                                     t_end=guiding.time + 0.2))
+    live.send(InjectFault(InjectedFaultKind.STALE, after_s=0.05, duration_s=0.15))
     fault = until(live, lambda s: s.state == State.FAULT, 0.5, "FAULT")
+    assert fault.time > guiding.time + 0.05
     assert fault.fault == Fault.STALE_FEEDBACK and fault.cause.startswith("STALE_FEEDBACK")
     time.sleep(0.05)
     assert live.snapshot().state == State.FAULT            # latched (stale feedback is over)
@@ -144,19 +152,33 @@ def test_a_fault_latches_until_cleared_at_rest(sim: SimulatedPendantSession) -> 
     assert cleared.cause == "FAULT_CLEARED"
 
 
-def test_the_loop_reports_why_it_stopped(er20: Robot) -> None:
-    s = simulated_session(er20, paced=False)
+def test_the_loop_reports_why_it_did_not_start(er20: Robot) -> None:
+    s = simulated_session(er20, paced=False, guiding=GuidingConfig(dt=0.0015))
+    try:
+        with pytest.raises(ControlError, match="multiple of the servo period"):
+            s.live.start()
+        assert not s.live.running
+    finally:
+        s.live.close()
 
-    def broken(_: object) -> None:
-        raise RuntimeError("link lost")
 
-    s.live.start()
-    s.live.driver.write = broken  # type: ignore[method-assign]
+def test_a_crashed_loop_shows_a_lost_link(sim: SimulatedPendantSession) -> None:
+    live = sim.live
+    live.send(SetEnable(True))
+    until(live, lambda s: s.state == State.GUIDING, 0.1, "GUIDING")
+    assert live.pid is not None
+    os.kill(live.pid, signal.SIGKILL)
     deadline = time.monotonic() + 10
-    while s.live.running and time.monotonic() < deadline:
+    while live.running and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert not s.live.running
-    assert s.live.snapshot().error == "RuntimeError: link lost"
+    assert not live.running
+    snap = live.snapshot()
+    assert snap is not None and snap.state == State.FAULT
+    assert snap.error == f"lost link to the loop (its process ended, exit code {-signal.SIGKILL})"
+    live.send(SetEnable(False))                  # no error, no wait: nobody listens
+    page = status_html(snap, StatusExtras(armed=True, device=True, push_n=None,
+                                          period_us=(0.0, 0.0), params=""))
+    assert 'data-state="STOPPED"' in page and "lost link to the loop" in page
 
 
 def test_snapshots_are_copies(sim: SimulatedPendantSession) -> None:
@@ -184,10 +206,11 @@ class _Rows:
 @settings(max_examples=40, deadline=None)
 @given(st.integers(2, 40), st.integers(0, 120))
 def test_the_ring_keeps_the_last_rows_in_order(capacity: int, written: int) -> None:
-    ring = LiveRecording(_Rows(), capacity, 2, True)  # type: ignore[arg-type]
+    ring, loop = LiveRecording(capacity, 2, True), _Rows()
     for k in range(written):
-        ring.store(float(k))
+        ring.store(loop, float(k))  # type: ignore[arg-type]
     rows, first = ring.rows()
+    ring.block.close()
     kept = min(written, capacity - 1) if written >= capacity else written
     assert first == written - kept
     assert np.array_equal(rows.time, np.arange(first, written, dtype=float))
@@ -195,13 +218,13 @@ def test_the_ring_keeps_the_last_rows_in_order(capacity: int, written: int) -> N
 
 
 def test_the_ring_never_returns_a_row_being_written() -> None:
-    ring = LiveRecording(_Rows(), 50, 6, True)  # type: ignore[arg-type]
+    ring, loop = LiveRecording(50, 6, True), _Rows()
     stop = threading.Event()
 
     def writer() -> None:
         k = 0
         while not stop.is_set():
-            ring.store(float(k))
+            ring.store(loop, float(k))  # type: ignore[arg-type]
             k += 1
 
     thread = threading.Thread(target=writer)
@@ -218,6 +241,7 @@ def test_the_ring_never_returns_a_row_being_written() -> None:
     finally:
         stop.set()
         thread.join()
+        ring.block.close()
     assert complete > 0     # (a writer that laps the ring during a copy leaves no rows)
 
 
@@ -278,3 +302,17 @@ def test_the_shipped_parameters_guide_the_simulated_er20(er20: Robot) -> None:
     rest = run_sim_session(er20, params, SimSessionConfig(operator="rest", duration_s=4.0,
                                                           loop=loop))
     assert np.all(rest.result.log.twist_cmd_base == 0.0)
+
+
+def test_marks_stop_at_the_limit_with_a_notice() -> None:
+    from types import SimpleNamespace
+
+    from leadthrough.pendant.loop_requests import MAX_MARKS, RequestHandler
+    loop = SimpleNamespace(fb=SimpleNamespace(q=np.zeros(6)))
+    handler = RequestHandler(None, loop, None)  # type: ignore[arg-type]
+    for k in range(MAX_MARKS + 1):
+        handler.apply(MarkPoint(f"W{k + 1}"), float(k))
+    assert len(handler.marks) == MAX_MARKS
+    assert handler.notices[-1].text.startswith(f"not marked: {MAX_MARKS} marks")
+    handler.apply(InjectFault(InjectedFaultKind.STALE, 0.0, 1.0), 0.0)      # not a simulator
+    assert handler.notices[-1].text == "not a simulator: InjectFault refused"

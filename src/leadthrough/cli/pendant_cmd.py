@@ -14,8 +14,8 @@ from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError, LeadthroughError
 from leadthrough.identification.params_file import load_params
 from leadthrough.pendant.backend import LiveSession
+from leadthrough.pendant.loop_process import DriverRecipe
 from leadthrough.robot.description import Robot, load_robot
-from leadthrough.session.loop_config import LoopConfig, build_loop
 
 __all__ = ["DRIVERS", "register"]
 
@@ -67,7 +67,7 @@ def register(sub: Any) -> None:
     p.add_argument("--record-s", type=float, default=600.0, metavar="S",
                    help="seconds of the session kept for the export (default 600)")
     p.add_argument("--rt-priority", type=int, default=None, metavar="P",
-                   help="run the loop's thread under SCHED_FIFO at priority P (1-99; Linux, "
+                   help="run the loop's process under SCHED_FIFO at priority P (1-99; Linux, "
                         "needs root or CAP_SYS_NICE); see the README on the loop's isolation")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: run until Ctrl-C)")
@@ -86,9 +86,8 @@ def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession,
                            field="--host/--params", value=(args.host, args.params),
                            expected="--host H --params params.toml")
     params = load_params(args.params, robot)
-    driver = factory(robot, args.host)
-    parts = build_loop(robot, params, LoopConfig(), driver.dt)
-    return (LiveSession(driver, parts, robot, rt_priority=args.rt_priority),
+    recipe = DriverRecipe(robot, params, factory, args.host)
+    return (LiveSession(recipe, robot, rt_priority=args.rt_priority),
             f"{args.params} ({params.method})")
 
 
@@ -110,8 +109,8 @@ def run(args: argparse.Namespace) -> int:
         sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
                                 rt_priority=args.rt_priority)
         live, hand, note = sim.live, sim.hand, sim.params_note
-    print("starting the loop (loading the compiled code) ...", flush=True)
-    live.start()
+    print("starting the loop in its own process ...", flush=True)
+    live.start(progress=lambda step: print(f"  {step} ...", flush=True))
     pendant = Pendant(live, args.output, hand=hand, bind=args.bind, port=args.port,
                       params_note=note)
     pendant.start()
@@ -128,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
     pendant.stop()
     live.stop()
     snap = live.snapshot()
+    live.close()
     if snap is not None and snap.error not in (None, "stopped"):
         print(f"the loop stopped: {snap.error}")
         return 1

@@ -7,7 +7,7 @@ no network access, and it works in a tablet's browser. meshcat, the other candid
 scene but has no GUI controls or draggable gizmos; a hand-written three.js page would have to
 re-implement both (viser docs: https://viser.studio).
 
-Structure: the loop runs in its own thread (:mod:`leadthrough.pendant.backend`); this module
+Structure: the loop runs in a process of its own (:mod:`leadthrough.pendant.backend`); this module
 reads its snapshot :data:`UI_HZ` times a second on a thread of its own and updates the page
 (:mod:`~leadthrough.pendant.status_view`, :mod:`~leadthrough.pendant.scene_view`,
 :mod:`~leadthrough.pendant.controls`); the operator's actions become requests to the loop.
@@ -80,7 +80,7 @@ class Pendant:
         self.server.initial_camera.position = (1.95, -0.6, 1.3)
         self.server.initial_camera.look_at = (0.55, 0.12, 0.6)
         self.scene = SceneView(self.server, self.robot, hand is not None)
-        self.controls = Controls(self.server.gui, self, live.parts.controller.config,
+        self.controls = Controls(self.server.gui, self, live.config,
                                  hand is not None)
         self.points = TaughtPoints()
         self._armed, self._device = False, (False if hand is not None else None)
@@ -195,7 +195,7 @@ class Pendant:
         """Bring the page up to the loop's latest snapshot (called :data:`UI_HZ` times a
         second by the pendant's thread): the 3D view every time, the panels at
         :data:`PANEL_HZ` or on a change of state. Nothing is done while no browser is
-        connected (the pendant's work shares the interpreter with the loop's thread)."""
+        connected."""
         if not self.server.get_clients():
             return
         snap = self.live.snapshot()

@@ -11,6 +11,11 @@ the virtual mass in force, ``c = 2ζ·√(k·M)``: a spring on a mass alone woul
 the handle and back. The force goes into the simulated plant at the TCP; the estimator sees it
 only through the motor currents.
 
+The simulated hand lives in the loop's process: the pendant's :class:`RemoteHand` sends
+:class:`Push`, :class:`Hold` and :class:`Release` requests there
+(:func:`apply_to_hand` applies them at a controller cycle's start) and reads the force back
+from the snapshot.
+
 The cap (80 N by default) stays below the controller's collision threshold (150 N,
 ``SafetyConfig.max_force``), so that a hard drag is a push, not a crash.
 """
@@ -25,8 +30,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leadthrough.errors import ControlError, check_fields
+from leadthrough.pendant.messages import Request, SimulatorRequest
 
-__all__ = ["Hand", "PushSpring"]
+__all__ = ["Hand", "Hold", "Push", "PushSpring", "Release", "RemoteHand", "apply_to_hand"]
 
 Array = NDArray[np.float64]
 
@@ -91,3 +97,84 @@ class PushSpring:
         """Grip ``hand`` on the handle at ``handle_m`` [m] with this spring."""
         hand.hold(np.asarray(handle_m, dtype=float), self.stiffness, self.damping(mass_kg),
                   self.max_force_n)
+
+
+@dataclass(frozen=True)
+class Push(SimulatorRequest):
+    """A constant force on the tool [N], base axes (x, y, z)."""
+
+    force_base: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Hold(SimulatorRequest):
+    """Grip the tool through a spring and a damper on a handle (see :meth:`Hand.hold`)."""
+
+    handle_base: tuple[float, float, float]
+    stiffness: float
+    damping: float
+    max_force: float
+
+
+@dataclass(frozen=True)
+class Release(SimulatorRequest):
+    """Let go of the tool."""
+
+
+def apply_to_hand(hand: Hand, request: object) -> bool:
+    """Apply a hand request to ``hand`` (the loop's process); False if it is none."""
+    if isinstance(request, Push):
+        hand.push(request.force_base)
+    elif isinstance(request, Hold):
+        hand.hold(request.handle_base, request.stiffness, request.damping, request.max_force)
+    elif isinstance(request, Release):
+        hand.release()
+    else:
+        return False
+    return True
+
+
+class Link(Protocol):
+    """The pendant's link to the loop (:class:`~leadthrough.pendant.backend.LiveSession`)."""
+
+    def send(self, request: Request) -> None:
+        """Send a request to the loop."""
+        ...
+
+    def snapshot(self) -> object:
+        """The latest snapshot (with ``push_base``), or None."""
+        ...
+
+
+class RemoteHand:
+    """The simulated hand as the pendant's process sees it: requests out, force from the
+    snapshot (the force the hand applied at the latest controller cycle)."""
+
+    def __init__(self, link: Link) -> None:
+        self.link = link
+
+    def push(self, force_base: ArrayLike) -> None:
+        """A constant force [N], shape (3,), at the TCP from the next cycle on."""
+        self.link.send(Push(_vec3(force_base)))
+
+    def hold(self, handle_base: ArrayLike, stiffness: float, damping: float,
+             max_force: float) -> None:
+        """Grip the tool through a spring on a handle (see :meth:`Hand.hold`)."""
+        self.link.send(Hold(_vec3(handle_base), float(stiffness), float(damping),
+                            float(max_force)))
+
+    def release(self) -> None:
+        """No force from the next cycle on."""
+        self.link.send(Release())
+
+    @property
+    def force_base(self) -> Array:
+        """The force the hand applied at the latest controller cycle [N], shape (3,)."""
+        snap = self.link.snapshot()
+        push = getattr(snap, "push_base", None)
+        return np.zeros(3) if push is None else np.asarray(push, dtype=float)
+
+
+def _vec3(v: ArrayLike) -> tuple[float, float, float]:
+    a = np.asarray(v, dtype=float).reshape(3)
+    return float(a[0]), float(a[1]), float(a[2])
