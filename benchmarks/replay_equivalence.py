@@ -13,6 +13,11 @@
 
 The replay is open loop (the recorded robot does not answer today's commands), so the comparison
 holds for any change of the simulator: it checks the loop alone. Goal: 1e-12 rad.
+
+Today's loop starts guiding only on a fresh press of the enabling device (a digital input of the
+driver); a reference trace recorded before the drivers reported inputs carries none, so the
+replay adds the press the simulated session scripts (input 0, pressed once the estimator is
+ready, ``warm_up_s + tare_s`` after the first sample, and held).
 """
 
 from __future__ import annotations
@@ -87,9 +92,17 @@ class _TodayAPI:
 
     def trace(self, ref: np.lib.npyio.NpzFile) -> object:
         from leadthrough.drivers.replay import FeedbackTrace
+        from leadthrough.session.loop_config import LoopConfig
+        from leadthrough.sim.session import ENABLE_INPUT
+
+        inputs = ref.get("fb_inputs")
+        if inputs is None:      # the scripted press of the enabling device (see the doc)
+            est = LoopConfig().estimator
+            held = ref["fb_fresh"] & (ref["fb_t"] >= est.warm_up_s + est.tare_s)
+            inputs = np.where(held, 1 << ENABLE_INPUT, 0).astype(np.int64)
         return FeedbackTrace(dt=float(ref["fb_dt"]), t=ref["fb_t"], q=ref["fb_q"],
                              current=ref["fb_current"], sequence=ref["fb_sequence"],
-                             fresh=ref["fb_fresh"])
+                             fresh=ref["fb_fresh"], digital_inputs=inputs)
 
     def config(self, robot: object, case: dict[str, object]) -> object:
         """Today's SimSessionConfig of a case (the reference builds the same settings with its

@@ -15,6 +15,7 @@ __all__ = [
     "ControlError",
     "DataError",
     "DataWarning",
+    "DriverError",
     "LeadthroughError",
     "RobotFileError",
     "SimulationError",
@@ -90,6 +91,11 @@ class TeachError(LeadthroughError):
 class ControlError(LeadthroughError):
     """The guiding controller was configured with invalid settings or started from an invalid
     state (pose outside the joint limits or the workspace box, missing optional package)."""
+
+
+class DriverError(LeadthroughError):
+    """The link to a robot controller failed: it could not be opened, it closed, a call timed
+    out, or the controller refused the stream (wrong joint count, units or mode)."""
 
 
 def check_fields(prefix: str, obj: Any, checks: list[tuple[str, bool, str]],

@@ -1,10 +1,11 @@
 """The driver protocol: how the guiding loop talks to a position-mode robot controller.
 
 A driver delivers feedback samples (time, encoder joint positions, measured motor currents,
-sequence number) and takes a joint position + velocity command every servo period ``dt``
-(1 ms). Nothing is allocated in the loop: the caller makes one :class:`DriverFeedback` and one
-:class:`JointCommand` with :meth:`Driver.make_feedback` and :meth:`Driver.make_command` and the
-driver fills or reads them in place (ruckig-style).
+sequence number and, where the controller reports them, its own state and its digital inputs)
+and takes a joint position + velocity command every servo period ``dt`` (1 ms on the simulator;
+2, 4 or 8 ms on real controllers). Nothing is allocated in the loop: the caller makes one
+:class:`DriverFeedback` and one :class:`JointCommand` with :meth:`Driver.make_feedback` and
+:meth:`Driver.make_command` and the driver fills or reads them in place (ruckig-style).
 
 The loop, for every driver::
 
@@ -19,6 +20,19 @@ The loop, for every driver::
             ...                     # stale feedback: count it, stop after a few
         ...                         # compute the next cmd from fb
 
+The controller's own state (:class:`ControllerState`: emergency or protective stop, not ready
+for streamed commands, a command it refused) and its digital inputs (a bit field: the enabling
+device, a "mark point" button) are optional: a driver that cannot report them leaves the
+defaults (``OK``, no input set). The loop treats any state but ``OK`` as a fault, and takes the
+enabling device and the mark button from the inputs it is told to watch.
+
+Errors: a driver raises when the link fails (:class:`~leadthrough.errors.DriverError`, or any
+exception). The loop never lets one escape: it latches a fault and stops at the acceleration
+limit if the link still takes commands, else it stops commanding (the controller's own watchdog
+then stops the robot). A driver whose calls can block may also provide ``abort()``, callable from
+another thread, which makes a blocked ``step`` or ``read`` return by raising: the loop's watchdog
+calls it when a call has blocked beyond its timeout.
+
 Pacing: :meth:`Driver.step` is where the loop waits for the next servo period. A simulated
 driver (``simulated`` true) advances its physics by one period and returns at once, so a
 simulated session runs as fast as the CPU allows (pace it with the wall clock only to watch
@@ -29,14 +43,40 @@ real time.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Driver", "DriverFeedback", "JointCommand", "WrappedDriver"]
+__all__ = ["ControllerState", "Driver", "DriverFeedback", "JointCommand", "WrappedDriver"]
 
 Array = NDArray[np.float64]
+
+
+class ControllerState(IntEnum):
+    """The robot controller's own state, as a driver reports it (any but ``OK`` is a fault for
+    the loop).
+
+    A driver maps its controller's codes onto these, e.g. UR RTDE's ``safety_mode`` (protective,
+    safeguard and emergency stops, violations, faults) and ``robot_mode``, or FANUC Stream
+    Motion's status bits (ready for commands, command received).
+    """
+
+    #: Ready for streamed commands, and the last command was accepted.
+    OK = 0
+    #: Not in a mode that takes streamed commands (teach mode, program not running, remote
+    #: control off, stream not started).
+    NOT_READY = 1
+    #: The controller refused the last command (e.g. beyond its joint speed, acceleration or
+    #: jerk limits).
+    COMMAND_REJECTED = 2
+    #: A protective or safeguard stop: a safety function of the controller stopped the robot.
+    PROTECTIVE_STOP = 3
+    #: An emergency stop.
+    EMERGENCY_STOP = 4
+    #: Any other controller fault (servo alarm, safety violation, ...).
+    FAULT = 5
 
 
 @dataclass(slots=True, eq=False)
@@ -49,12 +89,18 @@ class DriverFeedback:
         current: Measured motor currents [A], shape (n,) (NaN before the first sample).
         sequence: Controller sample counter: +1 per servo period, a jump means missed samples
             (-1 before the first sample).
+        controller_state: The controller's own state (a :class:`ControllerState` value;
+            ``OK`` when the driver cannot tell).
+        digital_inputs: The controller's digital inputs, bit k = input k (0 when the driver
+            reports none).
     """
 
     t: float
     q: Array
     current: Array
     sequence: int
+    controller_state: int = ControllerState.OK
+    digital_inputs: int = 0
 
     @classmethod
     def empty(cls, n: int) -> DriverFeedback:
@@ -183,3 +229,9 @@ class WrappedDriver:
     def step(self) -> None:
         """Step the wrapped driver."""
         self._driver.step()
+
+    def abort(self) -> None:
+        """Abort a blocked call of the wrapped driver, if it can (see the module doc)."""
+        abort = getattr(self._driver, "abort", None)
+        if abort is not None:
+            abort()

@@ -12,9 +12,14 @@ Per servo period (``driver.dt``, 1 ms):
 4. the row is recorded (preallocated arrays) and the compute time of steps 2–3 is measured.
 
 Before the first period the compiled code of all three parts is loaded (``warm_up``), so that
-no cycle compiles. The enabling input is held only once the estimator reports OK (after its
-warm-up and tare): guiding with an estimate that has not settled would start the robot on filter
-transients.
+no cycle compiles.
+
+The enabling device (a digital input of the driver, ``LoopOptions.enable_input``, or a
+``deadman`` function) starts guiding only on a fresh press seen while the loop is ready: the
+estimator reports OK (after its warm-up and tare: guiding on an estimate that has not settled
+would start the robot on filter transients) and no fault is latched
+(:class:`~leadthrough.session.operator_inputs.EnablingDevice`). A device held at the start must
+be released and pressed again; with no enabling input the loop never guides.
 
 The loop itself reads the clock, to pace (``paced=True``) and to measure; the algorithms it
 drives never do. It never raises once running: a driver or controller problem shows as a
@@ -42,9 +47,12 @@ from scipy.spatial.transform import Rotation
 from leadthrough.control.guiding import GuidingController
 from leadthrough.control.interpolation import JointInterpolator
 from leadthrough.control.safety import Event
+from leadthrough.control.safety_states import State
 from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
 from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
+from leadthrough.session.loop_config import LoopOptions
+from leadthrough.session.operator_inputs import EnablingDevice, input_bit
 from leadthrough.session.record import Mark, SessionEvent, SessionLog
 
 __all__ = ["LoopResult", "run_session"]
@@ -75,10 +83,10 @@ def run_session(
     interpolator: JointInterpolator,
     duration_s: float,
     *,
+    options: LoopOptions | None = None,
     deadman: Callable[[float], bool] | None = None,
     marks: Sequence[Mark] = (),
     applied_wrench: Callable[[], Array] | None = None,
-    paced: bool = False,
     settings: dict[str, object] | None = None,
 ) -> LoopResult:
     """Run a guiding session.
@@ -90,24 +98,33 @@ def run_session(
         controller: Guiding controller; its cycle must be a multiple of the driver's period.
         interpolator: Controller cycle → servo period interpolation.
         duration_s: Session length [s].
-        deadman: Enabling input as a function of time (default: held throughout).
+        options: How the loop meets the driver and the operator (the enabling input, pacing).
+        deadman: The enabling device's level as a function of the loop's time, instead of a
+            digital input (e.g. a scripted operator); None: ``options.enable_input``, if any.
         marks: Operator "mark point" presses, recorded as events.
         applied_wrench: A simulator's truth: the wrench applied this period (base frame),
             recorded for comparison; None for a real robot.
-        paced: Pace the loop to the wall clock (real time) instead of running flat out.
         settings: Recorded in the session file.
 
     Returns:
         The recording and the compute times.
 
     Raises:
-        ControlError: Mismatched periods or frames (checked before anything runs), or no
-            feedback on the first read.
+        ControlError: Mismatched periods or frames, or two enabling inputs (checked before
+            anything runs), or no feedback on the first read.
     """
+    options = options if options is not None else LoopOptions()
     every = _check_setup(driver, estimator, controller, duration_s)
+    if deadman is not None and options.enable_input is not None:
+        raise ControlError("two enabling inputs", field="deadman",
+                           value=f"a function and input {options.enable_input}",
+                           expected="one of deadman and options.enable_input")
     dt = driver.dt
     steps = round(duration_s / dt)
-    loop = _Loop(driver, estimator, controller, interpolator, every, deadman, applied_wrench)
+    paced = options.paced
+    loop = _Loop(driver, estimator, controller, interpolator, every, applied_wrench)
+    loop.enable_level = (_input_level(loop.fb, options.enable_input)
+                         if options.enable_input is not None else deadman)
     rec = _Buffers(steps, driver.n, applied_wrench is not None)
     t_start = loop.start()
     cycle_us = np.zeros(steps // every + 1)
@@ -160,11 +177,13 @@ class _Loop:
 
     def __init__(self, driver: Driver, estimator: ExternalForceEstimator,
                  controller: GuidingController, interpolator: JointInterpolator, every: int,
-                 deadman: Callable[[float], bool] | None,
                  applied_wrench: Callable[[], Array] | None) -> None:
         self.driver, self.estimator, self.controller = driver, estimator, controller
         self.interpolator, self.every = interpolator, every
-        self.deadman, self.applied_wrench = deadman, applied_wrench
+        self.applied_wrench = applied_wrench
+        #: The enabling device's level at the loop's time; None: no enabling input.
+        self.enable_level: Callable[[float], bool] | None = None
+        self.enabling = EnablingDevice()
         self.e_in, self.e_out = estimator.make_input(), estimator.make_output()
         # the feedback's arrays are the estimator input's and the command's velocity is its
         # qd_cmd (the command sent this period until the interpolator writes the next at its
@@ -224,8 +243,9 @@ class _Loop:
         c_in.current[:] = fb.current
         c_in.wrench_base[:] = e_out.wrench
         status = e_out.status
-        held = True if self.deadman is None else self.deadman(t_loop)
-        c_in.deadman = held and status == EstimatorStatus.OK
+        held = self.enable_level is not None and self.enable_level(t_loop)
+        ready = status == EstimatorStatus.OK and c_out.state != State.FAULT
+        c_in.deadman = self.enabling.update(held, ready)
         c_in.estimator_status = int(status)
         self.controller.update(c_in, c_out)
         if self.rezero_samples:
@@ -240,6 +260,13 @@ class _Loop:
                   c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
                   int(c_out.fault),
                   self.applied_wrench() if self.applied_wrench is not None else None)
+
+
+def _input_level(fb: DriverFeedback, bit: int) -> Callable[[float], bool]:
+    """The level of digital input ``bit`` of the feedback ``fb`` (at any time)."""
+    def level(t: float) -> bool:
+        return input_bit(fb.digital_inputs, bit)
+    return level
 
 
 def _zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,

@@ -2,10 +2,11 @@
 estimator, the guiding controller and the interpolator, for any driver.
 
     parts = build_loop(robot, params, LoopConfig(), driver.dt)
-    run_session(driver, *parts, duration_s=...)
+    run_session(driver, *parts, duration_s=..., options=LoopOptions(enable_input=0))
 
 The parameters come from calibration (a params file); nothing here knows whether the driver is
-a real controller or the simulator.
+a real controller or the simulator. :class:`LoopOptions` say how the loop meets the driver and
+the operator: which digital input is the enabling device, pacing.
 """
 
 from __future__ import annotations
@@ -15,11 +16,15 @@ from typing import NamedTuple
 
 from leadthrough.control.guiding import GuidingConfig, GuidingController
 from leadthrough.control.interpolation import HermiteInterpolator
+from leadthrough.errors import ControlError, check_fields
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 
-__all__ = ["LoopConfig", "LoopParts", "build_loop"]
+__all__ = ["MAX_INPUT_BIT", "LoopConfig", "LoopOptions", "LoopParts", "build_loop"]
+
+#: Highest digital input bit a driver can report (a 64-bit field).
+MAX_INPUT_BIT = 63
 
 
 def _guiding_estimator() -> EstimatorConfig:
@@ -42,6 +47,33 @@ class LoopConfig:
 
     estimator: EstimatorConfig = field(default_factory=_guiding_estimator)
     guiding: GuidingConfig = field(default_factory=GuidingConfig)
+
+
+def _bit_or_none(bit: int | None) -> bool:
+    return bit is None or (isinstance(bit, int) and 0 <= bit <= MAX_INPUT_BIT)
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """How the loop meets the driver and the operator.
+
+    Attributes:
+        enable_input: The digital input (bit of ``DriverFeedback.digital_inputs``) wired to
+            the enabling device; None: no enabling input from the driver. Guiding starts only
+            on a fresh press of it (:class:`~leadthrough.session.operator_inputs.EnablingDevice`);
+            with no enabling input at all, the loop never guides.
+        paced: Pace a simulated driver to the wall clock (real time) instead of running flat
+            out; a real driver paces the loop itself.
+    """
+
+    enable_input: int | None = None
+    paced: bool = False
+
+    def __post_init__(self) -> None:
+        check_fields("loop", self, [
+            ("enable_input", _bit_or_none(self.enable_input),
+             f"None or an input bit 0..{MAX_INPUT_BIT}"),
+        ], ControlError)
 
 
 class LoopParts(NamedTuple):

@@ -14,6 +14,10 @@ the feedback go bad mid-session:
   following error: the robot is not where it reports).
 
 The simulation itself is never touched by a fault: it keeps moving under the last command.
+
+Digital inputs (an enabling device, a "mark point" button) are scripted with
+:meth:`SimDriver.script_input` (:class:`InputScript`: the intervals of sample time during which
+an input is set); ``read`` reports them in ``DriverFeedback.digital_inputs``.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from leadthrough.drivers.protocol import DriverFeedback, JointCommand
 from leadthrough.errors import SimulationError
 from leadthrough.sim.robot import SimRobot
 
-__all__ = ["InjectedFault", "InjectedFaultKind", "SimDriver"]
+__all__ = ["InjectedFault", "InjectedFaultKind", "InputScript", "SimDriver"]
 
 
 class InjectedFaultKind(StrEnum):
@@ -78,6 +82,37 @@ class InjectedFault:
         return self.t_start <= t < self.t_end
 
 
+@dataclass(frozen=True)
+class InputScript:
+    """A digital input of the simulated controller, set while the sample time is in one of the
+    intervals ``[t_on, t_off)``.
+
+    Attributes:
+        bit: The input (bit of ``DriverFeedback.digital_inputs``), 0..63.
+        intervals: ``(t_on, t_off)`` pairs [s], in time order, not overlapping (``t_off`` may be
+            inf).
+    """
+
+    bit: int
+    intervals: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.bit, int) and 0 <= self.bit <= 63):
+            raise SimulationError("no such input", field="input.bit", value=self.bit,
+                                  expected="an input bit 0..63")
+        last = -math.inf
+        for on, off in self.intervals:
+            if not (math.isfinite(on) and last <= on < off):
+                raise SimulationError("intervals out of order or empty", field="input.intervals",
+                                      value=self.intervals,
+                                      expected="(t_on, t_off) pairs, t_on < t_off, in time order")
+            last = off
+
+    def level(self, t: float) -> bool:
+        """Whether the input is set at sample time ``t`` [s]."""
+        return any(on <= t < off for on, off in self.intervals)
+
+
 class SimDriver:
     """Driver on a :class:`~leadthrough.sim.robot.SimRobot` (``simulated`` is True).
 
@@ -95,6 +130,7 @@ class SimDriver:
         self._dt = float(sim.config.timestep)
         self._last_seq = 0
         self._faults: list[InjectedFault] = []
+        self._inputs: dict[int, InputScript] = {}
 
     @property
     def n(self) -> int:
@@ -147,6 +183,17 @@ class SimDriver:
         """Remove all injected faults."""
         self._faults.clear()
 
+    def script_input(self, script: InputScript) -> None:
+        """Script a digital input (replaces that input's script, if any)."""
+        self._inputs[script.bit] = script
+
+    def _digital_inputs(self, t: float) -> int:
+        bits = 0
+        for bit, script in self._inputs.items():
+            if script.level(t):
+                bits |= 1 << bit
+        return bits
+
     def read(self, fb: DriverFeedback) -> bool:
         """Fill ``fb`` with the newest sample if one arrived since the last read.
 
@@ -168,6 +215,7 @@ class SimDriver:
         fb.sequence = sample.sequence
         fb.q[:] = sample.q
         fb.current[:] = sample.current
+        fb.digital_inputs = self._digital_inputs(sample.t)
         for f in active:
             idx = slice(None) if f.joint is None else f.joint
             if f.kind is InjectedFaultKind.NAN_Q:

@@ -4,10 +4,16 @@ a real robot runs (:func:`~leadthrough.session.loop_config.build_loop`,
 
 The parameters come from calibration (a params file), never from the simulator's truth: the
 simulated robot is a different, richer plant than the identified model.
+
+The scripted operator holds an enabling device wired to digital input :data:`ENABLE_INPUT` of
+the simulated controller: by default pressed once the loop is ready (the estimator's warm-up and
+tare, ``warm_up_s + tare_s`` after the first sample) and held to the end; the loop starts guiding
+on that fresh press, as it would on a real robot.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -24,14 +30,17 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import LoopResult, run_session
-from leadthrough.session.loop_config import LoopConfig, build_loop
+from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
 from leadthrough.session.metrics import SessionSummary, summarize
-from leadthrough.sim.driver import InjectedFault, SimDriver
+from leadthrough.sim.driver import InjectedFault, InputScript, SimDriver
 from leadthrough.sim.operator_scripts import make_operator
 from leadthrough.sim.robot import SimConfig, SimRobot
 
-__all__ = ["DEFAULT_SIM_SEED", "PUSH_MASS_KG", "SimSession", "SimSessionConfig",
+__all__ = ["DEFAULT_SIM_SEED", "ENABLE_INPUT", "PUSH_MASS_KG", "SimSession", "SimSessionConfig",
            "light_guiding", "replay_session", "run_sim_session", "sim_robot_seed"]
+
+#: The simulated controller's digital input wired to the enabling device.
+ENABLE_INPUT = 0
 
 #: Virtual mass [kg] of the push demonstrations: 40 N for 3 s then reaches the 0.2 m/s cap
 #: ((40 − 15) N / 100 kg = 0.25 m/s²). With Table IV's 1000 kg it reaches 0.075 m/s.
@@ -58,6 +67,10 @@ class SimSessionConfig:
             ``loop.guiding.controller``).
         paced: Run in real time instead of as fast as possible.
         faults: Feedback faults injected by the simulated driver (safety tests).
+        enable_held_s: When the operator holds the enabling device: ``(t_press, t_release)``
+            intervals of sample time [s] (``t_release`` may be inf); None: pressed when the
+            loop is ready (``loop.estimator.warm_up_s + tare_s``) and held to the end; ``()``:
+            never pressed (the loop then never guides).
     """
 
     operator: str = "push-x"
@@ -69,8 +82,11 @@ class SimSessionConfig:
     loop: LoopConfig = field(default_factory=LoopConfig)
     paced: bool = False
     faults: tuple[InjectedFault, ...] = ()
+    enable_held_s: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.enable_held_s is not None:
+            InputScript(ENABLE_INPUT, self.enable_held_s)       # checks the intervals
         check_fields("session", self, [
             ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600,
              "0 < duration <= 3600 s"),
@@ -173,6 +189,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     sim_driver = SimDriver(sim)
     for fault in config.faults:
         sim_driver.inject(fault)
+    sim_driver.script_input(InputScript(ENABLE_INPUT, _enable_held(config)))
     recorder = (RecordingDriver(sim_driver, round(duration / sim_driver.dt) + 1)
                 if record_feedback else None)
     driver: Driver = sim_driver if recorder is None else recorder
@@ -189,9 +206,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         "friction_mode": guiding.friction_mode,
     }
     result = run_session(driver, parts.estimator, parts.controller, parts.interpolator,
-                         duration, marks=operator.marks,
-                         applied_wrench=lambda: sim.applied_wrench, paced=config.paced,
-                         settings=settings)
+                         duration, options=_options(config), marks=operator.marks,
+                         applied_wrench=lambda: sim.applied_wrench, settings=settings)
     p1 = getattr(operator, "p1_base", None)
     p2 = getattr(operator, "p2_base", None)
     return SimSession(result=result, summary=summarize(result, guiding.dt,
@@ -224,4 +240,18 @@ def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     driver: Driver = replay if wrap_driver is None else wrap_driver(replay)
     parts = build_loop(robot, params, config.loop, driver.dt)
     duration = (feedback.reads - 1) * driver.dt
-    return run_session(driver, parts.estimator, parts.controller, parts.interpolator, duration)
+    return run_session(driver, parts.estimator, parts.controller, parts.interpolator, duration,
+                       options=_options(config))
+
+
+def _options(config: SimSessionConfig) -> LoopOptions:
+    """The loop's options of a simulated session: the enabling device on its input."""
+    return LoopOptions(enable_input=ENABLE_INPUT, paced=config.paced)
+
+
+def _enable_held(config: SimSessionConfig) -> tuple[tuple[float, float], ...]:
+    """When the scripted operator holds the enabling device (see ``enable_held_s``)."""
+    if config.enable_held_s is not None:
+        return config.enable_held_s
+    est = config.loop.estimator
+    return ((est.warm_up_s + est.tare_s, math.inf),)
