@@ -37,18 +37,6 @@ from leadthrough.sim.session import (
 LIMIT_ACC = 0.4  # m/s², Table IV
 
 
-@pytest.fixture(scope="module")
-def nominal_params(er20: Robot) -> ParamsFile:
-    """Nominal (CAD) parameters with the noise level of a calibration: enough to run the loop.
-
-    The loop's contract (zero motion at rest, faults, recording) must hold for any parameters;
-    the accuracy of calibrated parameters is covered by the benchmarks.
-    """
-    n = er20.n
-    return ParamsFile(robot="er20", method="nominal", params=nominal_drive_parameters(er20),
-                      noise_mean=np.zeros(n), noise_std=np.full(n, 1.0), J=0.0)
-
-
 def test_rest_session_commands_exactly_zero(er20: Robot, nominal_params: ParamsFile) -> None:
     """The paper's claim, on the closed loop: nobody pushes, the commands never change."""
     s = run_sim_session(er20, nominal_params, SimSessionConfig(operator="rest", duration_s=4.0))

@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
                            operator_seed=args.operator_seed, paced=args.realtime, loop=loop)
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
-    save_session(session.result.log, args.output)
+    save_session(session.log, args.output)
     summary = session.summary.to_json()
     summary["session"] = str(args.output)
     if args.json:

@@ -227,9 +227,19 @@ class SafetySupervisor:
     @property
     def events(self) -> list[Event]:
         """The logged transitions, oldest first (at most ``max_events``)."""
-        ring, count = self.event_ring, int(self._s.event_count)
+        return self.events_since(0)
+
+    @property
+    def event_count(self) -> int:
+        """Transitions logged since construction (dropped ones included)."""
+        return int(self._s.event_count)
+
+    def events_since(self, count: int) -> list[Event]:
+        """The transitions logged after the first ``count``, oldest first (those still in the
+        ring)."""
+        ring, total = self.event_ring, int(self._s.event_count)
         cap = ring.size
-        rows = (ring[k % cap] for k in range(max(0, count - cap), count))
+        rows = (ring[k % cap] for k in range(max(0, total - cap, count), total))
         return [Event(float(e["t"]), State(e["from_state"]), State(e["to_state"]),
                       Cause(e["cause"]), Fault(e["fault"]), float(e["value"]), int(e["index"]))
                 for e in rows]

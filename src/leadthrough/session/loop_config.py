@@ -11,6 +11,7 @@ the operator: which digital input is the enabling device, pacing.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -62,17 +63,39 @@ class LoopOptions:
             the enabling device; None: no enabling input from the driver. Guiding starts only
             on a fresh press of it (:class:`~leadthrough.session.operator_inputs.EnablingDevice`);
             with no enabling input at all, the loop never guides.
+        software_enable: Take the enabling device from ``LoopRequests.set_enable`` (a page's
+            button) instead; a simulated driver only: a software button is no enabling device
+            for a real robot.
+        mark_input: The digital input wired to the "mark point" button; None: marks come only
+            from ``LoopRequests.mark``.
         paced: Pace a simulated driver to the wall clock (real time) instead of running flat
             out; a real driver paces the loop itself.
+        watchdog_s: A driver exchange (write, step, read) longer than this is a fault, and one
+            that blocks is aborted (:mod:`~leadthrough.session.watchdog`) [s]; real drivers
+            only (a simulation's wall time means nothing). More than two periods.
+        stop_timeout_s: A stop (requested, or the end of ``duration_s``) that has not brought
+            the commanded motion to rest after this long ends the loop anyway [s].
     """
 
     enable_input: int | None = None
+    software_enable: bool = False
+    mark_input: int | None = None
     paced: bool = False
+    watchdog_s: float = 0.05
+    stop_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
+        bits = f"None or an input bit 0..{MAX_INPUT_BIT}"
         check_fields("loop", self, [
-            ("enable_input", _bit_or_none(self.enable_input),
-             f"None or an input bit 0..{MAX_INPUT_BIT}"),
+            ("enable_input", _bit_or_none(self.enable_input), bits),
+            ("mark_input", _bit_or_none(self.mark_input)
+             and (self.mark_input is None or self.mark_input != self.enable_input),
+             bits + ", not the enabling input"),
+            ("software_enable", not (self.software_enable and self.enable_input is not None),
+             "False with an enable_input (one enabling device)"),
+            ("watchdog_s", math.isfinite(self.watchdog_s) and self.watchdog_s > 0, "> 0 s"),
+            ("stop_timeout_s", math.isfinite(self.stop_timeout_s) and self.stop_timeout_s > 0,
+             "> 0 s"),
         ], ControlError)
 
 
