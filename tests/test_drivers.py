@@ -191,12 +191,12 @@ def test_scripted_digital_inputs_are_read_recorded_and_replayed(er20: Robot) -> 
     sim.script_input(InputScript(1, ((0.004, math.inf),)))
     rec = RecordingDriver(sim, capacity=8)
     fb = rec.make_feedback()
-    assert fb.digital_inputs == 0 and fb.controller_state == 0
+    assert fb.inputs == 0 and fb.state == 0
     got = []
     for _ in range(8):
         rec.step()
         assert rec.read(fb)
-        got.append(fb.digital_inputs)
+        got.append(fb.inputs)
     assert got == [0, 0, 1, 1, 3, 2, 2, 2]           # samples at t = 0, 1, ..., 7 ms
     trace = rec.trace()
     assert trace.digital_inputs is not None and trace.digital_inputs.tolist() == got
@@ -205,7 +205,7 @@ def test_scripted_digital_inputs_are_read_recorded_and_replayed(er20: Robot) -> 
     replayed = []
     for _ in range(8):
         assert rep.read(fb2)
-        replayed.append(fb2.digital_inputs)
+        replayed.append(fb2.inputs)
     assert replayed == got
     with pytest.raises(SimulationError, match="bit"):
         InputScript(64, ())

@@ -84,8 +84,8 @@ def test_emergency_stop_latches_stops_and_resets_to_a_fresh_press(
     assert fault is Fault.CONTROLLER_STATE and 2.0 <= t_fault < 2.011
     assert np.linalg.norm(log.twist_cmd_base[np.searchsorted(log.time, 1.99), :3]) > 0.05
     notes = _notes(log)
-    assert notes[0] == ("controller state", "EMERGENCY_STOP")
-    assert notes[1][0] == "reset refused" and "EMERGENCY_STOP" in notes[1][1]
+    assert notes[0] == ("controller state", "ESTOP")
+    assert notes[1][0] == "reset refused" and "ESTOP" in notes[1][1]
     assert notes[2][0] == "fault reset"
     during = (log.time >= t_fault) & (log.time < 4.0)
     assert np.all(log.state[during] == int(State.FAULT))         # latched

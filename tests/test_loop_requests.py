@@ -211,6 +211,7 @@ def test_the_board_never_hands_out_a_torn_snapshot() -> None:
             f.q_cmd = float(k)
             f.mark_count = 0
             board.end()
+            time.sleep(0)                    # the loop waits for its next period here
 
     writer = threading.Thread(target=write)
     writer.start()

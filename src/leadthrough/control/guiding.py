@@ -54,6 +54,7 @@ transition writes one entry of the supervisor's preallocated event ring).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -72,6 +73,7 @@ from leadthrough.control.guiding_types import (
 )
 from leadthrough.control.ik import DifferentialIK
 from leadthrough.control.ik_step import update_manipulability_of
+from leadthrough.control.operator_limits import adjusted_config
 from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
 from leadthrough.control.safety import Event, Fault, SafetySupervisor, State
 from leadthrough.errors import ControlError
@@ -108,6 +110,7 @@ class GuidingController:
     def __init__(self, robot: Robot, config: GuidingConfig | None = None,
                  noise_mean: Array | None = None, noise_std: Array | None = None) -> None:
         self.config = cfg = config if config is not None else GuidingConfig()
+        self._commissioned = cfg
         self.robot = robot
         self.n = n = robot.n
         self._auto: AutoFriction | None = None
@@ -133,9 +136,17 @@ class GuidingController:
 
     def _set_up(self, cfg: GuidingConfig) -> None:
         """The record's settings, and the state before the first reset."""
+        self._write_settings(cfg)
+        s = self._s
+        s.q_measured = math.nan       # the last finite q before the first reset
+        s.rest_s = s.release_s = s.stop_plan = math.inf
+        s.ik_scale = s.speed_scale = 1.0
+
+    def _write_settings(self, cfg: GuidingConfig) -> None:
+        """The record's settings from ``cfg`` (the state untouched)."""
         s = self._s
         s.dt = cfg.dt
-        self._write_live_settings(cfg, with_friction=True)
+        self._write_live_settings(cfg)
         if cfg.controller != "virtual-friction":
             s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
         s.hold_s = cfg.settle_s + cfg.rezero_s
@@ -145,14 +156,10 @@ class GuidingController:
         s.max_speed = cfg.limits.max_speed
         s.max_step = cfg.limits.max_step(cfg.dt)
         s.stop_fraction = cfg.ik.stop_acceleration_fraction
-        s.q_measured = math.nan       # the last finite q before the first reset
-        s.rest_s = s.release_s = s.stop_plan = math.inf
-        s.ik_scale = s.speed_scale = 1.0
 
-    def _write_live_settings(self, cfg: GuidingConfig, with_friction: bool) -> None:
-        """The settings :meth:`retune` may change: the frame, the law's coefficients, the axis
-        mask and the friction (``with_friction``; eq. 36 replaces it at the next reset or
-        setpoint move when automatic)."""
+    def _write_live_settings(self, cfg: GuidingConfig) -> None:
+        """The settings an operator may change: the frame, the law's coefficients, the axis
+        mask and the friction (eq. 36 replaces it at the next cycle when automatic)."""
         s = self._s
         s.tool_frame = cfg.frame == "tool"
         if cfg.controller == "virtual-friction":
@@ -161,9 +168,8 @@ class GuidingController:
         else:
             s.law, s.law_coefficients = Law.VELOCITY, cfg.velocity_baseline.gain
         s.axis_mask = [1.0 if a else 0.0 for a in cfg.axes_enabled]
-        if with_friction:
-            s.friction = cfg.virtual_friction.friction
-            s.stopping_friction = cfg.virtual_friction.stopping_friction
+        s.friction = cfg.virtual_friction.friction
+        s.stopping_friction = cfg.virtual_friction.stopping_friction
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
@@ -262,7 +268,9 @@ class GuidingController:
             raise ControlError("the commanded motion is not at rest", field="config",
                                expected="a retune at rest")
         self.config = config
-        self._write_live_settings(config, with_friction=config.friction_mode == "fixed")
+        self._write_live_settings(config)
+        if self._auto is not None:
+            s.kinematics_fresh = False   # eq. 36 again, in the new frame
         s.release_peak = s.release_smooth = 0.0
 
     def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
@@ -278,6 +286,44 @@ class GuidingController:
         """
         self._safety.trip(t, fault, value, index)
 
+    def adjust(self, *, frame: str | None = None, axes_enabled: Sequence[bool] | None = None,
+               mass: tuple[float, float] | None = None,
+               friction: tuple[float, float] | None = None) -> GuidingConfig:
+        """Change what an operator may change: the frame, the enabled axes, the virtual mass
+        and the fixed friction, the last two clamped to ``config.operator_limits``
+        (:func:`~leadthrough.control.operator_limits.adjusted_config`).
+
+        Call it between cycles, while the controller is IDLE or in FAULT: a change of frame
+        or axes while the law is running would turn the motion (its twist and the release
+        detector's state are kept in the controller's frame). With the automatic friction,
+        eq. 36 is evaluated again in the new frame at the next cycle.
+
+        Args:
+            frame: ``"base"`` or ``"tool"``; None: unchanged.
+            axes_enabled: 6 booleans (x, y, z, ωx, ωy, ωz); None: unchanged.
+            mass: (translational [kg], rotational [kg·m²]); None: unchanged.
+            friction: (translational [N], rotational [N·m]); None: unchanged.
+
+        Returns:
+            The settings now in force (``config``), with the clamped values.
+
+        Raises:
+            ControlError: GUIDING or STOPPING, or a change ``adjusted_config`` refuses
+                (nothing is changed then).
+        """
+        state = self.state
+        if state in (State.GUIDING, State.STOPPING):
+            raise ControlError("settings change only while the robot is not guided",
+                               field="state", value=state.name,
+                               expected="IDLE or FAULT (release the enabling device)")
+        cfg = adjusted_config(self.config, self._commissioned, frame=frame,
+                              axes_enabled=axes_enabled, mass=mass, friction=friction)
+        self.config = cfg
+        self._write_settings(cfg)
+        if self._auto is not None:
+            self._s.kinematics_fresh = False   # eq. 36 again, in the new frame
+        return cfg
+
     @property
     def state(self) -> State:
         """Current safety state."""
@@ -288,14 +334,20 @@ class GuidingController:
         """The latched fault (``Fault.NONE`` unless in FAULT)."""
         return self._safety.fault
 
-    @property
-    def event_count(self) -> int:
-        """Transitions logged since construction (an integer read: cheap every cycle)."""
-        return self._safety.event_count
-
     def events_since(self, count: int) -> list[Event]:
         """The transitions logged after the first ``count``, oldest first."""
         return self._safety.events_since(count)
+
+    @property
+    def last_event(self) -> Event | None:
+        """The latest logged state transition (with the fault, its value and index), or None
+        before the first."""
+        return self._safety.last_event
+
+    @property
+    def event_count(self) -> int:
+        """Number of transitions logged since the controller was made (dropped ones too)."""
+        return self._safety.event_count
 
     @property
     def events(self) -> list[Event]:

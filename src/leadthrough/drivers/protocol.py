@@ -20,11 +20,13 @@ The loop, for every driver::
             ...                     # stale feedback: count it, stop after a few
         ...                         # compute the next cmd from fb
 
-The controller's own state (:class:`ControllerState`: emergency or protective stop, not ready
-for streamed commands, a command it refused) and its digital inputs (a bit field: the enabling
-device, a "mark point" button) are optional: a driver that cannot report them leaves the
-defaults (``OK``, no input set). The loop treats any state but ``OK`` as a fault, and takes the
-enabling device and the mark button from the inputs it is told to watch.
+Controller state and digital inputs: a real controller's driver also fills
+:attr:`DriverFeedback.state` (:class:`ControllerState` flags: E-stop, protective stop, not ready
+for streamed commands, a command not taken) and :attr:`DriverFeedback.inputs` (its digital
+inputs as a bit word, ``inputs_read`` telling whether the sample carried them), and a controller
+that reports joint torque instead of motor current (KUKA RSI) fills
+:attr:`DriverFeedback.torque`. These fields have defaults (normal state, no inputs, no torque),
+so drivers and callers that do not use them are unaffected.
 
 Errors: a driver raises when the link fails (:class:`~leadthrough.errors.DriverError`, or any
 exception). The loop never lets one escape: it latches a fault and stops at the acceleration
@@ -43,7 +45,7 @@ real time.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import IntEnum
+from enum import IntFlag
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -54,29 +56,19 @@ __all__ = ["ControllerState", "Driver", "DriverFeedback", "JointCommand", "Wrapp
 Array = NDArray[np.float64]
 
 
-class ControllerState(IntEnum):
-    """The robot controller's own state, as a driver reports it (any but ``OK`` is a fault for
-    the loop).
+class ControllerState(IntFlag):
+    """What a real controller reports about itself, as flags (0: normal, or not reported).
 
-    A driver maps its controller's codes onto these, e.g. UR RTDE's ``safety_mode`` (protective,
-    safeguard and emergency stops, violations, faults) and ``robot_mode``, or FANUC Stream
-    Motion's status bits (ready for commands, command received).
+    Each driver documents how its controller's codes map onto these (e.g. UR ``safety_mode``
+    3 is ``PROTECTIVE_STOP``, FANUC J519 status bits 0 and 2 cleared is ``NOT_READY``).
     """
 
-    #: Ready for streamed commands, and the last command was accepted.
-    OK = 0
-    #: Not in a mode that takes streamed commands (teach mode, program not running, remote
-    #: control off, stream not started).
-    NOT_READY = 1
-    #: The controller refused the last command (e.g. beyond its joint speed, acceleration or
-    #: jerk limits).
-    COMMAND_REJECTED = 2
-    #: A protective or safeguard stop: a safety function of the controller stopped the robot.
-    PROTECTIVE_STOP = 3
-    #: An emergency stop.
-    EMERGENCY_STOP = 4
-    #: Any other controller fault (servo alarm, safety violation, ...).
-    FAULT = 5
+    NORMAL = 0
+    ESTOP = 1             # emergency stop
+    PROTECTIVE_STOP = 2   # protective / safeguard stop
+    NOT_READY = 4         # not in the mode that executes streamed commands (servo power off,
+    #                       alarm, program not running, stream not accepted)
+    COMMAND_REJECTED = 8  # the controller did not take the last command (refused or late)
 
 
 @dataclass(slots=True, eq=False)
@@ -86,27 +78,34 @@ class DriverFeedback:
     Attributes:
         t: Sample time on the controller clock [s] (NaN before the first sample).
         q: Encoder joint positions [rad], shape (n,) (NaN before the first sample).
-        current: Measured motor currents [A], shape (n,) (NaN before the first sample).
+        current: Measured motor currents [A], shape (n,) (NaN before the first sample). A
+            controller that reports joint torque instead fills the equivalent motor current
+            ``torque / (R·Kt)`` of the robot file (see its driver) and :attr:`torque`.
         sequence: Controller sample counter: +1 per servo period, a jump means missed samples
             (-1 before the first sample).
-        controller_state: The controller's own state (a :class:`ControllerState` value;
-            ``OK`` when the driver cannot tell).
-        digital_inputs: The controller's digital inputs, bit k = input k (0 when the driver
-            reports none).
+        state: :class:`ControllerState` flags of the sample (0: normal or not reported).
+        inputs: The controller's digital inputs, bit k = input k in the driver's numbering
+            (0 when not reported).
+        inputs_read: Whether this sample carried the digital inputs.
+        torque: Joint torques reported by the controller [N·m], shape (n,), or None when the
+            controller reports currents (or the caller did not ask for torque).
     """
 
     t: float
     q: Array
     current: Array
     sequence: int
-    controller_state: int = ControllerState.OK
-    digital_inputs: int = 0
+    state: int = 0
+    inputs: int = 0
+    inputs_read: bool = False
+    torque: Array | None = None
 
     @classmethod
-    def empty(cls, n: int) -> DriverFeedback:
-        """A feedback for ``n`` joints that holds no sample yet (NaN, sequence -1)."""
+    def empty(cls, n: int, torque: bool = False) -> DriverFeedback:
+        """A feedback for ``n`` joints that holds no sample yet (NaN, sequence -1); with a
+        torque array (NaN) if ``torque``."""
         return cls(t=float("nan"), q=np.full(n, np.nan), current=np.full(n, np.nan),
-                   sequence=-1)
+                   sequence=-1, torque=np.full(n, np.nan) if torque else None)
 
 
 @dataclass(slots=True, eq=False)

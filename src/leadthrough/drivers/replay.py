@@ -97,8 +97,8 @@ class RecordingDriver(WrappedDriver):
                 self._q[k] = fb.q
                 self._current[k] = fb.current
                 self._sequence[k] = fb.sequence
-                self._state[k] = fb.controller_state
-                self._inputs[k] = fb.digital_inputs
+                self._state[k] = fb.state
+                self._inputs[k] = fb.inputs
             self._k = k + 1
         return fresh
 
@@ -183,8 +183,9 @@ class ReplayDriver:
         fb.q[:] = tr.q[k]
         fb.current[:] = tr.current[k]
         fb.sequence = int(tr.sequence[k])
-        fb.controller_state = int(self._state[k])
-        fb.digital_inputs = int(self._inputs[k])
+        fb.state = int(self._state[k])
+        fb.inputs = int(self._inputs[k])
+        fb.inputs_read = True
         return True
 
     def write(self, cmd: JointCommand) -> None:

@@ -6,7 +6,7 @@ Per servo period (``driver.dt``):
 1. **exchange** with the driver: write the interpolated joint command, ``driver.step()`` (a
    simulated driver advances one period; a real one blocks until the next), ``driver.read(fb)``;
 2. a new sample goes through the external force estimator (eq. 27–30); the controller's own
-   state (``fb.controller_state``) is checked, the mark button read, one request served;
+   state (``fb.state``) is checked, the mark button read, one request served;
 3. every ``controller_every`` periods (10 ms), the **controller cycle**: the guiding controller
    takes the measured state, the estimated wrench and the enabling device's state and produces
    a joint setpoint; the interpolator turns it into 1 ms position + velocity commands; the
@@ -68,9 +68,11 @@ from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.record import SessionLog
 from leadthrough.session.recorder import SessionRecorder
 from leadthrough.session.requests import LoopRequests
-from leadthrough.session.servo_loop import EndCause, LoopEnd, ServoLoop
+from leadthrough.session.servo_loop import EndCause, LoopEnd, ServoLoop, transition_event
+from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
 
-__all__ = ["EndCause", "LoopEnd", "LoopResult", "run_session"]
+__all__ = ["EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers", "run_session",
+           "transition_event"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")

@@ -59,7 +59,7 @@ class LoopOptions:
     """How the loop meets the driver and the operator.
 
     Attributes:
-        enable_input: The digital input (bit of ``DriverFeedback.digital_inputs``) wired to
+        enable_input: The digital input (bit of ``DriverFeedback.inputs``) wired to
             the enabling device; None: no enabling input from the driver. Guiding starts only
             on a fresh press of it (:class:`~leadthrough.session.operator_inputs.EnablingDevice`);
             with no enabling input at all, the loop never guides.
@@ -73,6 +73,9 @@ class LoopOptions:
         watchdog_s: A driver exchange (write, step, read) longer than this is a fault, and one
             that blocks is aborted (:mod:`~leadthrough.session.watchdog`) [s]; real drivers
             only (a simulation's wall time means nothing). More than two periods.
+        abort_s: A driver exchange blocked longer than this is aborted and the link taken as
+            gone: the loop ends without commanding (the controller's own watchdog stops the
+            robot) [s]; at least ``watchdog_s``.
         stop_timeout_s: A stop (requested, or the end of ``duration_s``) that has not brought
             the commanded motion to rest after this long ends the loop anyway [s].
     """
@@ -82,6 +85,7 @@ class LoopOptions:
     mark_input: int | None = None
     paced: bool = False
     watchdog_s: float = 0.05
+    abort_s: float = 1.0
     stop_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
@@ -94,6 +98,8 @@ class LoopOptions:
             ("software_enable", not (self.software_enable and self.enable_input is not None),
              "False with an enable_input (one enabling device)"),
             ("watchdog_s", math.isfinite(self.watchdog_s) and self.watchdog_s > 0, "> 0 s"),
+            ("abort_s", math.isfinite(self.abort_s) and self.abort_s >= self.watchdog_s,
+             ">= watchdog_s"),
             ("stop_timeout_s", math.isfinite(self.stop_timeout_s) and self.stop_timeout_s > 0,
              "> 0 s"),
         ], ControlError)

@@ -13,9 +13,10 @@ requests, in the loop's thread, and publishing the snapshot
 * **Fault reset**: at rest, with the robot controller reporting OK, the feedback finite and the
   robot within the following-error limit of its command (beyond it the reported position cannot
   be trusted to restart from: an encoder or a following fault), unless the controller stopped
-  the robot itself (``Fault.CONTROLLER_STATE``: it stopped short of the commanded stop). Every part restarts at the
-  measured position (after an E-stop the robot stopped where it was, short of the commanded
-  stop); the estimator warms up and tares again, and guiding needs a fresh press.
+  the robot itself (``Fault.CONTROLLER_STATE``: it stopped short of the commanded stop). Every
+  part restarts at the measured position (after an E-stop the robot stopped where it was,
+  short of the commanded stop); the estimator warms up and tares again,
+  and guiding needs a fresh press.
 
 A request that cannot be served is refused with a note: a ``loop`` event in the recording and
 the snapshot's ``notice``.
@@ -118,8 +119,8 @@ def _reset_refusal(loop: ServoLoop) -> str | None:
         return "no fault is latched"
     if not loop.at_rest():
         return "the stop is not complete"
-    state = int(loop.fb.controller_state)
-    if state != ControllerState.OK:
+    state = int(loop.fb.state)
+    if state != ControllerState.NORMAL:
         name = (ControllerState(state).name if state in ControllerState._value2member_map_
                 else f"code {state}")
         return f"the robot controller reports {name}"
@@ -166,7 +167,7 @@ def publish(loop: ServoLoop, i: int, t: float) -> None:
     f.tcp_rotation, f.tcp_position = pose[:3, :3], pose[:3, 3]
     f.wrench, f.twist = loop.e_out.wrench, c_out.twist_base
     f.state, f.fault = c_out.state, c_out.fault
-    f.controller_state, f.estimator_status = fb.controller_state, loop.e_out.status
+    f.controller_state, f.estimator_status = fb.state, loop.e_out.status
     f.enable_held, f.enabled, f.ready = loop.held, loop.enabling.engaged, loop.ready
     f.friction = c_out.friction
     f.mark_count, f.late_periods, f.running = len(loop.marks), loop.late, True

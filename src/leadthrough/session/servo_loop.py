@@ -33,7 +33,8 @@ from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
 from leadthrough.session.watchdog import DriverWatchdog
 
-__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop"]
+__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "sleep_until", "transition_event",
+           "zero_velocity_update"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
@@ -118,7 +119,10 @@ class ServoLoop:
         self.interp_status = InterpolatorStatus.FINISHED
         # the operator
         self.enabling = EnablingDevice()
-        self.enable_level = _enable_source(self.fb, options, requests, deadman)
+        #: The digital inputs of the last sample that carried them (a sample without them,
+        #: e.g. before J519 echoes its I/O request, keeps the last: 0, released, at first).
+        self.inputs = 0
+        self.enable_level = _enable_source(self, options, requests, deadman)
         self.mark_bit = -1 if options.mark_input is None else options.mark_input
         self.mark_button = MarkButton()
         self.requests = requests
@@ -132,7 +136,8 @@ class ServoLoop:
         self.controller_tripped = False           # a controller-state fault is latched
         self.timeout_s = math.inf if driver.simulated else options.watchdog_s
         self.watch = (None if driver.simulated else
-                      DriverWatchdog(options.watchdog_s, getattr(driver, "abort", None)))
+                      DriverWatchdog(options.watchdog_s, options.abort_s,
+                                     getattr(driver, "abort", None)))
         self.stop_timeout_s = options.stop_timeout_s
         self.ending: EndCause | None = None
         self.ending_since = math.nan
@@ -249,10 +254,12 @@ class ServoLoop:
         if fresh:
             self.e_in.t = fb.t
             self.estimator.update(self.e_in, self.e_out)
-            if fb.controller_state != ControllerState.OK and not self.controller_tripped:
+            if fb.inputs_read:
+                self.inputs = fb.inputs
+            if fb.state != ControllerState.NORMAL and not self.controller_tripped:
                 self._controller_fault(t_loop)
         if self.mark_bit >= 0 and self.mark_button.update(
-                input_bit(fb.digital_inputs, self.mark_bit), t_loop):
+                input_bit(self.inputs, self.mark_bit), t_loop):
             self.mark(t_loop, None)
         requests = self.requests
         if requests is not None:
@@ -271,7 +278,7 @@ class ServoLoop:
         if self.link is Link.LOST:
             return False
         if deadline is not None:
-            _sleep_until(deadline)
+            sleep_until(deadline)
         driver, watch = self.driver, self.watch
         start = time.perf_counter()
         if watch is not None:
@@ -309,9 +316,8 @@ class ServoLoop:
             self.note(t, fault.name.lower().replace("_", " "), detail)
 
     def _controller_fault(self, t: float) -> None:
-        code = int(self.fb.controller_state)
-        name = (ControllerState(code).name if code in ControllerState._value2member_map_
-                else f"code {code}")
+        code = int(self.fb.state)
+        name = ControllerState(code).name or f"code {code}"
         self.controller.trip(t, Fault.CONTROLLER_STATE, float(code))
         self.controller_tripped = True
         self.note(t, "controller state", name)
@@ -332,7 +338,7 @@ class ServoLoop:
         c_in.estimator_status = int(status)
         self.controller.update(c_in, c_out)
         if self.rezero_samples:
-            _zero_velocity_update(self.estimator, c_out.rest_s, self.settle_s, self.cycle_s,
+            zero_velocity_update(self.estimator, c_out.rest_s, self.settle_s, self.cycle_s,
                                   self.rezero_samples)
         self.interpolator.set_target(c_out.q, c_out.qd)
         if self.controller.event_count != self.seen:
@@ -362,26 +368,26 @@ class ServoLoop:
         """The controller's new transitions into the session's events."""
         count = self.controller.event_count
         for e in self.controller.events_since(self.seen):
-            self.events.append(_transition(e))
+            self.events.append(transition_event(e))
             if self.board is not None and e.to_state == State.FAULT:
-                self.board.fault_cause = _transition(e).cause
+                self.board.fault_cause = transition_event(e).cause
         self.seen = count
 
 
-def _enable_source(fb: DriverFeedback, options: LoopOptions, requests: LoopRequests | None,
+def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests | None,
                    deadman: Callable[[float], bool] | None) -> Callable[[float], bool] | None:
     """The enabling device's level at the loop's time; None: no enabling device."""
     if deadman is not None:
         return deadman
     bit = options.enable_input
     if bit is not None:
-        return lambda t: input_bit(fb.digital_inputs, bit)
+        return lambda t: input_bit(loop.inputs, bit)
     if options.software_enable and requests is not None:
         return lambda t: requests.enable_held
     return None
 
 
-def _zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
+def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
                           cycle_s: float, samples: int) -> None:
     """Re-zero the estimator once the commanded motion has been at rest for ``settle_s``
     (in the first controller cycle past it); abandon the re-zero if the motion restarts."""
@@ -392,13 +398,15 @@ def _zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, sett
         estimator.rezero(samples)
 
 
-def _transition(e: Event) -> SessionEvent:
+def transition_event(e: Event) -> SessionEvent:
+    """A controller's state transition as a session event (``cause`` or ``cause:fault``)."""
     cause = e.cause.name if e.fault.name == "NONE" else f"{e.cause.name}:{e.fault.name}"
     return SessionEvent(t=e.t, kind="transition",
                         label=f"{e.from_state.name}->{e.to_state.name}", cause=cause)
 
 
-def _sleep_until(deadline: float) -> None:
+def sleep_until(deadline: float) -> None:
+    """Sleep until ``deadline`` (``time.perf_counter`` seconds), at once if past."""
     remaining = deadline - time.perf_counter()
     if remaining > 0:
         time.sleep(remaining)

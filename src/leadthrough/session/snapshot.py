@@ -141,6 +141,7 @@ class SnapshotBoard:
         """Allocate the record for ``n`` joints (before the loop's first period); returns the
         fields the loop writes."""
         record = new_record(snapshot_dtype(n))
+        record["tcp_rotation"][0] = np.eye(3)     # a rotation before the first cycle writes one
         self.fields = fields = view(record)
         self._record = record
         return fields

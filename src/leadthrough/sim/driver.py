@@ -16,7 +16,7 @@ the feedback go bad mid-session:
 Faults of the controller and of the link, for the loop's ways out:
 
 * ``estop``, ``protective_stop``, ``rejected``: the controller reports that state
-  (``DriverFeedback.controller_state``) and, like a real one, takes no command meanwhile: the
+  (``DriverFeedback.state``) and, like a real one, takes no command meanwhile: the
   servo holds the last command it accepted (the controller's own stop).
 * ``raise``: ``read`` raises :class:`~leadthrough.errors.DriverError` (a link failure; a window
   of one sample is a one-off error, an open-ended one a link that is gone).
@@ -28,7 +28,7 @@ command.
 
 Digital inputs (an enabling device, a "mark point" button) are scripted with
 :meth:`SimDriver.script_input` (:class:`InputScript`: the intervals of sample time during which
-an input is set); ``read`` reports them in ``DriverFeedback.digital_inputs``.
+an input is set); ``read`` reports them in ``DriverFeedback.inputs``.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ class InjectedFaultKind(StrEnum):
 
 
 #: The controller state each controller fault reports.
-_CONTROLLER_STATES = {InjectedFaultKind.ESTOP: ControllerState.EMERGENCY_STOP,
+_CONTROLLER_STATES = {InjectedFaultKind.ESTOP: ControllerState.ESTOP,
                       InjectedFaultKind.PROTECTIVE_STOP: ControllerState.PROTECTIVE_STOP,
                       InjectedFaultKind.REJECTED: ControllerState.COMMAND_REJECTED}
 
@@ -116,7 +116,7 @@ class InputScript:
     intervals ``[t_on, t_off)``.
 
     Attributes:
-        bit: The input (bit of ``DriverFeedback.digital_inputs``), 0..63.
+        bit: The input (bit of ``DriverFeedback.inputs``), 0..63.
         intervals: ``(t_on, t_off)`` pairs [s], in time order, not overlapping (``t_off`` may be
             inf).
     """
@@ -251,8 +251,9 @@ class SimDriver:
         fb.sequence = sample.sequence
         fb.q[:] = sample.q
         fb.current[:] = sample.current
-        fb.digital_inputs = self._digital_inputs(sample.t)
-        fb.controller_state = self._controller_state(sample.t)
+        fb.inputs = self._digital_inputs(sample.t)
+        fb.inputs_read = True
+        fb.state = self._controller_state(sample.t)
         for f in active:
             idx = slice(None) if f.joint is None else f.joint
             if f.kind is InjectedFaultKind.NAN_Q:
@@ -281,7 +282,7 @@ class SimDriver:
             raise SimulationError("command is not finite", field="cmd.q/cmd.qd",
                                   value=(cmd.q.tolist(), cmd.qd.tolist()),
                                   expected="finite joint positions and velocities")
-        if self._controller_state(self.sim.time) != ControllerState.OK:
+        if self._controller_state(self.sim.time) != ControllerState.NORMAL:
             return      # the controller stopped the robot: it takes no command
         self.sim.command(cmd.q, cmd.qd)
         self.writes += 1
@@ -311,4 +312,4 @@ class SimDriver:
             state = _CONTROLLER_STATES.get(f.kind)
             if state is not None and f.active(t):
                 return state
-        return ControllerState.OK
+        return ControllerState.NORMAL
