@@ -52,7 +52,6 @@ from __future__ import annotations
 import gc
 import logging
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -65,8 +64,9 @@ from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import ExternalForceEstimator
 from leadthrough.session.loop_config import LoopOptions
+from leadthrough.session.pacing import ComputeTimes, PeriodClock
 from leadthrough.session.record import SessionLog
-from leadthrough.session.recorder import SessionRecorder
+from leadthrough.session.recorder import ChunkSink, SessionRecorder
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.servo_loop import EndCause, LoopEnd, ServoLoop, transition_event
 from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
@@ -88,12 +88,18 @@ class LoopResult:
         cycle_us: Compute time of each controller cycle's servo period (estimator +
             controller + IK + limits + interpolation) [µs], shape (cycles,).
         servo_us: Compute time of the other servo periods (estimator + interpolation) [µs].
+            Both: the last ten minutes at most (:class:`~leadthrough.session.pacing.ComputeTimes`).
+        late_periods: Servo periods that missed their slot (paced, or a real driver:
+            :class:`~leadthrough.session.pacing.PeriodClock`); none is caught up.
+        skipped_periods: Slots skipped after late periods (paced only).
     """
 
     log: SessionLog | None
     end: LoopEnd
     cycle_us: Array
     servo_us: Array
+    late_periods: int = 0
+    skipped_periods: int = 0
 
 
 def run_session(
@@ -108,6 +114,7 @@ def run_session(
     deadman: Callable[[float], bool] | None = None,
     applied_wrench: Callable[[], Array] | None = None,
     settings: dict[str, object] | None = None,
+    sink: ChunkSink | None = None,
 ) -> LoopResult:
     """Run a guiding session until a stop (see the module doc).
 
@@ -126,6 +133,9 @@ def run_session(
         applied_wrench: A simulator's truth: the wrench applied this period (base frame),
             recorded for comparison; None for a real robot.
         settings: Recorded in the session file.
+        sink: Where the recording's chunks go (e.g. a
+            :class:`~leadthrough.session.session_file.SessionFileSink`, streaming to disk);
+            None: memory, returned in the result.
 
     Returns:
         The recording, how the loop ended, the compute times.
@@ -140,40 +150,45 @@ def run_session(
     steps = None if duration_s is None else round(duration_s / dt)
     loop = ServoLoop(driver, estimator, controller, interpolator, every, options, requests,
                     deadman)
-    rec = SessionRecorder(driver.n, applied_wrench is not None)
+    rec = SessionRecorder(driver.n, applied_wrench is not None, sink)
+    clock = PeriodClock(dt, options.paced, real_time=not driver.simulated)
+    times = ComputeTimes()
     t_start = loop.start()
-    times: list[float] = []
     gc_was_enabled = gc.isenabled()
     gc.disable()
     try:
-        _run(loop, rec, t_start, steps, options.paced, applied_wrench, times)
+        _run(loop, rec, t_start, steps, clock, applied_wrench, times)
     finally:
         if gc_was_enabled:
             gc.enable()
         loop.close()
-    servo = np.asarray(times)
-    is_cycle = np.arange(servo.size) % every == 0
-    events = loop.session_events()
-    session_log = rec.finish(controller.robot.name, events, settings or {})
+        events = loop.session_events()
+        session_log = rec.finish(controller.robot.name, events, settings or {})
     assert loop.end is not None
-    return LoopResult(log=session_log, end=loop.end, cycle_us=servo[is_cycle],
-                      servo_us=servo[~is_cycle])
+    if clock.late:
+        log.warning("%d servo periods late (%d slots skipped, none caught up)", clock.late,
+                    clock.skipped)
+    cycle_us, servo_us = times.split(every)
+    return LoopResult(log=session_log, end=loop.end, cycle_us=cycle_us, servo_us=servo_us,
+                      late_periods=clock.late, skipped_periods=clock.skipped)
 
 
-def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | None, paced: bool,
-         applied_wrench: Callable[[], Array] | None, times: list[float]) -> None:
+def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | None,
+         clock: PeriodClock, applied_wrench: Callable[[], Array] | None,
+         times: ComputeTimes) -> None:
     """The periods, until the loop ends."""
     dt = loop.driver.dt
     fb, cmd, e_out, c_out = loop.fb, loop.cmd, loop.e_out, loop.c_out
-    wall0 = time.perf_counter()
+    clock.start()
     i = 0
     while True:
-        deadline = wall0 + (i + 1) * dt if paced else None
         t_loop = t_start + (i + 1) * dt   # the loop's clock: advances on stale feedback too
-        times.append(loop.period(i, t_loop, deadline))
+        times.add(loop.period(i, t_loop, clock))
         rec.store(t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
                   c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
                   int(c_out.fault), applied_wrench() if applied_wrench is not None else None)
+        clock.done()
+        loop.late = clock.late
         i += 1
         if steps is not None and i >= steps:
             loop.begin_end(EndCause.DURATION, t_loop)

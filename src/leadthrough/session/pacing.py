@@ -20,7 +20,10 @@ from __future__ import annotations
 import math
 import time
 
-__all__ = ["PeriodClock"]
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["ComputeTimes", "PeriodClock"]
 
 
 class PeriodClock:
@@ -79,3 +82,32 @@ class PeriodClock:
         following = self.t0 + slots * self.dt
         self.skipped += max(0, round((following - end_of_slot) / self.dt))
         self.next_start = following
+
+
+class ComputeTimes:
+    """The compute time of the last ``capacity`` servo periods, in a preallocated ring (memory
+    stays bounded however long the session runs).
+
+    Args:
+        capacity: Periods kept (default: 10 min at 1 kHz, 4.8 MB).
+    """
+
+    __slots__ = ("count", "ring")
+
+    def __init__(self, capacity: int = 600_000) -> None:
+        self.ring = np.zeros(max(1, capacity))
+        self.count = 0
+
+    def add(self, us: float) -> None:
+        """One period's compute time [µs]."""
+        self.ring[self.count % self.ring.size] = us
+        self.count += 1
+
+    def split(self, every: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The kept periods' times [µs], oldest first: those of controller cycles (period
+        index a multiple of ``every``) and the others."""
+        size = self.ring.size
+        idx = np.arange(max(0, self.count - size), self.count)
+        times = self.ring[idx % size]
+        cycle = idx % every == 0
+        return times[cycle], times[~cycle]

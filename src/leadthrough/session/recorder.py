@@ -17,7 +17,8 @@ from scipy.spatial.transform import Rotation
 
 from leadthrough.session.record import SessionEvent, SessionLog
 
-__all__ = ["DEFAULT_CHUNK_ROWS", "ChunkSink", "MemorySink", "RecordChunk", "SessionRecorder"]
+__all__ = ["DEFAULT_CHUNK_ROWS", "ChunkSink", "MemorySink", "RecordChunk", "SessionRecorder",
+           "chunks_to_log"]
 
 Array = NDArray[np.float64]
 #: Rows per chunk: 10 s at 1 kHz (about 4.5 MB for six joints).
@@ -98,18 +99,23 @@ class MemorySink:
                ) -> SessionLog:
         """The kept chunks as one session."""
         chunks = [c for c in self._chunks if c.rows > 0] or self._chunks[:1]
+        return chunks_to_log(chunks, self._truth, robot, events, settings)
 
-        def join(name: str) -> Any:
-            return np.concatenate([getattr(c, name)[:c.rows] for c in chunks])
 
-        applied = join("applied") if self._truth else None
-        return SessionLog(robot=robot, time=join("time"), q=join("q"), current=join("current"),
-                          tau_ext=join("tau_ext"), wrench_base=join("wrench"),
-                          q_cmd=join("q_cmd"), qd_cmd=join("qd_cmd"), tcp_cmd_base=join("tcp"),
-                          tcp_cmd_quat=np.concatenate([c.quaternions() for c in chunks]),
-                          twist_cmd_base=join("twist"), state=join("state"),
-                          fault=join("fault"), wrench_applied_base=applied, events=events,
-                          settings=settings)
+def chunks_to_log(chunks: list[RecordChunk], with_truth: bool, robot: str,
+                  events: list[SessionEvent], settings: dict[str, object]) -> SessionLog:
+    """The filled rows of ``chunks``, in order, as one session."""
+
+    def join(name: str) -> Any:
+        return np.concatenate([getattr(c, name)[:c.rows] for c in chunks])
+
+    applied = join("applied") if with_truth else None
+    return SessionLog(robot=robot, time=join("time"), q=join("q"), current=join("current"),
+                      tau_ext=join("tau_ext"), wrench_base=join("wrench"), q_cmd=join("q_cmd"),
+                      qd_cmd=join("qd_cmd"), tcp_cmd_base=join("tcp"),
+                      tcp_cmd_quat=np.concatenate([c.quaternions() for c in chunks]),
+                      twist_cmd_base=join("twist"), state=join("state"), fault=join("fault"),
+                      wrench_applied_base=applied, events=events, settings=settings)
 
 
 class SessionRecorder:

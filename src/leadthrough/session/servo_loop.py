@@ -29,6 +29,7 @@ from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstim
 from leadthrough.session import operator_link
 from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.operator_inputs import EnablingDevice, MarkButton, input_bit
+from leadthrough.session.pacing import PeriodClock
 from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
 from leadthrough.session.watchdog import DriverWatchdog
@@ -244,11 +245,13 @@ class ServoLoop:
         return LoopEnd(cause, t, self.controller.state, self.controller.fault, detail)
 
     # ------------------------------------------------------------------ one period
-    def period(self, i: int, t_loop: float, deadline: float | None) -> float:
+    def period(self, i: int, t_loop: float, clock: PeriodClock) -> float:
         """Servo period ``i``: exchange with the driver, estimate, the operator's inputs and
         requests, every ``every`` periods the controller cycle, interpolate. Returns the
         compute time [µs]."""
-        fresh = self._exchange(t_loop, deadline)
+        clock.wait()
+        fresh = self._exchange(t_loop)
+        clock.exchanged()
         t0 = time.perf_counter()
         fb = self.fb
         if fresh:
@@ -272,13 +275,11 @@ class ServoLoop:
         self.interp_status = self.interpolator.update(self.cmd)
         return (time.perf_counter() - t0) * 1e6
 
-    def _exchange(self, t_loop: float, deadline: float | None) -> bool:
+    def _exchange(self, t_loop: float) -> bool:
         """Write the command, step, read; a failure or a stall is a fault (see the module doc
         of :mod:`leadthrough.session.loop`). Returns whether a new sample arrived."""
         if self.link is Link.LOST:
             return False
-        if deadline is not None:
-            sleep_until(deadline)
         driver, watch = self.driver, self.watch
         start = time.perf_counter()
         if watch is not None:
