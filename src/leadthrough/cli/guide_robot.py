@@ -3,9 +3,9 @@
 until the user stops it.
 
 1. Optional real-time set-up (:mod:`leadthrough.session.realtime`), each step reported.
-2. Set-up before the first command: the estimator's, controller's and interpolator's compiled
-   code is loaded (compiled on a first run) with a progress line, on parts that are thrown away;
-   then the controller is connected (``with driver``: joint count, units and the stream checked
+2. Set-up before the link opens: the estimator, controller and interpolator are built and
+   their compiled code loaded (compiled on a first run) with a progress line; then the
+   controller is connected (``with driver``: joint count, units and the stream checked
    at open: a mismatch, a refused stream or no answer is a clear error, exit 2).
 3. The loop (:func:`~leadthrough.session.loop.run_session`) at the controller's cycle, the
    guiding controller at the multiple of it nearest 10 ms; guiding only on a fresh press of the
@@ -65,6 +65,9 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
                         "required with --driver")
     g.add_argument("--mark-input", type=int, default=None, metavar="I",
                    help="the digital input of the 'mark point' button")
+    g.add_argument("--watchdog", type=float, default=0.05, metavar="S",
+                   help="a driver exchange longer than this is a fault (a commanded stop) "
+                        "[s]; one blocked over max(1 s, S) is aborted (default 0.05)")
     g.add_argument("--rt-priority", type=int, default=None, metavar="P",
                    help="run the loop with SCHED_FIFO priority P (1-99; needs CAP_SYS_NICE)")
     g.add_argument("--lock-memory", action="store_true",
@@ -89,22 +92,27 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
         print(f"leadthrough: {line}", file=sys.stderr, flush=True)
     driver = connect(args.driver, robot, args.host, args.port)
     sink = SessionFileSink(args.output, robot.n)
-    _warm_up(robot, pf, guiding, driver.dt)
+    # everything built and compiled before the link opens: a controller streams from the
+    # open on, and cycles it is not answered in count against the session (RSI's late count)
+    parts = _loop_parts(robot, pf, guiding, driver.dt)
     requests = LoopRequests()
-    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input)
+    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
+                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
     settings: dict[str, object] = {"driver": args.driver, "host": args.host,
                                    "port": args.port, "enable_input": args.enable_input,
                                    "mark_input": args.mark_input}
-    with driver:
-        cfg = LoopConfig(guiding=replace(guiding, dt=controller_cycle(driver.dt)))
-        parts = build_loop(robot, pf, cfg, driver.dt)
+    dt = driver.dt
+    # Ctrl-C: a stop request while the loop runs, and nothing more once it has ended (the
+    # stream's own end and the file are written); a second one aborts
+    with requests.stop_on_interrupt(), _stop_on_term(requests), driver:
+        if driver.dt != dt:    # the cycle the controller reported at open (UR CB3: 8 ms)
+            parts = _loop_parts(robot, pf, guiding, driver.dt)
         print(f"leadthrough: guiding {robot.name} on {args.driver} at {args.host} "
               f"({1e3 * driver.dt:g} ms cycle, controller every "
-              f"{1e3 * cfg.guiding.dt:g} ms); press the enabling device to guide, Ctrl-C to "
-              f"stop", file=sys.stderr, flush=True)
-        with requests.stop_on_interrupt(), _stop_on_term(requests):
-            result = run_session(driver, *parts, args.duration, options=options,
-                                 requests=requests, settings=settings, sink=sink)
+              f"{1e3 * parts.controller.config.dt:g} ms); press the enabling device to "
+              f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
+        result = run_session(driver, *parts, args.duration, options=options,
+                             requests=requests, settings=settings, sink=sink)
     return _report(args, result)
 
 
@@ -124,23 +132,26 @@ def _check_args(args: argparse.Namespace) -> None:
                                     "device")
 
 
-def _warm_up(robot: Robot, pf: ParamsFile, guiding: GuidingConfig, dt: float) -> None:
-    """Load (compile on a first run) the loop's compiled code on parts thrown away after,
-    before anything is connected: the first controller cycle runs at full speed."""
-    parts: LoopParts = build_loop(robot, pf, LoopConfig(guiding=replace(
+def _loop_parts(robot: Robot, pf: ParamsFile, guiding: GuidingConfig, dt: float) -> LoopParts:
+    """The loop's parts at servo period ``dt``, their compiled code loaded (compiled on a first
+    run, with a progress line) on copies of their state: the first controller cycle runs at
+    full speed."""
+    bar = Progress("compiling the loop", 4, lines=True)
+    parts = build_loop(robot, pf, LoopConfig(guiding=replace(
         guiding, dt=controller_cycle(dt))), dt)
+    bar(1)
     q0 = guide_start_pose(robot)
-    bar = Progress("compiling the loop", 3, lines=True)
     parts.estimator.reset(q0)
     parts.estimator.warm_up()
-    bar(1)
+    bar(2)
     parts.controller.reset(q0, 0.0)
     parts.controller.warm_up()
-    bar(2)
+    bar(3)
     parts.interpolator.reset(q0)
     parts.interpolator.warm_up()
-    bar(3)
+    bar(4)
     bar.close()
+    return parts
 
 
 @contextmanager

@@ -177,13 +177,16 @@ def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | Non
          clock: PeriodClock, applied_wrench: Callable[[], Array] | None,
          times: ComputeTimes) -> None:
     """The periods, until the loop ends."""
-    dt = loop.driver.dt
+    dt, simulated = loop.driver.dt, loop.driver.simulated
     fb, cmd, e_out, c_out = loop.fb, loop.cmd, loop.e_out, loop.c_out
     clock.start()
     i = 0
     while True:
-        t_loop = t_start + (i + 1) * dt   # the loop's clock: advances on stale feedback too
+        # the loop's clock advances on stale feedback too; on a real controller it catches up
+        # with the controller's clock after cycles that went by unseen (ServoLoop.t)
+        t_loop = t_start + (i + 1) * dt if simulated else loop.t + dt
         times.add(loop.period(i, t_loop, clock))
+        t_loop = loop.t
         rec.store(t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
                   c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
                   int(c_out.fault), applied_wrench() if applied_wrench is not None else None)

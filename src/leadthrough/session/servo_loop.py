@@ -144,18 +144,28 @@ class ServoLoop:
         self.ending_since = math.nan
         self.end: LoopEnd | None = None
         self.late = 0
+        #: The loop's time [s]: its periods counted from the first sample, on a real
+        #: controller caught up with the controller's clock when cycles went by unseen.
+        self.t = math.nan
+        self.follow_clock = not driver.simulated
         # the session's events
         self.events: list[SessionEvent] = []
         self.marks: list[Mark] = []
-        self.seen = 0                             # controller transitions taken into events
+        # controller transitions taken into events (those before the session, e.g. of a
+        # warm-up at set-up, are not the session's)
+        self.seen = controller.event_count
 
     # ------------------------------------------------------------------ start and end
     def start(self) -> float:
         """The first sample: every part reset there, their compiled code loaded; returns the
         sample's time [s]."""
         driver, fb = self.driver, self.fb
-        driver.step()
-        if not driver.read(fb):
+        # a real controller's driver may hold the packet of its open, due an answer now
+        fresh = not driver.simulated and driver.read(fb)
+        if not fresh:
+            driver.step()
+            fresh = driver.read(fb)
+        if not fresh:
             raise ControlError("no feedback on the first read (the robot must report a "
                                "position to start from)", field="driver",
                                value=type(driver).__name__,
@@ -172,6 +182,7 @@ class ServoLoop:
             operator_link.publish_settings(self)
         if self.watch is not None:
             self.watch.start()
+        self.t = fb.t
         return fb.t
 
     def begin_end(self, cause: EndCause, t: float) -> None:
@@ -188,7 +199,7 @@ class ServoLoop:
             return True
         if self.ending is None:
             return False
-        if self.at_rest():
+        if self.at_rest() and self.c_out.state != State.GUIDING:   # released, and at rest
             self.end = self._end_state(self.ending, t)
         elif t - self.ending_since >= self.stop_timeout_s:
             self.end = self._end_state(EndCause.STOP_TIMEOUT, t,
@@ -254,6 +265,9 @@ class ServoLoop:
         clock.exchanged()
         t0 = time.perf_counter()
         fb = self.fb
+        if fresh and self.follow_clock and fb.t > t_loop:
+            t_loop = fb.t       # a real controller's cycles that went by without a packet
+        self.t = t_loop
         if fresh:
             self.e_in.t = fb.t
             self.estimator.update(self.e_in, self.e_out)
