@@ -24,11 +24,10 @@ cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
 
 :meth:`~StreamingDriver.open` connects, runs the protocol's handshake and waits for the first
 packet, checking it against the robot file (joint count, and every joint inside its limits,
-which catches a wrong robot file, joint order or unit); that first packet is then readable
-(:meth:`~StreamingDriver.read` without a :meth:`~StreamingDriver.step`) and due an answer.
-From then on the controller expects an answer every cycle: its own watchdog (J519's, the UR
-program's, RSI's late-packet count) stops the robot if the answers stop, so the caller must
-have finished any slow set-up (compilation, warm-up) before ``open``.
+which catches a wrong robot file, joint order or unit). From then on the controller expects an
+answer every cycle: its own watchdog (J519's, the UR program's, RSI's late-packet count) stops
+the robot if the answers stop, so the caller must have finished any slow set-up (compilation,
+warm-up) before ``open``.
 """
 
 from __future__ import annotations
@@ -200,10 +199,7 @@ class StreamingDriver(ABC, Generic[S]):
             self._disconnect()
             raise
         self.opened, self.unanswered, self.skipped_cycles, self.late_answers = True, 0, 0, 0
-        # the first packet is readable and due an answer: a caller that reads it and writes
-        # at once answers the controller's first cycle (RSI counts an unanswered one late)
-        self._sample, self._newest, self._answer_due = first, first, True
-        self._sample_late = False
+        self._sample, self._newest, self._answer_due = None, first, False
 
     def close(self) -> None:
         """End the stream (the controller's own way) and close the connection."""

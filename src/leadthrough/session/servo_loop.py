@@ -160,12 +160,8 @@ class ServoLoop:
         """The first sample: every part reset there, their compiled code loaded; returns the
         sample's time [s]."""
         driver, fb = self.driver, self.fb
-        # a real controller's driver may hold the packet of its open, due an answer now
-        fresh = not driver.simulated and driver.read(fb)
-        if not fresh:
-            driver.step()
-            fresh = driver.read(fb)
-        if not fresh:
+        driver.step()
+        if not driver.read(fb):
             raise ControlError("no feedback on the first read (the robot must report a "
                                "position to start from)", field="driver",
                                value=type(driver).__name__,
