@@ -135,6 +135,9 @@ class ServoLoop:
         # the link, and the end
         self.link = Link.OK
         self.controller_tripped = False           # a controller-state fault is latched
+        #: The controller has reported itself ready: from then on NOT_READY is a fault (before,
+        #: the stream is starting on its side: no guiding, no fault).
+        self.controller_ready = False
         self.timeout_s = math.inf if driver.simulated else options.watchdog_s
         self.watch = (None if driver.simulated else
                       DriverWatchdog(options.watchdog_s, options.abort_s,
@@ -269,7 +272,10 @@ class ServoLoop:
             self.estimator.update(self.e_in, self.e_out)
             if fb.inputs_read:
                 self.inputs = fb.inputs
-            if fb.state != ControllerState.NORMAL and not self.controller_tripped:
+            if fb.state == ControllerState.NORMAL:
+                self.controller_ready = True
+            elif not self.controller_tripped and (self.controller_ready
+                                                  or fb.state != ControllerState.NOT_READY):
                 self._controller_fault(t_loop)
         if self.mark_bit >= 0 and self.mark_button.update(
                 input_bit(self.inputs, self.mark_bit), t_loop):
@@ -344,7 +350,7 @@ class ServoLoop:
         status = e_out.status
         self.held = held = self.enable_level is not None and self.enable_level(t_loop)
         self.ready = ready = (status == EstimatorStatus.OK and c_out.state != State.FAULT
-                              and self.ending is None)
+                              and self.ending is None and self.controller_ready)
         c_in.deadman = self.enabling.update(held, ready)
         c_in.estimator_status = int(status)
         self.controller.update(c_in, c_out)
