@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
+from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
-from leadthrough.errors import ControlError
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
@@ -80,11 +80,9 @@ def run(args: argparse.Namespace) -> int:
     require_folder(args.output)
     if args.driver is not None:
         return guide_on_robot(args, robot, pf, guiding)
-    for name in ("enable_input", "mark_input", "host", "port"):
-        if getattr(args, name) is not None:
-            raise ControlError("a robot setting given for the simulator",
-                               field=f"--{name.replace('_', '-')}", value=getattr(args, name),
-                               expected="--driver D with it (the simulator scripts its inputs)")
+    refuse_settings(args, ("enable_input", "mark_input", "host", "port"),
+                    "a robot setting given for the simulator",
+                    "--driver D with it (the simulator scripts its inputs)")
     args.operator = args.operator or "push-x"
     seed = sim_robot_seed(args.seed, pf)
     loop = LoopConfig(guiding=guiding)

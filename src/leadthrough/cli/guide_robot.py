@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from leadthrough.cli.record_robot import add_connection_arguments
+from leadthrough.cli.record_robot import add_connection_arguments, refuse_settings
 from leadthrough.control.guiding_types import GuidingConfig
 from leadthrough.drivers.controllers import connect
 from leadthrough.errors import ControlError
@@ -117,11 +117,8 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
 
 
 def _check_args(args: argparse.Namespace) -> None:
-    for name in _SIM_ONLY:
-        if getattr(args, name) is not None:
-            raise ControlError("a simulator setting given for a robot",
-                               field=f"--{name.replace('_', '-')}", value=getattr(args, name),
-                               expected="no simulator settings with --driver")
+    refuse_settings(args, _SIM_ONLY, "a simulator setting given for a robot",
+                    "no simulator settings with --driver")
     if args.realtime:
         raise ControlError("a simulator setting given for a robot", field="--realtime",
                            value=True, expected="none: the controller paces the loop")

@@ -18,7 +18,8 @@ from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot
 from leadthrough.session.trajectory_recording import TrajectoryRunConfig, record_trajectory
 
-__all__ = ["add_connection_arguments", "add_driver_arguments", "record_on_robot"]
+__all__ = ["add_connection_arguments", "add_driver_arguments", "record_on_robot",
+           "refuse_settings"]
 
 _SIM_ONLY = ("seed", "run", "payload_mass", "payload_com")
 
@@ -30,6 +31,15 @@ def add_driver_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--approach", type=float, default=0.1, metavar="F",
                    help="share of the joint speed and acceleration limits for the move to the "
                         "trajectory's start (0: the robot must already be there; default 0.1)")
+
+
+def refuse_settings(args: argparse.Namespace, names: tuple[str, ...], message: str,
+                    expected: str) -> None:
+    """Raise :class:`ControlError` naming the first of ``names`` given (not None)."""
+    for name in names:
+        if getattr(args, name) is not None:
+            raise ControlError(message, field=f"--{name.replace('_', '-')}",
+                               value=getattr(args, name), expected=expected)
 
 
 def add_connection_arguments(g: Any) -> None:
@@ -44,11 +54,8 @@ def add_connection_arguments(g: Any) -> None:
 
 def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamples) -> int:
     """Run ``traj`` on the controller of ``args.driver`` and write the recording."""
-    for name in _SIM_ONLY:
-        if getattr(args, name) is not None:
-            raise ControlError("a simulator setting given for a robot",
-                               field=f"--{name.replace('_', '-')}", value=getattr(args, name),
-                               expected="no simulator settings with --driver")
+    refuse_settings(args, _SIM_ONLY, "a simulator setting given for a robot",
+                    "no simulator settings with --driver")
     config = TrajectoryRunConfig(approach_fraction=args.approach)
     driver = connect(args.driver, robot, args.host, args.port)
     bar = Progress("recording", 1)
