@@ -92,11 +92,12 @@ def test_a_trajectory_is_recorded_at_the_controllers_cycle(kind: str,
     assert rec.time[0] == 0.0 and abs(rec.duration - 1.5) <= 2 * driver.dt
     assert rec.samples >= 0.95 * (1.5 / driver.dt) and done.stale <= 0.05 * done.cycles
     assert np.all(np.diff(rec.time) > 0)
-    # the logged target is the trajectory at the sample's controller time
+    # the logged target is the trajectory on the controller's clock: the one sent before the
+    # sample (one cycle earlier, two after a lost packet), never stretched by lost packets
     assert rec.q_cmd is not None
     expect = np.column_stack([np.interp(rec.time, traj.time, traj.q[:, j])
                               for j in range(robot.n)])
-    np.testing.assert_allclose(rec.q_cmd, expect, atol=0.6 * np.max(np.abs(traj.qd)) * driver.dt)
+    np.testing.assert_allclose(rec.q_cmd, expect, atol=2.0 * np.max(np.abs(traj.qd)) * driver.dt)
     # the robot followed it (within a few cycles' lag at the peak speed)
     lag = float(np.max(np.abs(rec.q - rec.q_cmd)))
     assert lag <= 4 * driver.dt * np.max(np.abs(traj.qd)) + 1e-3
@@ -224,7 +225,9 @@ def test_ctrl_c_mid_run_is_a_commanded_stop_and_no_recording(tmp_path: Path) -> 
                                 "fanuc-j519", "--host", host, "--robot", "er20", "--trajectory",
                                 str(traj), "-o", str(out)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(6.0)  # the interpreter's start, the approach and the settle: mid-trajectory
+        assert rec.stderr is not None  # its first line: connecting (the imports are done)
+        assert rec.stderr.readline().startswith("recording on fanuc-j519")
+        time.sleep(4.0)  # the approach (~1 s) and the settle (0.5 s): mid-trajectory
         rec.send_signal(signal.SIGINT)
         _, stderr = rec.communicate(timeout=30)
     finally:

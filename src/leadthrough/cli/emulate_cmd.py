@@ -28,6 +28,8 @@ from leadthrough.sim.emulators import (
     Window,
     make_emulator,
 )
+from leadthrough.sim.emulators.operator import OperatorPlan
+from leadthrough.sim.operator_scripts import OPERATOR_NAMES
 
 __all__ = ["register", "run"]
 
@@ -79,6 +81,16 @@ def register(sub: Any) -> None:
                    help="enabling device held")
     g.add_argument("--mark", type=_window, action="append", default=[],
                    help="mark button pressed")
+    o = p.add_argument_group("an operator at the robot")
+    o.add_argument("--operator", default=None, choices=OPERATOR_NAMES,
+                   help="a scripted operator who holds the enabling device, pushes the tool "
+                        "and presses the mark button, starting --operator-delay after the "
+                        "stream's first command")
+    o.add_argument("--operator-seed", type=int, default=0,
+                   help="seed of the operator's random pushes (random)")
+    o.add_argument("--operator-delay", type=float, default=3.0, metavar="S",
+                   help="from the stream's first command to the operator's start [s] "
+                        "(default 3)")
     f = p.add_argument_group("faults")
     f.add_argument("--loss-rate", type=float, default=0.0, help="outgoing packets lost, 0..1")
     f.add_argument("--loss-burst", type=_window, action="append", default=[],
@@ -103,7 +115,9 @@ def _options(args: argparse.Namespace) -> EmulatorOptions:
     return EmulatorOptions(
         host=args.host, cycle_ms=args.cycle_ms, watchdog=args.watchdog,
         inputs=InputSchedule(enable=tuple(args.enable), mark=tuple(args.mark)), faults=faults,
-        q0=tuple(args.q0) if args.q0 else None, generation="cb3" if args.cb3 else "e-series")
+        q0=tuple(args.q0) if args.q0 else None, generation="cb3" if args.cb3 else "e-series",
+        operator=None if args.operator is None else OperatorPlan(
+            args.operator, seed=args.operator_seed, delay_s=args.operator_delay))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -58,7 +58,7 @@ def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamp
                     "no simulator settings with --driver")
     config = TrajectoryRunConfig(approach_fraction=args.approach)
     driver = connect(args.driver, robot, args.host, args.port)
-    bar = Progress("recording", 1)
+    bar = Progress(f"recording on {args.driver} at {args.host}", 1, lines=True)
     with driver:
         done = record_trajectory(driver, robot, traj, config, progress=bar)
     bar.close()

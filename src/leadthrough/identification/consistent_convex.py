@@ -163,8 +163,9 @@ def _solve(problem: cp.Problem, what: str) -> None:
 
 
 def _verify(obs: Observations, phi: Array, rotor: Array, cfg: ConsistentConfig, status: str,
-            what: str) -> None:
-    """Check a solution really is physically consistent and within the bounds.
+            what: str, rotor_scale: Array) -> None:
+    """Check a solution really is physically consistent and within the bounds (rotor inertias
+    >= 0 to the problem's tolerance, 10·_SLACK of each one's variable scale ``rotor_scale``).
 
     Raises:
         SolverError: Naming the first link that violates its constraints.
@@ -190,7 +191,7 @@ def _verify(obs: Observations, phi: Array, rotor: Array, cfg: ConsistentConfig, 
                               f"(status '{status}', min pseudo-inertia eigenvalue {eig[k]:.3g})",
                               field=f"links.{name}", value=status,
                               expected="a physically consistent solution within the bounds")
-    if np.any(rotor < -1e-9 * max(1.0, float(np.max(np.abs(rotor))))):
+    if np.any(rotor < -10.0 * _SLACK * np.abs(rotor_scale)):
         raise SolverError(f"the {what} returned a negative rotor inertia (status '{status}')",
                           field="rotor_inertia", value=rotor.tolist(), expected=">= 0")
 
@@ -251,7 +252,9 @@ def inner_problem(obs: Observations, targets: list[Array], cols: list[Array], la
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or u.value is None:
         raise _diagnose(obs, cfg, str(prob.status), "inner problem")
     out = np.asarray(z_nom + scale * u.value)
-    _verify(obs, out[: 10 * n], out[10 * n:11 * n], cfg, str(prob.status), "inner problem")
+    _verify(obs, out[: 10 * n], out[10 * n:11 * n], cfg, str(prob.status), "inner problem",
+            scale[10 * n:11 * n])
+    out[10 * n:11 * n] = np.maximum(out[10 * n:11 * n], 0.0)  # solver tolerance, verified above
     return out
 
 
@@ -276,5 +279,6 @@ def closest_to_nominal(obs: Observations, z: Array, z_nom: Array, scale: Array,
     if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or w.value is None:
         raise _diagnose(obs, cfg, str(prob.status), "closest-to-nominal problem")
     out = np.asarray(x_star + s * (N @ w.value))
-    _verify(obs, out[: 10 * n], out[10 * n:], cfg, str(prob.status), "closest-to-nominal problem")
-    return out[: 10 * n], out[10 * n:]
+    _verify(obs, out[: 10 * n], out[10 * n:], cfg, str(prob.status), "closest-to-nominal problem",
+            s[10 * n:])
+    return out[: 10 * n], np.maximum(out[10 * n:], 0.0)  # solver tolerance, verified above

@@ -17,8 +17,9 @@ controller cycle, in three phases:
    the controller reports torque), and the target that was in force.
 
 Anything that is not a normal sample stops the run: a controller state flag (E-stop,
-protective stop, not ready, command rejected), a non-finite sample, a stretch of stale feedback
-longer than ``max_stale_s``, a following error beyond ``max_following_error``, or a
+protective stop, not ready), a non-finite sample, a stretch of stale feedback or of commands the
+controller did not take in time (``COMMAND_REJECTED``: a late answer) longer than
+``max_stale_s``, a following error beyond ``max_following_error``, or a
 :class:`~leadthrough.errors.DriverError`. The robot then gets a **commanded stop**: the
 target's velocity brought to zero at each joint's acceleration limit (while the link lasts;
 a broken link leaves the stop to the controller's own watchdog), and the run raises
@@ -188,10 +189,15 @@ class _Run:
             if self.stale_run > self.max_stale:
                 self.stop(f"no fresh sample for {self.stale_run} cycles", phase)
             return False
-        self.stale_run = 0
         state = ControllerState(self.fb.state)
-        if state != ControllerState.NORMAL:
+        if state & ~ControllerState.COMMAND_REJECTED:
             self.stop(f"controller state {state!r}", phase)
+        if state & ControllerState.COMMAND_REJECTED:  # an answer came late: as a stale cycle
+            self.stale_run += 1
+            if self.stale_run > self.max_stale:
+                self.stop(f"{self.stale_run} commands in a row not taken", phase)
+        else:
+            self.stale_run = 0
         if not (np.all(np.isfinite(self.fb.q)) and np.all(np.isfinite(self.fb.current))):
             self.stop("a non-finite sample", phase)
         err = float(np.max(np.abs(self.cmd.q - self.fb.q)))

@@ -3,8 +3,16 @@ targets, with the controller's own checks, stops and command log.
 
 Every controller cycle (8/4 ms J519, 2/8 ms RTDE, 4 ms RSI) the protocol layer hands
 :meth:`EmulatedArm.command` a joint target (or :meth:`EmulatedArm.hold` when none came); the
-arm checks it against the controller's limits, then interpolates linearly to it over the next
-cycle, feeding the simulator position and velocity every millisecond. A target that fails a
+arm checks it against the controller's limits, then interpolates to it over the next cycle,
+feeding the simulator position and velocity every millisecond. The interpolation is a cubic
+Hermite segment from where the arm is, with the velocity it has, to the target, arriving with the
+cycle's mean velocity: position and velocity are continuous from one cycle to the next, so the
+acceleration spreads over the cycle as a real controller's interpolator spreads it. (A linear
+segment with the cycle's mean velocity as feed-forward steps the velocity at every cycle start:
+the servo then delivers each cycle's acceleration as a torque spike in the first milliseconds,
+and a controller sampling the currents once per cycle, in phase with those spikes, reports
+currents without most of the inertial torque: an 8 ms J519 recording identified 12 % held-out
+torque error against 5 % at 1 kHz.) A target that fails a
 check is refused and starts a controlled stop (each joint decelerates at the robot's
 acceleration limit; an E-stop at twice that), after which the arm is in ``FAULT`` until
 :meth:`EmulatedArm.reset`. Every command is logged (:class:`CommandRecord`) and
@@ -23,6 +31,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.robot.description import Robot
+from leadthrough.sim.emulators.operator import EmulatedOperator
 from leadthrough.sim.robot import Feedback, SimConfig, SimRobot
 
 __all__ = ["ArmPhase", "CommandRecord", "EmulatedArm", "MotionLimits", "StopKind"]
@@ -102,9 +111,10 @@ class EmulatedArm:
     """
 
     def __init__(self, robot: Robot, seed: int, cycle: float, limits: MotionLimits,
-                 q0: Array | None = None) -> None:
+                 q0: Array | None = None, operator: EmulatedOperator | None = None) -> None:
         self.robot = robot
-        self.sim = SimRobot(robot, SimConfig(seed=seed), q0=q0)
+        self.operator = operator
+        self.sim = SimRobot(robot, SimConfig(seed=seed), q0=q0, operator=operator)
         self.dt = float(self.sim.config.timestep)
         self.steps = max(1, round(cycle / self.dt))
         self.cycle = self.steps * self.dt
@@ -115,6 +125,7 @@ class EmulatedArm:
         self._a = np.zeros(robot.n)      # its change over the last cycle
         self._k = 0
         self._q, self._qd = q.copy(), np.zeros(robot.n)
+        self._v_from = np.zeros(robot.n)  # velocity at the start of the cycle's segment
         self.phase = ArmPhase.IDLE
         self.stop_kind: StopKind | None = None
         self.stop_reason = ""
@@ -181,6 +192,8 @@ class EmulatedArm:
             return False
         self._advance(q)
         self.phase = ArmPhase.RUNNING
+        if self.operator is not None:
+            self.operator.stream_started(self.sim.time)
         return True
 
     def refuse(self, q: tuple[float, ...], t: float, reason: str) -> None:
@@ -203,6 +216,7 @@ class EmulatedArm:
         v = (q - self._to) / self.cycle
         self._a = (v - self._v) / self.cycle
         self._v = v
+        self._v_from = self._qd.copy()  # the velocity the arm has: continuous across cycles
         self._from, self._to = self._q.copy(), q.copy()
         self._k = 0
 
@@ -229,8 +243,7 @@ class EmulatedArm:
                 self._qd[:] = 0.0
             else:
                 self._k += 1
-                self._q[:] = self._from + (self._to - self._from) * (self._k / self.steps)
-                self._qd[:] = self._v  # velocity feed-forward of the cycle
+                self._hermite(self._k / self.steps)
         elif self.phase is ArmPhase.STOPPING:
             speed = np.maximum(np.abs(self._qd) - self._decel * self.dt, 0.0)
             self._qd[:] = np.sign(self._qd) * speed
@@ -239,12 +252,30 @@ class EmulatedArm:
                 self.phase = (ArmPhase.IDLE if self.stop_kind is StopKind.REQUEST
                               else ArmPhase.FAULT)
                 self._to, self._v = self._q.copy(), np.zeros(self.robot.n)
+        if self.operator is not None and self.operator.due(self.sim.time):
+            self.operator.start(self.sim.time, self.tcp_position(self._q))
         self.sim.command(self._q, self._qd)
         self.sim.step()
+
+    def _hermite(self, u: float) -> None:
+        """Position and velocity at fraction ``u`` of the cycle's segment (see the module doc):
+        from (``_from``, ``_v_from``) to (``_to``, ``_v``) over one cycle."""
+        T = self.cycle
+        h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
+        h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
+        d00, d10 = (6 * u**2 - 6 * u) / T, 3 * u**2 - 4 * u + 1
+        d01, d11 = (-6 * u**2 + 6 * u) / T, 3 * u**2 - 2 * u
+        self._q[:] = h00 * self._from + h10 * T * self._v_from + h01 * self._to + h11 * T * self._v
+        self._qd[:] = d00 * self._from + d10 * self._v_from + d01 * self._to + d11 * self._v
 
     def sample(self) -> Feedback:
         """The newest sample (time, encoder positions, measured currents, sequence)."""
         return self.sim.read()
+
+    def tcp_position(self, q: Array) -> Array:
+        """TCP position at ``q`` [m], base frame, shape (3,)."""
+        pin.framesForwardKinematics(self.robot.model, self._pin, q)
+        return np.array(self._pin.oMf[self.robot.tcp_frame_id].translation)
 
     def tcp_pose(self, q: Array) -> tuple[float, ...]:
         """TCP pose at ``q``: X Y Z [mm] and fixed-axis X-Y-Z angles (roll, pitch, yaw) [deg].

@@ -21,6 +21,7 @@ import numpy as np
 
 from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.arm import ArmPhase, EmulatedArm, MotionLimits, StopKind
+from leadthrough.sim.emulators.operator import EmulatedOperator
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
 __all__ = ["EmulatedController", "EmulatorReport", "UdpController"]
@@ -43,6 +44,9 @@ class EmulatorReport:
         max_lag: Largest lag of the loop behind the wall clock [s].
         resyncs: Times the loop dropped a lag of more than one controller cycle instead of
             catching it up (a real controller never sends a burst of cycles).
+        operator_start: Simulated time the operator's script started [s] (None: no operator,
+            or not yet).
+        operator_end: Simulated time the script ends [s] (None: as above).
     """
 
     kind: str
@@ -58,6 +62,8 @@ class EmulatorReport:
     delayed: int
     max_lag: float
     resyncs: int
+    operator_start: float | None = None
+    operator_end: float | None = None
 
 
 class EmulatedController(ABC):
@@ -77,7 +83,10 @@ class EmulatedController(ABC):
         self.robot, self.options, self.requested_port = robot, options, port
         cycle_ms = options.cycle_ms if options.cycle_ms is not None else self.default_cycle_ms
         q0 = np.array(options.q0) if options.q0 is not None else None
-        self.arm = EmulatedArm(robot, seed, cycle_ms * 1e-3, self.motion_limits(robot), q0)
+        self.operator = (EmulatedOperator(options.operator) if options.operator is not None
+                         else None)
+        self.arm = EmulatedArm(robot, seed, cycle_ms * 1e-3, self.motion_limits(robot), q0,
+                               operator=self.operator)
         self.rng = np.random.default_rng([seed, 7])
         self._outbox: list[tuple[float, socket.socket, bytes, tuple[str, int] | None]] = []
         self.sent = self.dropped = self.delayed = 0
@@ -119,8 +128,12 @@ class EmulatedController(ABC):
         return self.arm.sim.time
 
     def inputs(self) -> dict[str, bool]:
-        """Digital inputs now ({name: on})."""
-        return self.options.inputs.state(self.t)
+        """Digital inputs now ({name: on}): the scripted windows, or the operator's hands."""
+        state = self.options.inputs.state(self.t)
+        if self.operator is not None:
+            hands = self.operator.inputs(self.t)
+            state = {name: state[name] or hands[name] for name in state}
+        return state
 
     def datagrams(self, sock: socket.socket | None) -> Iterator[tuple[bytes, tuple[str, int]]]:
         """Every datagram queued on a non-blocking UDP socket (none if it is closed)."""
@@ -235,7 +248,9 @@ class EmulatedController(ABC):
             refused=len(log) - accepted, violations=tuple(self.arm.violations()),
             stop_kind=None if kind is None else kind.value, stop_reason=self.arm.stop_reason,
             sent=self.sent, dropped=self.dropped, delayed=self.delayed,
-            max_lag=self.max_lag, resyncs=self.resyncs)
+            max_lag=self.max_lag, resyncs=self.resyncs,
+            operator_start=None if self.operator is None else self.operator.t0,
+            operator_end=None if self.operator is None else self.operator.finished_at)
 
     @property
     def faulted(self) -> bool:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from leadthrough.errors import SimulationError
+from leadthrough.sim.emulators.operator import OperatorPlan
 
 __all__ = ["INPUT_NAMES", "EmulatorOptions", "FaultPlan", "InputSchedule", "Window"]
 
@@ -129,6 +130,8 @@ class EmulatorOptions:
         q0: Start pose [rad]; None: the robot's neutral pose.
         generation: RTDE only: ``"e-series"`` (500 Hz, version 5.x) or ``"cb3"`` (125 Hz,
             version 3.x).
+        operator: A scripted operator at the robot (enabling device, pushes, marks; see
+            :mod:`leadthrough.sim.emulators.operator`), or None.
     """
 
     host: str = "127.0.0.1"
@@ -139,6 +142,7 @@ class EmulatorOptions:
     realtime: bool = True
     q0: tuple[float, ...] | None = None
     generation: str = "e-series"
+    operator: OperatorPlan | None = None
 
     def __post_init__(self) -> None:
         if self.cycle_ms is not None and self.cycle_ms not in (2, 4, 8, 12):

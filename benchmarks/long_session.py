@@ -1,0 +1,112 @@
+"""A long guiding session over the wire: memory stays bounded and the recording loads (issue
+25, must show 6).
+
+``leadthrough emulate`` (its own process; the enabling device pressed for 20 s every 30 s, the
+mark button once per press) and ``leadthrough guide --driver`` (its own process, recording
+streamed to disk) for ``--minutes``; the guide process's resident memory (VmRSS) is read from
+/proc every 10 s. At the end the guide stops by its ``--duration``, then ``leadthrough teach``
+loads the recording. It prints RSS after the first minute (set-up done), at the end, the
+growth, the file's size and rows, the guide's late periods and the emulator's report.
+
+    python benchmarks/long_session.py [--minutes 60] [--kind kuka-rsi] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import select
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+PORTS = {"fanuc-j519": 60015, "ur-rtde": 30004, "kuka-rsi": 49152}
+
+
+def _lt(*args: str) -> list[str]:
+    return [sys.executable, "-m", "leadthrough", *args]
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _emulator(kind: str, port: int, minutes: float) -> subprocess.Popen[str]:
+    presses: list[str] = []
+    for k in range(int(minutes * 2) + 2):
+        a = 5.0 + 30.0 * k
+        presses += ["--enable", f"{a}:{a + 20}", "--mark", f"{a + 2}:{a + 2.2}"]
+    proc = subprocess.Popen(_lt("emulate", kind, "--robot", "er20", "--seed", "3", "--host",
+                                "127.0.0.1", "--port", str(port), *presses),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], 120.0)
+    if not ready or not proc.stdout.readline().startswith("leadthrough: emulating"):
+        proc.kill()
+        raise SystemExit(f"the emulator did not start: {proc.communicate()}")
+    return proc
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--kind", default="kuka-rsi", choices=sorted(PORTS))
+    ap.add_argument("--params", type=Path, default=None,
+                    help="params file (default: the shipped er20 parameters)")
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    from leadthrough.sim.guiding_params import shipped_params_path
+
+    params = args.params or shipped_params_path("er20")
+    out = args.out or Path(tempfile.mkdtemp(prefix="lt-long-"))
+    out.mkdir(parents=True, exist_ok=True)
+    session = out / "long.parquet"
+    port = PORTS[args.kind] + 200
+    guide_cmd = _lt("guide", "--driver", args.kind, "--host", "127.0.0.1", "--port", str(port),
+                    "--robot", "er20", "--params", str(params), "--enable-input", "0",
+                    "--mark-input", "1", "--watchdog", "0.5", "--duration",
+                    str(60.0 * args.minutes), "-o", str(session), "--json")
+    emu = None
+    if args.kind != "kuka-rsi":
+        emu = _emulator(args.kind, port, args.minutes)
+    guide = subprocess.Popen(guide_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    if emu is None:
+        time.sleep(20.0)  # RSI: the PC listens (after compiling), then the robot sends
+        emu = _emulator(args.kind, port, args.minutes)
+    t0 = time.monotonic()
+    samples: list[tuple[float, float]] = []
+    while guide.poll() is None:
+        try:
+            samples.append((time.monotonic() - t0, _rss_mb(guide.pid)))
+        except (FileNotFoundError, ProcessLookupError):
+            break
+        time.sleep(10.0)
+    stdout, stderr = guide.communicate()
+    emu.terminate()
+    report, _ = emu.communicate(timeout=30)
+    result = json.loads(stdout) if stdout.strip().startswith("{") else {"stderr": stderr}
+    after = [m for s, m in samples if s >= 60.0]
+    first = after[0] if after else float("nan")
+    teach = subprocess.run(_lt("teach", str(session), "--robot", "er20", "--no-line", "-o",
+                               str(out / "taught.json")), capture_output=True, text=True,
+                           check=False)
+    print(f"{args.kind}, {args.minutes:g} min: RSS after 1 min {first:.1f} MB, max "
+          f"{max(after, default=float('nan')):.1f} MB, at the end "
+          f"{after[-1] if after else float('nan'):.1f} MB: growth "
+          f"{(after[-1] - first) if after else float('nan'):+.1f} MB (goal <= 50 MB)")
+    print(f"recording {session}: {session.stat().st_size / 1e6:.1f} MB" if session.exists()
+          else "no recording")
+    print(f"guide: {json.dumps(result)}")
+    print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
+    print("emulator: " + " ".join(report.split()))
+    (out / "rss.json").write_text(json.dumps(samples))
+
+
+if __name__ == "__main__":
+    main()
