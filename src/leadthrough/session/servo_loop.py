@@ -163,8 +163,15 @@ class ServoLoop:
         """The first sample: every part reset there, their compiled code loaded; returns the
         sample's time [s]."""
         driver, fb = self.driver, self.fb
-        driver.step()
-        if not driver.read(fb):
+        # a real controller: its next packet within a second (a step waits a few cycles)
+        tries = 1 if driver.simulated else max(1, math.ceil(1.0 / driver.dt))
+        fresh = False
+        for _ in range(tries):
+            driver.step()
+            fresh = driver.read(fb)
+            if fresh:
+                break
+        if not fresh:
             raise ControlError("no feedback on the first read (the robot must report a "
                                "position to start from)", field="driver",
                                value=type(driver).__name__,
