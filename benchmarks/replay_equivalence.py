@@ -10,9 +10,17 @@
    (:func:`leadthrough.sim.session.replay_session`), built from the same settings.
 3. Per case: the largest difference of the joint commands (position [rad], velocity [rad/s]) of
    every servo period, and whether the safety states, faults and transitions are identical.
+   Today's loop ends a session with a commanded stop (issue 25): where the commanded motion is
+   not at rest at the end of the duration, it runs on until it is; those periods ("stop
+   after") have no reference and are not compared.
 
 The replay is open loop (the recorded robot does not answer today's commands), so the comparison
 holds for any change of the simulator: it checks the loop alone. Goal: 1e-12 rad.
+
+Today's loop starts guiding only on a fresh press of the enabling device (a digital input of the
+driver); a reference trace recorded before the drivers reported inputs carries none, so the
+replay adds the press the simulated session scripts (input 0, pressed once the estimator is
+ready, ``warm_up_s + tare_s`` after the first sample, and held).
 """
 
 from __future__ import annotations
@@ -60,17 +68,21 @@ def compare(out: Path, names: list[str]) -> bool:
     robot = load_robot("er20")
     pf = load_params(out / "params.toml", robot)
     print(f"{'case':<22}{'reads':>7}  {'max |Δq_cmd| [rad]':>19}  {'max |Δqd_cmd|':>14}  "
-          f"{'states':>7}  {'events':>7}  reference replays itself")
+          f"{'states':>7}  {'events':>7}  {'stop after':>10}  reference replays itself")
     ok = True
     for name in names:
         ref = np.load(out / f"{name}.npz")
         trace = today.trace(ref)
         log = today.replay(robot, pf, CASES[name], trace)
-        dq = float(np.max(np.abs(log.q_cmd - ref["q_cmd"])))
-        dqd = float(np.max(np.abs(log.qd_cmd - ref["qd_cmd"])))
-        states = bool(np.array_equal(log.state, ref["state"])
-                      and np.array_equal(log.fault, ref["fault"]))
-        events = [[e.t, e.kind, e.label, e.cause] for e in log.events if e.kind == "transition"]
+        k = ref["q_cmd"].shape[0]            # today's loop may add its end-of-session stop
+        extra = log.q_cmd.shape[0] - k
+        dq = float(np.max(np.abs(log.q_cmd[:k] - ref["q_cmd"])))
+        dqd = float(np.max(np.abs(log.qd_cmd[:k] - ref["qd_cmd"])))
+        states = bool(np.array_equal(log.state[:k], ref["state"])
+                      and np.array_equal(log.fault[:k], ref["fault"]))
+        t_end = float(log.time[k - 1])
+        events = [[e.t, e.kind, e.label, e.cause] for e in log.events
+                  if e.kind == "transition" and e.t <= t_end]
         same_events = events == json.loads(str(ref["events"]))
         itself = all(np.array_equal(ref[k], ref["replay_" + k])
                      for k in ("q_cmd", "qd_cmd", "state", "fault"))
@@ -78,7 +90,7 @@ def compare(out: Path, names: list[str]) -> bool:
         ok = ok and good
         print(f"{name:<22}{ref['fb_t'].size:>7}  {dq:>19.3g}  {dqd:>14.3g}  "
               f"{'same' if states else 'DIFFER':>7}  {'same' if same_events else 'DIFFER':>7}  "
-              f"{'yes' if itself else 'NO'}")
+              f"{extra:>7} ms  {'yes' if itself else 'NO'}")
     return ok
 
 
@@ -87,9 +99,17 @@ class _TodayAPI:
 
     def trace(self, ref: np.lib.npyio.NpzFile) -> object:
         from leadthrough.drivers.replay import FeedbackTrace
+        from leadthrough.session.loop_config import LoopConfig
+        from leadthrough.sim.session import ENABLE_INPUT
+
+        inputs = ref.get("fb_inputs")
+        if inputs is None:      # the scripted press of the enabling device (see the doc)
+            est = LoopConfig().estimator
+            held = ref["fb_fresh"] & (ref["fb_t"] >= est.warm_up_s + est.tare_s)
+            inputs = np.where(held, 1 << ENABLE_INPUT, 0).astype(np.int64)
         return FeedbackTrace(dt=float(ref["fb_dt"]), t=ref["fb_t"], q=ref["fb_q"],
                              current=ref["fb_current"], sequence=ref["fb_sequence"],
-                             fresh=ref["fb_fresh"])
+                             fresh=ref["fb_fresh"], digital_inputs=inputs)
 
     def config(self, robot: object, case: dict[str, object]) -> object:
         """Today's SimSessionConfig of a case (the reference builds the same settings with its

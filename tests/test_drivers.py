@@ -178,3 +178,38 @@ def test_recording_and_replay_drivers_deliver_the_same_reads(er20: Robot) -> Non
                                    fresh=np.ones(2, bool)))
     with pytest.raises(DataError, match="capacity"):
         RecordingDriver(sim, capacity=0)
+
+
+def test_scripted_digital_inputs_are_read_recorded_and_replayed(er20: Robot) -> None:
+    """Bit 0 held from 2 ms to 5 ms, bit 1 from 4 ms on: ``read`` reports them at the sample's
+    time, and a recorded trace replays them with the controller state."""
+    from leadthrough.drivers.replay import RecordingDriver, ReplayDriver
+    from leadthrough.sim.driver import InputScript
+
+    sim = _driver(er20)
+    sim.script_input(InputScript(0, ((0.002, 0.005),)))
+    sim.script_input(InputScript(1, ((0.004, math.inf),)))
+    rec = RecordingDriver(sim, capacity=8)
+    fb = rec.make_feedback()
+    assert fb.inputs == 0 and fb.state == 0
+    got = []
+    for _ in range(8):
+        rec.step()
+        assert rec.read(fb)
+        got.append(fb.inputs)
+    assert got == [0, 0, 1, 1, 3, 2, 2, 2]           # samples at t = 0, 1, ..., 7 ms
+    trace = rec.trace()
+    assert trace.digital_inputs is not None and trace.digital_inputs.tolist() == got
+    rep = ReplayDriver(trace)
+    fb2 = rep.make_feedback()
+    replayed = []
+    for _ in range(8):
+        assert rep.read(fb2)
+        replayed.append(fb2.inputs)
+    assert replayed == got
+    with pytest.raises(SimulationError, match="bit"):
+        InputScript(64, ())
+    with pytest.raises(SimulationError, match="intervals"):
+        InputScript(0, ((0.5, 0.2),))
+    with pytest.raises(SimulationError, match="intervals"):
+        InputScript(0, ((0.0, 1.0), (0.5, 2.0)))

@@ -14,16 +14,14 @@ from leadthrough.cli import main
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.friction import StribeckParameters, stribeck_friction
 from leadthrough.errors import DataError
-from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
 from leadthrough.excitation.trajectory_file import load_trajectory
-from leadthrough.identification.api import identify, identify_with_sweep
+from leadthrough.identification.api import identify
 from leadthrough.identification.friction_sweep import fit_sweep_friction, sweep_points
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import (
     SimSessionConfig,
@@ -97,14 +95,6 @@ def test_too_few_passes_is_a_clear_error(er20: Robot) -> None:
     with pytest.raises(DataError, match="too few") as e:
         fit_sweep_friction(sweep_points(rec, er20), er20, source=rec.source)
     assert e.value.source == "short.parquet"
-
-
-@pytest.fixture(scope="module")
-def sweep_calibration(er20: Robot) -> tuple[object, object, object]:
-    cal = record_calibration_set(er20, seed=1, duration=30.0,
-                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60))
-    sweep = record_friction_sweep(er20, seed=1, run=2, q_start=guide_start_pose(er20))
-    return cal, sweep, identify_with_sweep(cal.identification.measured, sweep.measured, er20)
 
 
 def test_sweep_on_the_simulator_measures_the_plants_low_speed_friction(

@@ -94,8 +94,9 @@ class ControlError(LeadthroughError):
 
 
 class DriverError(LeadthroughError):
-    """A robot controller cannot be reached, refused the stream or a request, does not match
-    the robot file (joint count, units, limits), or its link broke mid-session."""
+    """The link to a robot controller failed or does not fit: it cannot be reached, it refused
+    the stream or a request, it does not match the robot file (joint count, units, limits), it
+    broke mid-session or a call timed out."""
 
 
 def check_fields(prefix: str, obj: Any, checks: list[tuple[str, bool, str]],

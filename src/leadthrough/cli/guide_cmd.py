@@ -1,4 +1,5 @@
-"""``leadthrough guide``: a hand-guiding session on the built-in simulated robot."""
+"""``leadthrough guide``: a hand-guiding session on the built-in simulated robot, or with
+``--driver D --host H`` on a robot controller (:mod:`leadthrough.cli.guide_robot`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
+from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
@@ -35,14 +38,16 @@ def register(sub: Any) -> None:
                     "mass and friction, eq. 31-36, or the velocity baseline [14]) through the "
                     "safety layer, differential IK and 1 ms interpolation. Everything is "
                     "recorded to Parquet.",
-        epilog="example: leadthrough guide --robot er20 --params params.toml --operator push-x "
-               "-o session.parquet --json",
+        epilog="examples:\n  leadthrough guide --robot er20 --params params.toml --operator push-x "
+               "-o session.parquet --json\n  leadthrough guide --driver ur-rtde --host 10.0.0.2 "
+               "--robot ur5 --params params.toml --enable-input 0 --mark-input 1 "
+               "-o session.parquet   (until Ctrl-C)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="er20", help="robot (default: er20)")
     p.add_argument("--params", type=Path, required=True,
                    help="identified parameters (leadthrough identify -o params.toml)")
-    p.add_argument("--operator", choices=OPERATOR_NAMES, default="push-x",
-                   help="scripted operator (default: push-x)")
+    p.add_argument("--operator", choices=OPERATOR_NAMES, default=None,
+                   help="scripted operator on the simulator (default: push-x)")
     p.add_argument("--controller", choices=CONTROLLERS, default="virtual-friction",
                    help="force-following law (default: virtual-friction, the paper's)")
     p.add_argument("--friction", choices=("fixed", "auto"), default="fixed",
@@ -51,7 +56,8 @@ def register(sub: Any) -> None:
                    help="translational virtual mass [kg] (default: Table IV's 1000; the "
                         "push demonstrations use 100 so that 40 N reaches the 0.2 m/s cap)")
     p.add_argument("--duration", type=float, default=None,
-                   help="session length [s] (default: the operator script's)")
+                   help="session length [s] (default: the operator script's; with --driver: "
+                        "until Ctrl-C)")
     p.add_argument("--seed", type=int, default=None,
                    help="simulated robot instance (default: the one the params were identified "
                         "on, their [meta] sim_seed, else 1); another one is refused")
@@ -61,6 +67,7 @@ def register(sub: Any) -> None:
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_robot_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -68,15 +75,21 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
     pf = load_params(args.params, robot)
-    seed = sim_robot_seed(args.seed, pf)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
-    loop = LoopConfig(guiding=replace(guiding, controller=args.controller,
-                                      friction_mode=args.friction))
+    guiding = replace(guiding, controller=args.controller, friction_mode=args.friction)
+    require_folder(args.output)
+    if args.driver is not None:
+        return guide_on_robot(args, robot, pf, guiding)
+    refuse_settings(args, ("enable_input", "mark_input", "host", "port"),
+                    "a robot setting given for the simulator",
+                    "--driver D with it (the simulator scripts its inputs)")
+    args.operator = args.operator or "push-x"
+    seed = sim_robot_seed(args.seed, pf)
+    loop = LoopConfig(guiding=guiding)
     cfg = SimSessionConfig(operator=args.operator, duration_s=args.duration, seed=seed,
                            operator_seed=args.operator_seed, paced=args.realtime, loop=loop)
-    require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
-    save_session(session.result.log, args.output)
+    save_session(session.log, args.output)
     summary = session.summary.to_json()
     summary["session"] = str(args.output)
     if args.json:

@@ -18,7 +18,8 @@ from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot
 from leadthrough.session.trajectory_recording import TrajectoryRunConfig, record_trajectory
 
-__all__ = ["add_driver_arguments", "record_on_robot"]
+__all__ = ["add_connection_arguments", "add_driver_arguments", "record_on_robot",
+           "refuse_settings"]
 
 _SIM_ONLY = ("seed", "run", "payload_mass", "payload_com")
 
@@ -26,24 +27,35 @@ _SIM_ONLY = ("seed", "run", "payload_mass", "payload_com")
 def add_driver_arguments(p: argparse.ArgumentParser) -> None:
     """``--driver``, ``--host``, ``--port`` and ``--approach``."""
     g = p.add_argument_group("on a robot controller")
+    add_connection_arguments(g)
+    g.add_argument("--approach", type=float, default=0.1, metavar="F",
+                   help="share of the joint speed and acceleration limits for the move to the "
+                        "trajectory's start (0: the robot must already be there; default 0.1)")
+
+
+def refuse_settings(args: argparse.Namespace, names: tuple[str, ...], message: str,
+                    expected: str) -> None:
+    """Raise :class:`ControlError` naming the first of ``names`` given (not None)."""
+    for name in names:
+        if getattr(args, name) is not None:
+            raise ControlError(message, field=f"--{name.replace('_', '-')}",
+                               value=getattr(args, name), expected=expected)
+
+
+def add_connection_arguments(g: Any) -> None:
+    """``--driver``, ``--host`` and ``--port`` (into an argument group or parser)."""
     g.add_argument("--driver", default=None, choices=sorted(CONTROLLERS),
                    help="the controller's interface (default: the simulated robot)")
     g.add_argument("--host", default=None,
                    help="the controller's address (kuka-rsi: this PC's address to listen on)")
     g.add_argument("--port", type=int, default=None,
                    help="the interface's port (default: its own: 60015, 30004, 49152)")
-    g.add_argument("--approach", type=float, default=0.1, metavar="F",
-                   help="share of the joint speed and acceleration limits for the move to the "
-                        "trajectory's start (0: the robot must already be there; default 0.1)")
 
 
 def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamples) -> int:
     """Run ``traj`` on the controller of ``args.driver`` and write the recording."""
-    for name in _SIM_ONLY:
-        if getattr(args, name) is not None:
-            raise ControlError("a simulator setting given for a robot",
-                               field=f"--{name.replace('_', '-')}", value=getattr(args, name),
-                               expected="no simulator settings with --driver")
+    refuse_settings(args, _SIM_ONLY, "a simulator setting given for a robot",
+                    "no simulator settings with --driver")
     config = TrajectoryRunConfig(approach_fraction=args.approach)
     driver = connect(args.driver, robot, args.host, args.port)
     bar = Progress(f"recording on {args.driver} at {args.host}", 1, lines=True)

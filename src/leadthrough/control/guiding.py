@@ -55,10 +55,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control import safety_rules as rules
 from leadthrough.control.auto_friction import AutoFriction
 from leadthrough.control.guiding_cycle import guiding_cycle, not_started_cycle
 from leadthrough.control.guiding_state import Law, controller_dtype
@@ -73,8 +75,7 @@ from leadthrough.control.ik import DifferentialIK
 from leadthrough.control.ik_step import update_manipulability_of
 from leadthrough.control.operator_limits import adjusted_config
 from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
-from leadthrough.control.safety import Event, SafetySupervisor, State
-from leadthrough.control.safety_rules import clear_fault
+from leadthrough.control.safety import Event, Fault, SafetySupervisor, State
 from leadthrough.errors import ControlError
 from leadthrough.robot.description import Robot
 from leadthrough.state_records import new_record, view
@@ -145,14 +146,9 @@ class GuidingController:
         """The record's settings from ``cfg`` (the state untouched)."""
         s = self._s
         s.dt = cfg.dt
-        s.tool_frame = cfg.frame == "tool"
-        if cfg.controller == "virtual-friction":
-            s.law, s.law_coefficients = Law.VIRTUAL_FRICTION, cfg.virtual_friction.dt_over_mass(
-                cfg.dt)
-        else:
-            s.law, s.law_coefficients = Law.VELOCITY, cfg.velocity_baseline.gain
+        self._write_live_settings(cfg)
+        if cfg.controller != "virtual-friction":
             s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
-        s.axis_mask = [1.0 if a else 0.0 for a in cfg.axes_enabled]
         s.hold_s = cfg.settle_s + cfg.rezero_s
         s.release_drop = RELEASE_DROP
         s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
@@ -160,6 +156,18 @@ class GuidingController:
         s.max_speed = cfg.limits.max_speed
         s.max_step = cfg.limits.max_step(cfg.dt)
         s.stop_fraction = cfg.ik.stop_acceleration_fraction
+
+    def _write_live_settings(self, cfg: GuidingConfig) -> None:
+        """The settings an operator may change: the frame, the law's coefficients, the axis
+        mask and the friction (eq. 36 replaces it at the next cycle when automatic)."""
+        s = self._s
+        s.tool_frame = cfg.frame == "tool"
+        if cfg.controller == "virtual-friction":
+            s.law, s.law_coefficients = Law.VIRTUAL_FRICTION, cfg.virtual_friction.dt_over_mass(
+                cfg.dt)
+        else:
+            s.law, s.law_coefficients = Law.VELOCITY, cfg.velocity_baseline.gain
+        s.axis_mask = [1.0 if a else 0.0 for a in cfg.axes_enabled]
         s.friction = cfg.virtual_friction.friction
         s.stopping_friction = cfg.virtual_friction.stopping_friction
 
@@ -238,6 +246,46 @@ class GuidingController:
             s.resync = True
         return ok
 
+    def retune(self, config: GuidingConfig) -> None:
+        """Change the settings an operator may change during a session, at rest: ``frame``,
+        ``axes_enabled`` and ``virtual_friction`` (mass and fixed friction). The law's state
+        that depends on the frame (the release detector) restarts.
+
+        Args:
+            config: The new settings; every other field as now.
+
+        Raises:
+            ControlError: Another setting differs, or the commanded motion is not at rest (the
+                law's twist, in the old frame, would be read in the new one).
+        """
+        live = ("frame", "axes_enabled", "virtual_friction")
+        if replace(config, **{k: getattr(self.config, k) for k in live}) != self.config:
+            raise ControlError("only the frame, the axes and the virtual mass and friction can "
+                               "change during a session", field="config",
+                               expected="the session's settings but for " + ", ".join(live))
+        s = self._s
+        if s.twist.any() or s.qd_cmd.any():
+            raise ControlError("the commanded motion is not at rest", field="config",
+                               expected="a retune at rest")
+        self.config = config
+        self._write_live_settings(config)
+        if self._auto is not None:
+            s.kinematics_fresh = False   # eq. 36 again, in the new frame
+        s.release_peak = s.release_smooth = 0.0
+
+    def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
+        """Latch ``fault`` from outside the cycle (a guiding loop's driver or controller-state
+        fault): from the next cycle on, the commanded motion stops at the acceleration limit and
+        holds, as for the controller's own faults (no-op while a fault is latched).
+
+        Args:
+            t: Time [s] (logged).
+            fault: The fault.
+            value: Its offending value (see :class:`Fault`).
+            index: Joint or axis index, -1 if none.
+        """
+        self._safety.trip(t, fault, value, index)
+
     def adjust(self, *, frame: str | None = None, axes_enabled: Sequence[bool] | None = None,
                mass: tuple[float, float] | None = None,
                friction: tuple[float, float] | None = None) -> GuidingConfig:
@@ -282,6 +330,15 @@ class GuidingController:
         return self._safety.state
 
     @property
+    def fault(self) -> Fault:
+        """The latched fault (``Fault.NONE`` unless in FAULT)."""
+        return self._safety.fault
+
+    def events_since(self, count: int) -> list[Event]:
+        """The transitions logged after the first ``count``, oldest first."""
+        return self._safety.events_since(count)
+
+    @property
     def last_event(self) -> Event | None:
         """The latest logged state transition (with the fault, its value and index), or None
         before the first."""
@@ -314,7 +371,11 @@ class GuidingController:
         update_manipulability_of(ik)
         not_started_cycle(inp.record, ctl, sv, events, out.record)
         guiding_cycle(inp.record, ctl, ik, sv, events, out.record)
-        clear_fault(sv[0], events, 0.0, True)
+        rules.clear_fault(sv[0], events, 0.0, True)
+        # what a reset, a trip from the loop and a fault reset run outside the cycle
+        rules.reset(sv[0], events, 0.0)
+        rules.trip(sv[0], events, 0.0, int(Fault.DRIVER_ERROR), math.nan, -1)
+        rules.workspace_clearance(sv[0], self._s.pose_position, 0.0, 0.0)
 
     # ----------------------------------------------------------------- real time
     def update(self, inp: GuidingInput, out: GuidingOutput) -> GuidingStatus:

@@ -233,14 +233,19 @@ class SafetySupervisor:
     @property
     def events(self) -> list[Event]:
         """The logged transitions, oldest first (at most ``max_events``)."""
-        ring, count = self.event_ring, int(self._s.event_count)
-        cap = ring.size
-        return [_event(ring[k % cap]) for k in range(max(0, count - cap), count)]
+        return self.events_since(0)
 
     @property
     def event_count(self) -> int:
-        """Number of transitions logged so far (dropped ones included)."""
+        """Transitions logged since construction (dropped ones included)."""
         return int(self._s.event_count)
+
+    def events_since(self, count: int) -> list[Event]:
+        """The transitions logged after the first ``count``, oldest first (those still in the
+        ring)."""
+        ring, total = self.event_ring, int(self._s.event_count)
+        cap = ring.size
+        return [_event(ring[k % cap]) for k in range(max(0, total - cap, count), total)]
 
     @property
     def last_event(self) -> Event | None:

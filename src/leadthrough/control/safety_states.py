@@ -58,6 +58,15 @@ class Fault(IntEnum):
     #: The force estimator latched a fault since the last cycle (a non-finite or wrong-size
     #: sample between the controller's cycles, or an overflow; value: the estimator's status).
     ESTIMATOR = 12
+    #: The robot controller reports a stop or a fault of its own: emergency or protective stop,
+    #: not ready, a command refused (value: the driver's ``ControllerState``). Tripped by the
+    #: guiding loop.
+    CONTROLLER_STATE = 13
+    #: The driver raised: the link to the controller failed (tripped by the guiding loop).
+    DRIVER_ERROR = 14
+    #: A driver call blocked beyond the loop's watchdog timeout (value: how long [s]; tripped
+    #: by the guiding loop).
+    DRIVER_TIMEOUT = 15
 
 
 class Cause(IntEnum):

@@ -123,12 +123,12 @@ def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
         loop = LoopConfig(guiding=replace(guiding, controller=ctl))
         s = run_sim_session(robot, params, SimSessionConfig(operator=op, seed=seed, loop=loop))
         sessions[f"{op}/{ctl}"] = s
-        save_session(s.result.log, out / f"session_{op}_{ctl}.parquet")
+        save_session(s.log, out / f"session_{op}_{ctl}.parquet")
         sm = s.summary
         drift = "" if sm.rest_drift_m is None else f", rest drift {1000 * sm.rest_drift_m:.2f} mm"
         say(f"      {op:<8} {ctl:<16} max {sm.max_linear_speed:.3f} m/s{drift}, "
             f"faults {', '.join(sm.faults) or 'none'}")
-    logs: dict[str, SessionLog] = {k: v.result.log for k, v in sessions.items()}
+    logs: dict[str, SessionLog] = {k: v.log for k, v in sessions.items()}
     fig4 = plot_force_velocity({"virtual friction": logs["push-x/virtual-friction"],
                                 "velocity [14]": logs["push-x/velocity"]}, out / "fig4.png")
     seam = sessions["seam/virtual-friction"]

@@ -218,7 +218,7 @@ def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None])
     if res.guiding is None:
         return
     seam = res.guiding.sessions["seam/virtual-friction"]
-    log = seam.result.log
+    log = seam.log
     try:
         program = teach_session(log, robot, tolerance_mm=1.0, speed_m_s=0.1)
     except LeadthroughError as e:  # a session the teach-in rejects is a result, not a crash

@@ -1,10 +1,11 @@
 """The driver protocol: how the guiding loop talks to a position-mode robot controller.
 
 A driver delivers feedback samples (time, encoder joint positions, measured motor currents,
-sequence number) and takes a joint position + velocity command every servo period ``dt``
-(1 ms). Nothing is allocated in the loop: the caller makes one :class:`DriverFeedback` and one
-:class:`JointCommand` with :meth:`Driver.make_feedback` and :meth:`Driver.make_command` and the
-driver fills or reads them in place (ruckig-style).
+sequence number and, where the controller reports them, its own state and its digital inputs)
+and takes a joint position + velocity command every servo period ``dt`` (1 ms on the simulator;
+2, 4 or 8 ms on real controllers). Nothing is allocated in the loop: the caller makes one
+:class:`DriverFeedback` and one :class:`JointCommand` with :meth:`Driver.make_feedback` and
+:meth:`Driver.make_command` and the driver fills or reads them in place (ruckig-style).
 
 The loop, for every driver::
 
@@ -26,6 +27,13 @@ inputs as a bit word, ``inputs_read`` telling whether the sample carried them), 
 that reports joint torque instead of motor current (KUKA RSI) fills
 :attr:`DriverFeedback.torque`. These fields have defaults (normal state, no inputs, no torque),
 so drivers and callers that do not use them are unaffected.
+
+Errors: a driver raises when the link fails (:class:`~leadthrough.errors.DriverError`, or any
+exception). The loop never lets one escape: it latches a fault and stops at the acceleration
+limit if the link still takes commands, else it stops commanding (the controller's own watchdog
+then stops the robot). A driver whose calls can block may also provide ``abort()``, callable from
+another thread, which makes a blocked ``step`` or ``read`` return by raising: the loop's watchdog
+calls it when a call has blocked beyond its timeout.
 
 Pacing: :meth:`Driver.step` is where the loop waits for the next servo period. A simulated
 driver (``simulated`` true) advances its physics by one period and returns at once, so a
@@ -220,3 +228,9 @@ class WrappedDriver:
     def step(self) -> None:
         """Step the wrapped driver."""
         self._driver.step()
+
+    def abort(self) -> None:
+        """Abort a blocked call of the wrapped driver, if it can (see the module doc)."""
+        abort = getattr(self._driver, "abort", None)
+        if abort is not None:
+            abort()

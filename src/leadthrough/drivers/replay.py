@@ -41,6 +41,8 @@ class FeedbackTrace:
         current: Motor currents [A], shape (N, n).
         sequence: Sample counter, shape (N,).
         fresh: Whether ``read`` delivered a new sample, shape (N,).
+        controller_state: The controller's state, shape (N,); None: ``OK`` throughout.
+        digital_inputs: The digital inputs' bit field, shape (N,); None: none set.
     """
 
     dt: float
@@ -49,6 +51,8 @@ class FeedbackTrace:
     current: Array
     sequence: NDArray[np.int64]
     fresh: NDArray[np.bool_]
+    controller_state: NDArray[np.int64] | None = None
+    digital_inputs: NDArray[np.int64] | None = None
 
     @property
     def reads(self) -> int:
@@ -78,6 +82,8 @@ class RecordingDriver(WrappedDriver):
         self._current = np.full((capacity, n), np.nan)
         self._sequence = np.full(capacity, -1, dtype=np.int64)
         self._fresh = np.zeros(capacity, dtype=bool)
+        self._state = np.zeros(capacity, dtype=np.int64)
+        self._inputs = np.zeros(capacity, dtype=np.int64)
         self._k = 0
 
     def read(self, fb: DriverFeedback) -> bool:
@@ -91,6 +97,8 @@ class RecordingDriver(WrappedDriver):
                 self._q[k] = fb.q
                 self._current[k] = fb.current
                 self._sequence[k] = fb.sequence
+                self._state[k] = fb.state
+                self._inputs[k] = fb.inputs
             self._k = k + 1
         return fresh
 
@@ -99,7 +107,9 @@ class RecordingDriver(WrappedDriver):
         k = self._k
         return FeedbackTrace(dt=self.dt, t=self._t[:k].copy(), q=self._q[:k].copy(),
                              current=self._current[:k].copy(),
-                             sequence=self._sequence[:k].copy(), fresh=self._fresh[:k].copy())
+                             sequence=self._sequence[:k].copy(), fresh=self._fresh[:k].copy(),
+                             controller_state=self._state[:k].copy(),
+                             digital_inputs=self._inputs[:k].copy())
 
 
 class ReplayDriver:
@@ -129,7 +139,16 @@ class ReplayDriver:
                                      "fresh (N,)")
         if not (np.isfinite(trace.dt) and trace.dt > 0):
             raise DataError("must be > 0", field="trace.dt", value=trace.dt, expected="> 0 s")
+        for name in ("controller_state", "digital_inputs"):
+            column = getattr(trace, name)
+            if column is not None and np.shape(column) != (N,):
+                raise DataError("inconsistent trace", field=f"trace.{name}",
+                                value=np.shape(column), expected=f"None or shape ({N},)")
         self._trace = trace
+        self._state = (trace.controller_state if trace.controller_state is not None
+                       else np.zeros(N, dtype=np.int64))
+        self._inputs = (trace.digital_inputs if trace.digital_inputs is not None
+                        else np.zeros(N, dtype=np.int64))
         self._n = int(trace.q.shape[1])
         self._k = 0
         self.last_command = JointCommand.zeros(self._n)
@@ -164,6 +183,9 @@ class ReplayDriver:
         fb.q[:] = tr.q[k]
         fb.current[:] = tr.current[k]
         fb.sequence = int(tr.sequence[k])
+        fb.state = int(self._state[k])
+        fb.inputs = int(self._inputs[k])
+        fb.inputs_read = True
         return True
 
     def write(self, cmd: JointCommand) -> None:

@@ -2,24 +2,30 @@
 estimator, the guiding controller and the interpolator, for any driver.
 
     parts = build_loop(robot, params, LoopConfig(), driver.dt)
-    run_session(driver, *parts, duration_s=...)
+    run_session(driver, *parts, duration_s=..., options=LoopOptions(enable_input=0))
 
 The parameters come from calibration (a params file); nothing here knows whether the driver is
-a real controller or the simulator.
+a real controller or the simulator. :class:`LoopOptions` say how the loop meets the driver and
+the operator: which digital input is the enabling device, pacing.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 from leadthrough.control.guiding import GuidingConfig, GuidingController
 from leadthrough.control.interpolation import HermiteInterpolator
+from leadthrough.errors import ControlError, check_fields
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 
-__all__ = ["LoopConfig", "LoopParts", "build_loop"]
+__all__ = ["MAX_INPUT_BIT", "LoopConfig", "LoopOptions", "LoopParts", "build_loop"]
+
+#: Highest digital input bit a driver can report (a 64-bit field).
+MAX_INPUT_BIT = 63
 
 
 def _guiding_estimator() -> EstimatorConfig:
@@ -42,6 +48,61 @@ class LoopConfig:
 
     estimator: EstimatorConfig = field(default_factory=_guiding_estimator)
     guiding: GuidingConfig = field(default_factory=GuidingConfig)
+
+
+def _bit_or_none(bit: int | None) -> bool:
+    return bit is None or (isinstance(bit, int) and 0 <= bit <= MAX_INPUT_BIT)
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """How the loop meets the driver and the operator.
+
+    Attributes:
+        enable_input: The digital input (bit of ``DriverFeedback.inputs``) wired to
+            the enabling device; None: no enabling input from the driver. Guiding starts only
+            on a fresh press of it (:class:`~leadthrough.session.operator_inputs.EnablingDevice`);
+            with no enabling input at all, the loop never guides.
+        software_enable: Take the enabling device from ``LoopRequests.set_enable`` (a page's
+            button) instead; a simulated driver only: a software button is no enabling device
+            for a real robot.
+        mark_input: The digital input wired to the "mark point" button; None: marks come only
+            from ``LoopRequests.mark``.
+        paced: Pace a simulated driver to the wall clock (real time) instead of running flat
+            out; a real driver paces the loop itself.
+        watchdog_s: A driver exchange (write, step, read) longer than this is a fault, and one
+            that blocks is aborted (:mod:`~leadthrough.session.watchdog`) [s]; real drivers
+            only (a simulation's wall time means nothing). More than two periods.
+        abort_s: A driver exchange blocked longer than this is aborted and the link taken as
+            gone: the loop ends without commanding (the controller's own watchdog stops the
+            robot) [s]; at least ``watchdog_s``.
+        stop_timeout_s: A stop (requested, or the end of ``duration_s``) that has not brought
+            the commanded motion to rest after this long ends the loop anyway [s].
+    """
+
+    enable_input: int | None = None
+    software_enable: bool = False
+    mark_input: int | None = None
+    paced: bool = False
+    watchdog_s: float = 0.05
+    abort_s: float = 1.0
+    stop_timeout_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        bits = f"None or an input bit 0..{MAX_INPUT_BIT}"
+        check_fields("loop", self, [
+            ("enable_input", _bit_or_none(self.enable_input), bits),
+            ("mark_input", _bit_or_none(self.mark_input)
+             and (self.mark_input is None or self.mark_input != self.enable_input),
+             bits + ", not the enabling input"),
+            ("software_enable", not (self.software_enable and self.enable_input is not None),
+             "False with an enable_input (one enabling device)"),
+            ("watchdog_s", math.isfinite(self.watchdog_s) and self.watchdog_s > 0, "> 0 s"),
+            ("abort_s", math.isfinite(self.abort_s) and self.abort_s >= self.watchdog_s,
+             ">= watchdog_s"),
+            ("stop_timeout_s", math.isfinite(self.stop_timeout_s) and self.stop_timeout_s > 0,
+             "> 0 s"),
+        ], ControlError)
 
 
 class LoopParts(NamedTuple):

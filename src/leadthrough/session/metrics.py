@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.safety import State
+from leadthrough.errors import ControlError
 from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
@@ -137,8 +138,15 @@ def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> 
         result: The session.
         controller_dt: Controller cycle [s] (accelerations are taken per cycle).
         deceleration: Linear acceleration limit [m/s²] for :func:`release_overruns`.
+
+    Raises:
+        ControlError: The session was recorded to a file, not in memory (load it with
+            :func:`~leadthrough.session.record.load_session` and summarise the log).
     """
     log = result.log
+    if log is None:
+        raise ControlError("the session was recorded to a file, not kept in memory",
+                           field="result.log", expected="a session recorded in memory")
     twist = log.twist_cmd_base
     dt = float(np.median(np.diff(log.time))) if log.time.size > 1 else controller_dt
     every = max(1, round(controller_dt / dt))

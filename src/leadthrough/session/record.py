@@ -27,7 +27,8 @@ from numpy.typing import NDArray
 from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write, require_file
 
-__all__ = ["Mark", "SessionEvent", "SessionLog", "load_session", "save_session"]
+__all__ = ["Mark", "SessionEvent", "SessionLog", "load_session", "save_session",
+           "session_columns", "session_metadata"]
 
 Array = NDArray[np.float64]
 _WRENCH = ("fx", "fy", "fz", "tx", "ty", "tz")
@@ -151,20 +152,32 @@ def save_session(log: SessionLog, path: str | Path) -> Path:
     if path.suffix.lower() not in (".parquet", ".pq"):
         raise DataError("unsupported session file type", source=path, field="suffix",
                         value=path.suffix, expected=".parquet")
+    table = pa.table(session_columns(log)).replace_schema_metadata(
+        session_metadata(log.robot, log.n, log.events, log.settings))
+
+    def write(tmp: Path) -> None:
+        pq.write_table(table, tmp)
+
+    return atomic_write(path, write)
+
+
+def session_columns(log: SessionLog) -> dict[str, Array]:
+    """The session file's columns of ``log``'s rows (``t``, ``q_1``..., ``state``, ...)."""
     columns: dict[str, Array] = {"t": log.time}
     for prefix, (arr, names) in _blocks(log).items():
         for k, name in enumerate(names):
             columns[f"{prefix}_{name}"] = arr[:, k]
     columns["state"] = log.state.astype(np.int8)
     columns["fault"] = log.fault.astype(np.int8)
-    meta = {"format": FORMAT_VERSION, "robot": log.robot, "n": log.n,
-            "events": [asdict(e) for e in log.events], "settings": log.settings}
-    table = pa.table(columns).replace_schema_metadata({_META_KEY: json.dumps(meta).encode()})
+    return columns
 
-    def write(tmp: Path) -> None:
-        pq.write_table(table, tmp)
 
-    return atomic_write(path, write)
+def session_metadata(robot: str, n: int, events: list[SessionEvent],
+                     settings: dict[str, object]) -> dict[bytes, bytes]:
+    """The session file's key-value metadata (robot, joints, events, settings)."""
+    meta = {"format": FORMAT_VERSION, "robot": robot, "n": n,
+            "events": [asdict(e) for e in events], "settings": settings}
+    return {_META_KEY: json.dumps(meta).encode()}
 
 
 def load_session(path: str | Path) -> SessionLog:
@@ -183,10 +196,12 @@ def load_session(path: str | Path) -> SessionLog:
     require_file(path, "session file", "an existing session .parquet")
     try:
         table = pq.read_table(path)
+        # save_session puts it in the schema; a file streamed chunk by chunk in the footer
+        raw = ((table.schema.metadata or {}).get(_META_KEY)
+               or (pq.read_metadata(path).metadata or {}).get(_META_KEY))
     except (OSError, pa.ArrowException) as e:
         raise DataError(f"not a readable Parquet file ({e})", source=path,
                         expected="a session written by 'leadthrough guide'") from e
-    raw = (table.schema.metadata or {}).get(_META_KEY)
     if raw is None:
         raise DataError("not a leadthrough session (no session metadata)", source=path,
                         expected="a session written by 'leadthrough guide'")

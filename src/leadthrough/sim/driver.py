@@ -13,22 +13,38 @@ the feedback go bad mid-session:
 * ``q_offset``: the delivered joint positions are off by ``offset`` [rad] (an encoder or
   following error: the robot is not where it reports).
 
-The simulation itself is never touched by a fault: it keeps moving under the last command.
+Faults of the controller and of the link, for the loop's ways out:
+
+* ``estop``, ``protective_stop``, ``rejected``: the controller reports that state
+  (``DriverFeedback.state``) and, like a real one, takes no command meanwhile: the
+  servo holds the last command it accepted (the controller's own stop).
+* ``raise``: ``read`` raises :class:`~leadthrough.errors.DriverError` (a link failure; a window
+  of one sample is a one-off error, an open-ended one a link that is gone).
+* ``block``: the first ``step`` that takes a sample in the window blocks ``block_s`` seconds of
+  wall time (inf: until :meth:`SimDriver.abort`, which makes it raise).
+
+The simulation itself is never touched by a feedback fault: it keeps moving under the last
+command.
+
+Digital inputs (an enabling device, a "mark point" button) are scripted with
+:meth:`SimDriver.script_input` (:class:`InputScript`: the intervals of sample time during which
+an input is set); ``read`` reports them in ``DriverFeedback.inputs``.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
 
-from leadthrough.drivers.protocol import DriverFeedback, JointCommand
-from leadthrough.errors import SimulationError
+from leadthrough.drivers.protocol import ControllerState, DriverFeedback, JointCommand
+from leadthrough.errors import DriverError, SimulationError
 from leadthrough.sim.robot import SimRobot
 
-__all__ = ["InjectedFault", "InjectedFaultKind", "SimDriver"]
+__all__ = ["InjectedFault", "InjectedFaultKind", "InputScript", "SimDriver"]
 
 
 class InjectedFaultKind(StrEnum):
@@ -38,6 +54,17 @@ class InjectedFaultKind(StrEnum):
     NAN_Q = "nan_q"
     NAN_CURRENT = "nan_current"
     Q_OFFSET = "q_offset"
+    ESTOP = "estop"
+    PROTECTIVE_STOP = "protective_stop"
+    REJECTED = "rejected"
+    RAISE = "raise"
+    BLOCK = "block"
+
+
+#: The controller state each controller fault reports.
+_CONTROLLER_STATES = {InjectedFaultKind.ESTOP: ControllerState.ESTOP,
+                      InjectedFaultKind.PROTECTIVE_STOP: ControllerState.PROTECTIVE_STOP,
+                      InjectedFaultKind.REJECTED: ControllerState.COMMAND_REJECTED}
 
 
 @dataclass(frozen=True)
@@ -50,6 +77,7 @@ class InjectedFault:
         t_end: End of the fault [s] (inf: until cleared).
         joint: Affected joint index (``nan_q``, ``nan_current``, ``q_offset``); None: all joints.
         offset: Position offset for ``q_offset`` [rad].
+        block_s: How long ``block`` blocks [s] (inf: until aborted).
     """
 
     kind: InjectedFaultKind
@@ -57,6 +85,7 @@ class InjectedFault:
     t_end: float = math.inf
     joint: int | None = None
     offset: float = 0.0
+    block_s: float = 0.0
 
     def __post_init__(self) -> None:
         try:
@@ -72,10 +101,44 @@ class InjectedFault:
         if not math.isfinite(self.offset):
             raise SimulationError("not finite", field="fault.offset", value=self.offset,
                                   expected="finite offset [rad]")
+        if not self.block_s >= 0.0:
+            raise SimulationError("negative", field="fault.block_s", value=self.block_s,
+                                  expected=">= 0 s (inf: until aborted)")
 
     def active(self, t: float) -> bool:
         """Whether the fault affects the sample taken at ``t`` [s]."""
         return self.t_start <= t < self.t_end
+
+
+@dataclass(frozen=True)
+class InputScript:
+    """A digital input of the simulated controller, set while the sample time is in one of the
+    intervals ``[t_on, t_off)``.
+
+    Attributes:
+        bit: The input (bit of ``DriverFeedback.inputs``), 0..63.
+        intervals: ``(t_on, t_off)`` pairs [s], in time order, not overlapping (``t_off`` may be
+            inf).
+    """
+
+    bit: int
+    intervals: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.bit, int) and 0 <= self.bit <= 63):
+            raise SimulationError("no such input", field="input.bit", value=self.bit,
+                                  expected="an input bit 0..63")
+        last = -math.inf
+        for on, off in self.intervals:
+            if not (math.isfinite(on) and last <= on < off):
+                raise SimulationError("intervals out of order or empty", field="input.intervals",
+                                      value=self.intervals,
+                                      expected="(t_on, t_off) pairs, t_on < t_off, in time order")
+            last = off
+
+    def level(self, t: float) -> bool:
+        """Whether the input is set at sample time ``t`` [s]."""
+        return any(on <= t < off for on, off in self.intervals)
 
 
 class SimDriver:
@@ -95,6 +158,11 @@ class SimDriver:
         self._dt = float(sim.config.timestep)
         self._last_seq = 0
         self._faults: list[InjectedFault] = []
+        self._inputs: dict[int, InputScript] = {}
+        self._blocked: set[InjectedFault] = set()     # block faults that have blocked
+        self._abort = threading.Event()
+        #: Commands taken by the simulated controller (not refused by a controller fault).
+        self.writes = 0
 
     @property
     def n(self) -> int:
@@ -147,6 +215,17 @@ class SimDriver:
         """Remove all injected faults."""
         self._faults.clear()
 
+    def script_input(self, script: InputScript) -> None:
+        """Script a digital input (replaces that input's script, if any)."""
+        self._inputs[script.bit] = script
+
+    def _digital_inputs(self, t: float) -> int:
+        bits = 0
+        for bit, script in self._inputs.items():
+            if script.level(t):
+                bits |= 1 << bit
+        return bits
+
     def read(self, fb: DriverFeedback) -> bool:
         """Fill ``fb`` with the newest sample if one arrived since the last read.
 
@@ -161,13 +240,20 @@ class SimDriver:
         if sample.sequence == 0 or sample.sequence == self._last_seq:
             return False
         active = [f for f in self._faults if f.active(sample.t)]
-        if any(f.kind is InjectedFaultKind.STALE for f in active):
+        kinds = {f.kind for f in active}
+        if InjectedFaultKind.RAISE in kinds:
+            raise DriverError("injected link failure", field="read", value=sample.t,
+                              expected="a sample")
+        if InjectedFaultKind.STALE in kinds:
             return False
         self._last_seq = sample.sequence
         fb.t = sample.t
         fb.sequence = sample.sequence
         fb.q[:] = sample.q
         fb.current[:] = sample.current
+        fb.inputs = self._digital_inputs(sample.t)
+        fb.inputs_read = True
+        fb.state = self._controller_state(sample.t)
         for f in active:
             idx = slice(None) if f.joint is None else f.joint
             if f.kind is InjectedFaultKind.NAN_Q:
@@ -196,8 +282,34 @@ class SimDriver:
             raise SimulationError("command is not finite", field="cmd.q/cmd.qd",
                                   value=(cmd.q.tolist(), cmd.qd.tolist()),
                                   expected="finite joint positions and velocities")
+        if self._controller_state(self.sim.time) != ControllerState.NORMAL:
+            return      # the controller stopped the robot: it takes no command
         self.sim.command(cmd.q, cmd.qd)
+        self.writes += 1
 
     def step(self) -> None:
-        """Advance the simulation by one servo period (returns at once)."""
+        """Advance the simulation by one servo period (returns at once, unless a ``block``
+        fault blocks it).
+
+        Raises:
+            DriverError: A blocked step was aborted (:meth:`abort`).
+        """
         self.sim.step()
+        t = self.sim.read().t
+        for f in self._faults:
+            if f.kind is InjectedFaultKind.BLOCK and f.active(t) and f not in self._blocked:
+                self._blocked.add(f)
+                if self._abort.wait(None if math.isinf(f.block_s) else f.block_s):
+                    self._abort.clear()
+                    raise DriverError("blocked step aborted", field="step", value=t)
+
+    def abort(self) -> None:
+        """Make a blocked :meth:`step` return by raising (callable from any thread)."""
+        self._abort.set()
+
+    def _controller_state(self, t: float) -> int:
+        for f in self._faults:
+            state = _CONTROLLER_STATES.get(f.kind)
+            if state is not None and f.active(t):
+                return state
+        return ControllerState.NORMAL

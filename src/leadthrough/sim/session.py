@@ -4,10 +4,18 @@ a real robot runs (:func:`~leadthrough.session.loop_config.build_loop`,
 
 The parameters come from calibration (a params file), never from the simulator's truth: the
 simulated robot is a different, richer plant than the identified model.
+
+The scripted operator holds an enabling device wired to digital input :data:`ENABLE_INPUT` of
+the simulated controller: by default pressed once the loop is ready (the estimator's warm-up and
+tare, ``warm_up_s + tare_s`` after the first sample) and held to the end; the loop starts guiding
+on that fresh press, as it would on a real robot. The script's marks are presses of a "mark
+point" button on input :data:`MARK_INPUT` (:data:`MARK_PRESS_S` long): the loop takes them live,
+as ``P1``, ``P2``, ...
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -24,14 +32,25 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import LoopResult, run_session
-from leadthrough.session.loop_config import LoopConfig, build_loop
+from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
 from leadthrough.session.metrics import SessionSummary, summarize
-from leadthrough.sim.driver import InjectedFault, SimDriver
+from leadthrough.session.record import SessionLog
+from leadthrough.session.requests import LoopRequests
+from leadthrough.sim.driver import InjectedFault, InputScript, SimDriver
+from leadthrough.sim.operator import ScriptedOperator
 from leadthrough.sim.operator_scripts import make_operator
 from leadthrough.sim.robot import SimConfig, SimRobot
 
-__all__ = ["DEFAULT_SIM_SEED", "PUSH_MASS_KG", "SimSession", "SimSessionConfig",
-           "light_guiding", "replay_session", "run_sim_session", "sim_robot_seed"]
+__all__ = ["DEFAULT_SIM_SEED", "ENABLE_INPUT", "MARK_INPUT", "PUSH_MASS_KG", "SimSession",
+           "SimSessionConfig", "light_guiding", "replay_session", "run_sim_session",
+           "sim_robot_seed"]
+
+#: The simulated controller's digital input wired to the enabling device.
+ENABLE_INPUT = 0
+#: The simulated controller's digital input wired to the "mark point" button.
+MARK_INPUT = 1
+#: How long the scripted operator presses the mark button [s].
+MARK_PRESS_S = 0.1
 
 #: Virtual mass [kg] of the push demonstrations: 40 N for 3 s then reaches the 0.2 m/s cap
 #: ((40 − 15) N / 100 kg = 0.25 m/s²). With Table IV's 1000 kg it reaches 0.075 m/s.
@@ -47,7 +66,8 @@ class SimSessionConfig:
     Attributes:
         operator: Operator script name (``rest``, ``push-x``, ``diagonal``, ``random``,
             ``seam``).
-        duration_s: Session length [s]; None: the script's own length.
+        duration_s: Session length [s]; None: the script's own length; inf: until
+            ``LoopRequests.stop`` (a session run with ``requests``).
         seed: Simulated robot instance (its true parameters): the one the params were
             identified on, or the force estimate is made with another robot's model.
         run: Recording number on that robot (independent sensor noise).
@@ -58,6 +78,12 @@ class SimSessionConfig:
             ``loop.guiding.controller``).
         paced: Run in real time instead of as fast as possible.
         faults: Feedback faults injected by the simulated driver (safety tests).
+        enable_held_s: When the operator holds the enabling device: ``(t_press, t_release)``
+            intervals of sample time [s] (``t_release`` may be inf); None: pressed when the
+            loop is ready (``loop.estimator.warm_up_s + tare_s``) and held to the end; ``()``:
+            never pressed (the loop then never guides).
+        software_enable: The enabling device is a page's button (``LoopRequests.set_enable``)
+            instead of the script's (``enable_held_s`` is then ignored).
     """
 
     operator: str = "push-x"
@@ -69,11 +95,15 @@ class SimSessionConfig:
     loop: LoopConfig = field(default_factory=LoopConfig)
     paced: bool = False
     faults: tuple[InjectedFault, ...] = ()
+    enable_held_s: tuple[tuple[float, float], ...] | None = None
+    software_enable: bool = False
 
     def __post_init__(self) -> None:
+        if self.enable_held_s is not None:
+            InputScript(ENABLE_INPUT, self.enable_held_s)       # checks the intervals
         check_fields("session", self, [
-            ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600,
-             "0 < duration <= 3600 s"),
+            ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600
+             or self.duration_s == math.inf, "0 < duration <= 3600 s, or inf"),
             ("seed", is_sim_seed(self.seed), "an integer >= 0"),
             ("operator_seed", self.operator_seed is None
              or (isinstance(self.operator_seed, int) and self.operator_seed >= 0),
@@ -98,6 +128,14 @@ class SimSession:
     p1_base: Array | None = None
     p2_base: Array | None = None
     feedback: FeedbackTrace | None = None
+
+    @property
+    def log(self) -> SessionLog:
+        """The recording (a simulated session keeps it in memory)."""
+        if self.result.log is None:
+            raise ControlError("the session was recorded to a file", field="result.log",
+                               expected="a session recorded in memory")
+        return self.result.log
 
 
 def light_guiding(mass_kg: float = PUSH_MASS_KG, base: GuidingConfig | None = None
@@ -145,7 +183,8 @@ def sim_robot_seed(requested: int | None, params: ParamsFile) -> int:
 
 def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
                     record_feedback: bool = False,
-                    wrap_driver: Callable[[Driver], Driver] | None = None) -> SimSession:
+                    wrap_driver: Callable[[Driver], Driver] | None = None, *,
+                    requests: LoopRequests | None = None) -> SimSession:
     """Run one guiding session on the simulated robot.
 
     Args:
@@ -155,6 +194,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         record_feedback: Keep every read of the driver in ``SimSession.feedback`` (for
             :func:`replay_session`).
         wrap_driver: Wraps the driver the loop talks to (e.g. to probe every servo period).
+        requests: Requests into the loop from other threads, and its snapshot (a pendant).
 
     Returns:
         The session and its summary.
@@ -162,19 +202,24 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     Raises:
         ControlError, SimulationError: Invalid settings (before anything runs).
     """
-    q0 = guide_start_pose(robot) if config.q0 is None else np.asarray(config.q0, dtype=float)
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, q0)
-    tcp0 = data.oMf[robot.tcp_frame_id].translation.copy()
+    q0, operator, duration = _scene(robot, config)
     op_seed = config.seed if config.operator_seed is None else config.operator_seed
-    operator = make_operator(config.operator, seed=op_seed, tcp_start_base=tcp0)
-    duration = operator.duration_s if config.duration_s is None else config.duration_s
     sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run), q0=q0, operator=operator)
     sim_driver = SimDriver(sim)
     for fault in config.faults:
         sim_driver.inject(fault)
-    recorder = (RecordingDriver(sim_driver, round(duration / sim_driver.dt) + 1)
-                if record_feedback else None)
+    if not config.software_enable:
+        sim_driver.script_input(InputScript(ENABLE_INPUT, _enable_held(config)))
+    sim_driver.script_input(InputScript(MARK_INPUT, tuple((m.t, m.t + MARK_PRESS_S)
+                                                          for m in operator.marks)))
+    if record_feedback and not math.isfinite(duration):
+        raise ControlError("cannot keep the feedback of a session without an end",
+                           field="record_feedback", value=True,
+                           expected="False, or a finite duration_s")
+    recorder = None
+    if record_feedback:     # the reads of the session and of its stop after the duration
+        reads = round((duration + LoopOptions().stop_timeout_s) / sim_driver.dt) + 1
+        recorder = RecordingDriver(sim_driver, reads)
     driver: Driver = sim_driver if recorder is None else recorder
     if wrap_driver is not None:
         driver = wrap_driver(driver)
@@ -189,9 +234,9 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         "friction_mode": guiding.friction_mode,
     }
     result = run_session(driver, parts.estimator, parts.controller, parts.interpolator,
-                         duration, marks=operator.marks,
-                         applied_wrench=lambda: sim.applied_wrench, paced=config.paced,
-                         settings=settings)
+                         duration if math.isfinite(duration) else None,
+                         options=_options(config), requests=requests,
+                         applied_wrench=lambda: sim.applied_wrench, settings=settings)
     p1 = getattr(operator, "p1_base", None)
     p2 = getattr(operator, "p2_base", None)
     return SimSession(result=result, summary=summarize(result, guiding.dt,
@@ -223,5 +268,32 @@ def replay_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     replay = ReplayDriver(feedback)
     driver: Driver = replay if wrap_driver is None else wrap_driver(replay)
     parts = build_loop(robot, params, config.loop, driver.dt)
-    duration = (feedback.reads - 1) * driver.dt
-    return run_session(driver, parts.estimator, parts.controller, parts.interpolator, duration)
+    return run_session(driver, parts.estimator, parts.controller, parts.interpolator,
+                       _scene(robot, config)[2], options=_options(config))
+
+
+def _scene(robot: Robot, config: SimSessionConfig) -> tuple[Array, ScriptedOperator, float]:
+    """The start pose, the scripted operator and the session's length [s]."""
+    q0 = guide_start_pose(robot) if config.q0 is None else np.asarray(config.q0, dtype=float)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q0)
+    tcp0 = data.oMf[robot.tcp_frame_id].translation.copy()
+    op_seed = config.seed if config.operator_seed is None else config.operator_seed
+    operator = make_operator(config.operator, seed=op_seed, tcp_start_base=tcp0)
+    duration = operator.duration_s if config.duration_s is None else config.duration_s
+    return q0, operator, duration
+
+
+def _options(config: SimSessionConfig) -> LoopOptions:
+    """The loop's options of a simulated session: the enabling device on its input."""
+    return LoopOptions(enable_input=None if config.software_enable else ENABLE_INPUT,
+                       software_enable=config.software_enable, mark_input=MARK_INPUT,
+                       paced=config.paced)
+
+
+def _enable_held(config: SimSessionConfig) -> tuple[tuple[float, float], ...]:
+    """When the scripted operator holds the enabling device (see ``enable_held_s``)."""
+    if config.enable_held_s is not None:
+        return config.enable_held_s
+    est = config.loop.estimator
+    return ((est.warm_up_s + est.tare_s, math.inf),)

@@ -139,13 +139,15 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         return (sample.ipoc - self._ipoc0) // self.client.cycle_ms
 
     def _answer_late(self, sample: RobotMessage) -> bool:
-        """The robot counted more late answers than documents we never saw."""
+        """The robot counted more late answers than documents we never saw (none before our
+        first answer: the documents of the set-up were not answered, and no command of ours
+        was refused)."""
         counted = (sample.delay - self._delay if sample.delay is not None
                    and self._delay is not None else 0)
         self._delay = sample.delay if sample.delay is not None else self._delay
         unseen = self._sequence(sample) - self._seen - 1
         self._seen = self._sequence(sample)
-        return counted > max(unseen, 0)
+        return self._answered is not None and counted > max(unseen, 0)
 
     def _fill(self, fb: DriverFeedback, sample: RobotMessage) -> None:
         fb.t = sample.ipoc * 1e-3

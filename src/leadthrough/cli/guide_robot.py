@@ -1,0 +1,178 @@
+"""``leadthrough guide --driver D --host H [--port P] --params P --enable-input I
+--mark-input I``: hand guiding a robot through its controller's streaming interface (issue 25),
+until the user stops it.
+
+1. Optional real-time set-up (:mod:`leadthrough.session.realtime`), each step reported.
+2. Set-up before the link opens: the estimator, controller and interpolator are built and
+   their compiled code loaded (compiled on a first run) with a progress line; then the
+   controller is connected (``with driver``: joint count, units and the stream checked
+   at open: a mismatch, a refused stream or no answer is a clear error, exit 2).
+3. The loop (:func:`~leadthrough.session.loop.run_session`) at the controller's cycle, the
+   guiding controller at the multiple of it nearest 10 ms; guiding only on a fresh press of the
+   enabling input; marks from the mark input; the recording streamed to ``-o`` in chunks
+   (:class:`~leadthrough.session.session_file.SessionFileSink`).
+4. Ctrl-C (SIGINT) or SIGTERM: a stop request (a commanded stop at the acceleration limit, the
+   loop ends at rest), then the driver closes the stream; a second Ctrl-C aborts.
+
+Exit: 0 when the session ended on the user's stop (or ``--duration``), 1 when it ended on a
+lost link or a stop that did not come to rest (the recording is written either way, with the
+cause in its events), 2 for bad input or a controller that could not be used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from leadthrough.cli.record_robot import add_connection_arguments, refuse_settings
+from leadthrough.control.guiding_types import GuidingConfig
+from leadthrough.drivers.controllers import connect
+from leadthrough.errors import ControlError
+from leadthrough.identification.params_file import ParamsFile
+from leadthrough.progress import Progress
+from leadthrough.robot.description import Robot
+from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session.loop import EndCause, LoopResult, run_session
+from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
+from leadthrough.session.realtime import RealtimeRequest, setup_realtime
+from leadthrough.session.requests import LoopRequests
+from leadthrough.session.session_file import SessionFileSink
+
+__all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot"]
+
+#: The guiding controller's cycle the paper uses [s].
+PAPER_CYCLE_S = 0.01
+_SIM_ONLY = ("operator", "seed", "operator_seed")
+
+
+def add_robot_arguments(p: argparse.ArgumentParser) -> None:
+    """``--driver``, ``--host``, ``--port``, ``--enable-input``, ``--mark-input`` and the
+    real-time options."""
+    g = p.add_argument_group("on a robot controller")
+    add_connection_arguments(g)
+    g.add_argument("--enable-input", type=int, default=None, metavar="I",
+                   help="the controller's digital input wired to the enabling device (bit I "
+                        "of the driver's inputs: J519 DI[1+I], UR DI I, KUKA $IN[1+I]); "
+                        "required with --driver")
+    g.add_argument("--mark-input", type=int, default=None, metavar="I",
+                   help="the digital input of the 'mark point' button")
+    g.add_argument("--watchdog", type=float, default=0.05, metavar="S",
+                   help="a driver exchange longer than this is a fault (a commanded stop) "
+                        "[s]; one blocked over max(1 s, S) is aborted (default 0.05)")
+    g.add_argument("--rt-priority", type=int, default=None, metavar="P",
+                   help="run the loop with SCHED_FIFO priority P (1-99; needs CAP_SYS_NICE)")
+    g.add_argument("--lock-memory", action="store_true",
+                   help="mlockall the process (no page faults in the loop)")
+    g.add_argument("--cpus", type=int, nargs="+", default=None, metavar="CPU",
+                   help="run on these CPUs only")
+
+
+def controller_cycle(servo_dt: float) -> float:
+    """The guiding controller's cycle on a controller of period ``servo_dt`` [s]: the multiple
+    of it nearest the paper's 10 ms (8 ms on J519 at 8 ms, 8 ms on RSI at 4 ms, 10 ms on an
+    e-Series UR at 2 ms)."""
+    return max(1, round(PAPER_CYCLE_S / servo_dt)) * servo_dt
+
+
+def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
+                   guiding: GuidingConfig) -> int:
+    """Run ``leadthrough guide --driver`` (see the module doc)."""
+    _check_args(args)
+    for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
+                                               tuple(args.cpus) if args.cpus else None)):
+        print(f"leadthrough: {line}", file=sys.stderr, flush=True)
+    driver = connect(args.driver, robot, args.host, args.port)
+    sink = SessionFileSink(args.output, robot.n)
+    # everything built and compiled before the link opens: a controller streams from the
+    # open on, and cycles it is not answered in count against the session (RSI's late count)
+    parts = _loop_parts(robot, pf, guiding, driver.dt)
+    requests = LoopRequests()
+    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
+                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
+    settings: dict[str, object] = {"driver": args.driver, "host": args.host,
+                                   "port": args.port, "enable_input": args.enable_input,
+                                   "mark_input": args.mark_input}
+    dt = driver.dt
+    # Ctrl-C: a stop request while the loop runs, and nothing more once it has ended (the
+    # stream's own end and the file are written); a second one aborts
+    with requests.stop_on_interrupt(), _stop_on_term(requests), driver:
+        if driver.dt != dt:    # the cycle the controller reported at open (UR CB3: 8 ms)
+            parts = _loop_parts(robot, pf, guiding, driver.dt)
+        print(f"leadthrough: guiding {robot.name} on {args.driver} at {args.host} "
+              f"({1e3 * driver.dt:g} ms cycle, controller every "
+              f"{1e3 * parts.controller.config.dt:g} ms); press the enabling device to "
+              f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
+        result = run_session(driver, *parts, args.duration, options=options,
+                             requests=requests, settings=settings, sink=sink)
+    return _report(args, result)
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    refuse_settings(args, _SIM_ONLY, "a simulator setting given for a robot",
+                    "no simulator settings with --driver")
+    if args.realtime:
+        raise ControlError("a simulator setting given for a robot", field="--realtime",
+                           value=True, expected="none: the controller paces the loop")
+    if args.enable_input is None:
+        raise ControlError("no enabling device: a robot is guided only while its enabling "
+                           "device is pressed", field="--enable-input", value=None,
+                           expected="the controller's digital input wired to the enabling "
+                                    "device")
+
+
+def _loop_parts(robot: Robot, pf: ParamsFile, guiding: GuidingConfig, dt: float) -> LoopParts:
+    """The loop's parts at servo period ``dt``, their compiled code loaded (compiled on a first
+    run, with a progress line) on copies of their state: the first controller cycle runs at
+    full speed."""
+    bar = Progress("compiling the loop", 4, lines=True)
+    parts = build_loop(robot, pf, LoopConfig(guiding=replace(
+        guiding, dt=controller_cycle(dt))), dt)
+    bar(1)
+    q0 = guide_start_pose(robot)
+    parts.estimator.reset(q0)
+    parts.estimator.warm_up()
+    bar(2)
+    parts.controller.reset(q0, 0.0)
+    parts.controller.warm_up()
+    bar(3)
+    parts.interpolator.reset(q0)
+    parts.interpolator.warm_up()
+    bar(4)
+    bar.close()
+    return parts
+
+
+@contextmanager
+def _stop_on_term(requests: LoopRequests) -> Iterator[None]:
+    """SIGTERM requests a stop too (a service manager's stop)."""
+    previous = signal.signal(signal.SIGTERM, lambda *_: requests.stop())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _report(args: argparse.Namespace, result: LoopResult) -> int:
+    end = result.end
+    p99 = float(np.percentile(result.cycle_us, 99)) if result.cycle_us.size else math.nan
+    out: dict[str, Any] = {
+        "end": str(end.cause), "end_detail": end.detail, "t_end_s": end.t,
+        "state": end.state.name, "fault": end.fault.name,
+        "late_periods": result.late_periods, "cycle_us_p99": p99, "output": str(args.output)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"session ended: {end.cause}{' (' + end.detail + ')' if end.detail else ''}; "
+              f"state {end.state.name}, fault {end.fault.name}; {result.late_periods} late "
+              f"periods; controller cycle p99 {out['cycle_us_p99']:.0f} µs -> {args.output}")
+    ok = end.cause in (EndCause.STOP_REQUESTED, EndCause.DURATION)
+    return 0 if ok else 1

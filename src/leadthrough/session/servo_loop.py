@@ -1,0 +1,436 @@
+"""The guiding loop's state between servo periods, and one period (see
+:mod:`leadthrough.session.loop` for the loop as a whole).
+
+:class:`ServoLoop` holds every preallocated input and output, the operator's inputs, the state
+of the link to the driver (:class:`Link`), the stop in progress and the session's events; its
+:meth:`ServoLoop.period` runs one servo period. The requests from other threads are served by
+:mod:`leadthrough.session.operator_link`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import IntEnum, StrEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.control.guiding import GuidingController
+from leadthrough.control.interpolation import InterpolatorStatus, JointInterpolator
+from leadthrough.control.safety import Event
+from leadthrough.control.safety_states import Fault, State
+from leadthrough.drivers.protocol import ControllerState, Driver, DriverFeedback, JointCommand
+from leadthrough.errors import ControlError
+from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
+from leadthrough.session import operator_link
+from leadthrough.session.loop_config import LoopOptions
+from leadthrough.session.operator_inputs import EnablingDevice, MarkButton, input_bit
+from leadthrough.session.pacing import PeriodClock
+from leadthrough.session.record import Mark, SessionEvent
+from leadthrough.session.requests import LoopRequests, Request
+from leadthrough.session.watchdog import DriverWatchdog
+
+__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "sleep_until", "transition_event",
+           "zero_velocity_update"]
+
+Array = NDArray[np.float64]
+log = logging.getLogger("leadthrough.session")
+
+
+class Link(IntEnum):
+    """The state of the link to the driver."""
+
+    #: The driver's calls succeed.
+    OK = 0
+    #: One failed (an exception, or an exchange beyond the watchdog's timeout): a fault is
+    #: latched and the stop is commanded.
+    SUSPECT = 1
+    #: A second failure, or a blocked call aborted: nothing more is sent.
+    LOST = 2
+
+
+class EndCause(StrEnum):
+    """Why a loop ended."""
+
+    #: ``duration_s`` ran out, and the commanded motion came to rest.
+    DURATION = "duration"
+    #: ``LoopRequests.stop``, and the commanded motion came to rest.
+    STOP_REQUESTED = "stop requested"
+    #: The driver failed twice (or a blocked call was aborted): no more commands were sent.
+    LINK_LOST = "link lost"
+    #: A stop did not bring the commanded motion to rest within ``stop_timeout_s``.
+    STOP_TIMEOUT = "stop timeout"
+
+
+@dataclass(frozen=True)
+class LoopEnd:
+    """How a loop ended.
+
+    Attributes:
+        cause: Why.
+        t: The loop's time at the end [s].
+        state: The controller's safety state at the end.
+        fault: The latched fault (``Fault.NONE`` if none).
+        detail: More, in words (the driver's error, ...).
+    """
+
+    cause: EndCause
+    t: float
+    state: State
+    fault: Fault
+    detail: str = ""
+
+
+class ServoLoop:
+    """The loop's parts, preallocated inputs and outputs, and state (see the module doc).
+
+    Args:
+        driver: The robot.
+        estimator: External force estimator.
+        controller: Guiding controller.
+        interpolator: Controller cycle → servo period interpolation.
+        every: Servo periods per controller cycle.
+        options: The loop's options.
+        requests: Requests from other threads, and the snapshot board; or None.
+        deadman: The enabling device's level as a function of time, or None.
+    """
+
+    def __init__(self, driver: Driver, estimator: ExternalForceEstimator,
+                 controller: GuidingController, interpolator: JointInterpolator, every: int,
+                 options: LoopOptions, requests: LoopRequests | None,
+                 deadman: Callable[[float], bool] | None) -> None:
+        self.driver, self.estimator, self.controller = driver, estimator, controller
+        self.interpolator, self.every = interpolator, every
+        self.e_in, self.e_out = estimator.make_input(), estimator.make_output()
+        # the feedback's arrays are the estimator input's and the command's velocity is its
+        # qd_cmd (the command sent this period until the interpolator writes the next at its
+        # end): the driver fills what the estimator reads, with no copies in the period
+        self.e_in.q[:] = self.e_in.current[:] = np.nan
+        self.fb = DriverFeedback(t=float("nan"), q=self.e_in.q, current=self.e_in.current,
+                                 sequence=-1)
+        self.cmd = JointCommand(q=np.zeros(driver.n), qd=self.e_in.qd_cmd)
+        self.c_in, self.c_out = controller.make_input(), controller.make_output()
+        cfg = controller.config
+        self.settle_s, self.cycle_s = cfg.settle_s, cfg.dt
+        self.rezero_samples = round(cfg.rezero_s / driver.dt)
+        self.interp_status = InterpolatorStatus.FINISHED
+        # the operator
+        self.enabling = EnablingDevice()
+        #: The digital inputs of the last sample that carried them (a sample without them,
+        #: e.g. before J519 echoes its I/O request, keeps the last: 0, released, at first).
+        self.inputs = 0
+        self.enable_level = _enable_source(self, options, requests, deadman)
+        self.mark_bit = -1 if options.mark_input is None else options.mark_input
+        self.mark_button = MarkButton()
+        self.requests = requests
+        self.board = None if requests is None else requests.board
+        self.held = self.ready = False
+        self.deferred: list[Request] = []        # settings waiting for rest
+        #: The session's friction: requests may raise it, not lower it.
+        self.friction_floor = cfg.virtual_friction.friction
+        # the link, and the end
+        self.link = Link.OK
+        self.controller_tripped = False           # a controller-state fault is latched
+        #: The controller has reported itself ready: from then on NOT_READY is a fault (before,
+        #: the stream is starting on its side: no guiding, no fault).
+        self.controller_ready = False
+        self.timeout_s = math.inf if driver.simulated else options.watchdog_s
+        self.watch = (None if driver.simulated else
+                      DriverWatchdog(options.watchdog_s, options.abort_s,
+                                     getattr(driver, "abort", None)))
+        self.stop_timeout_s = options.stop_timeout_s
+        self.ending: EndCause | None = None
+        self.ending_since = math.nan
+        self.end: LoopEnd | None = None
+        self.late = 0
+        #: The loop's time [s]: its periods counted from the first sample, on a real
+        #: controller caught up with the controller's clock when cycles went by unseen.
+        self.t = math.nan
+        self.follow_clock = not driver.simulated
+        # the session's events
+        self.events: list[SessionEvent] = []
+        self.marks: list[Mark] = []
+        # controller transitions taken into events (those before the session, e.g. of a
+        # warm-up at set-up, are not the session's)
+        self.seen = controller.event_count
+
+    # ------------------------------------------------------------------ start and end
+    def start(self) -> float:
+        """The first sample: every part reset there, their compiled code loaded; returns the
+        sample's time [s]."""
+        driver, fb = self.driver, self.fb
+        # a real controller: its next packet within a second (a step waits a few cycles)
+        tries = 1 if driver.simulated else max(1, math.ceil(1.0 / driver.dt))
+        fresh = False
+        for _ in range(tries):
+            driver.step()
+            fresh = driver.read(fb)
+            if fresh:
+                break
+        if not fresh:
+            raise ControlError("no feedback on the first read (the robot must report a "
+                               "position to start from)", field="driver",
+                               value=type(driver).__name__,
+                               expected="a fresh sample on the first read")
+        q0 = fb.q.copy()
+        self.estimator.reset(q0)
+        self.controller.reset(q0, fb.t)
+        self.interpolator.reset(q0)
+        for part in (self.estimator, self.controller, self.interpolator):
+            part.warm_up()
+        self.interp_status = self.interpolator.update(self.cmd)
+        if self.board is not None:
+            self.board.attach(driver.n)
+            operator_link.publish_settings(self)
+        if self.watch is not None:
+            self.watch.start()
+        self.t = fb.t
+        return fb.t
+
+    def begin_end(self, cause: EndCause, t: float) -> None:
+        """Stop, then end: the controller is released (a stop at the acceleration limit) and
+        the loop ends once the commanded motion is at rest."""
+        if self.ending is None:
+            self.ending, self.ending_since = cause, t
+            self.note(t, "stop", str(cause))
+
+    def finished(self, t: float) -> bool:
+        """Whether the loop ends after this period (link lost, or a stop complete or timed
+        out)."""
+        if self.end is not None:
+            return True
+        if self.ending is None:
+            return False
+        if self.at_rest() and self.c_out.state != State.GUIDING:   # released, and at rest
+            self.end = self._end_state(self.ending, t)
+        elif t - self.ending_since >= self.stop_timeout_s:
+            self.end = self._end_state(EndCause.STOP_TIMEOUT, t,
+                                       f"not at rest {self.stop_timeout_s} s after the stop")
+        return self.end is not None
+
+    def close(self) -> None:
+        """After the last period: the watchdog stops, the last snapshot says why it ended."""
+        if self.watch is not None:
+            self.watch.stop()
+        t = self.end.t if self.end is not None else math.nan
+        for request in self.deferred:
+            self.note(t, f"{request.kind} not made", "the session ended before rest")
+        self.deferred.clear()
+        self._drain()
+        if self.board is not None and self.board.fields is not None:
+            end = self.end
+            self.board.end_cause = "" if end is None else f"{end.cause}: {end.detail}".rstrip(
+                ": ")
+            self.board.begin()
+            self.board.fields.running = False
+            self.board.end()
+
+    def session_events(self) -> list[SessionEvent]:
+        """Transitions, marks and the loop's notes, in time order."""
+        self._drain()
+        return sorted(self.events, key=lambda e: e.t)
+
+    def at_rest(self) -> bool:
+        """The commanded motion is at rest: the controller holds its setpoint (no twist, no
+        joint velocity, not stopping) and the servo command has reached it."""
+        c_out, cmd = self.c_out, self.cmd
+        return (not (cmd.qd.any() or c_out.qd.any() or c_out.twist_base.any())
+                and c_out.state != State.STOPPING and np.array_equal(cmd.q, c_out.q))
+
+    def restart(self, q: Array, t: float) -> None:
+        """Restart every part at rest at ``q`` (a fault reset): the estimator warms up and tares
+        again, the enabling device needs a fresh press, a suspect link is trusted again.
+
+        Raises:
+            ControlError: ``q`` refused by the controller (nothing changed).
+        """
+        self.controller.reset(q, t)
+        self.estimator.reset(q)
+        self.interpolator.reset(q)
+        self.cmd.q[:] = q
+        self.cmd.qd[:] = 0.0
+        self.enabling.reset()
+        self.controller_tripped = False
+        if self.link is Link.SUSPECT:
+            self.link = Link.OK
+
+    def _end_state(self, cause: EndCause, t: float, detail: str = "") -> LoopEnd:
+        return LoopEnd(cause, t, self.controller.state, self.controller.fault, detail)
+
+    # ------------------------------------------------------------------ one period
+    def period(self, i: int, t_loop: float, clock: PeriodClock) -> float:
+        """Servo period ``i``: exchange with the driver, estimate, the operator's inputs and
+        requests, every ``every`` periods the controller cycle, interpolate. Returns the
+        compute time [µs]."""
+        clock.wait()
+        fresh = self._exchange(t_loop)
+        clock.exchanged()
+        t0 = time.perf_counter()
+        fb = self.fb
+        if fresh and self.follow_clock and fb.t > t_loop:
+            t_loop = fb.t       # a real controller's cycles that went by without a packet
+        self.t = t_loop
+        if fresh:
+            self.e_in.t = fb.t
+            self.estimator.update(self.e_in, self.e_out)
+            if fb.inputs_read:
+                self.inputs = fb.inputs
+            if fb.state == ControllerState.NORMAL:
+                self.controller_ready = True
+            elif not self.controller_tripped and (self.controller_ready
+                                                  or fb.state != ControllerState.NOT_READY):
+                self._controller_fault(t_loop)
+        if self.mark_bit >= 0 and self.mark_button.update(
+                input_bit(self.inputs, self.mark_bit), t_loop):
+            self.mark(t_loop, None)
+        requests = self.requests
+        if requests is not None:
+            if requests.pending:
+                operator_link.serve(self, requests.take(), t_loop)
+            if requests.stop_requested:
+                self.begin_end(EndCause.STOP_REQUESTED, t_loop)
+        if i % self.every == 0:
+            self._cycle(i, t_loop)
+        self.interp_status = self.interpolator.update(self.cmd)
+        return (time.perf_counter() - t0) * 1e6
+
+    def _exchange(self, t_loop: float) -> bool:
+        """Write the command, step, read; a failure or a stall is a fault (see the module doc
+        of :mod:`leadthrough.session.loop`). Returns whether a new sample arrived."""
+        if self.link is Link.LOST:
+            return False
+        driver, watch = self.driver, self.watch
+        start = time.perf_counter()
+        if watch is not None:
+            watch.enter(start)
+        try:
+            driver.write(self.cmd)
+            driver.step()
+            fresh = driver.read(self.fb)
+        except Exception as e:
+            fresh = False
+            aborted = watch is not None and watch.fired
+            self._link_failed(t_loop, Fault.DRIVER_TIMEOUT if aborted else Fault.DRIVER_ERROR,
+                              math.nan, f"{type(e).__name__}: {e}", lost=aborted)
+        if watch is not None:
+            watch.leave()
+        elapsed = time.perf_counter() - start
+        if elapsed > self.timeout_s and self.link is not Link.LOST:
+            self._link_failed(t_loop, Fault.DRIVER_TIMEOUT, elapsed,
+                              f"an exchange took {elapsed * 1e3:.1f} ms (watchdog "
+                              f"{self.timeout_s * 1e3:.0f} ms)", lost=False)
+        return fresh
+
+    def _link_failed(self, t: float, fault: Fault, value: float, detail: str,
+                     lost: bool) -> None:
+        """A driver failure: the first latches ``fault`` and the stop goes on; a second (or an
+        aborted call) ends the loop without commanding."""
+        log.error("driver failure at t = %.3f s: %s", t, detail)
+        self.controller.trip(t, fault, value)
+        if lost or self.link is not Link.OK:
+            self.link = Link.LOST
+            self.note(t, "link lost", detail)
+            self.end = self._end_state(EndCause.LINK_LOST, t, detail)
+        else:
+            self.link = Link.SUSPECT
+            self.note(t, fault.name.lower().replace("_", " "), detail)
+
+    def _controller_fault(self, t: float) -> None:
+        code = int(self.fb.state)
+        name = ControllerState(code).name or f"code {code}"
+        self.controller.trip(t, Fault.CONTROLLER_STATE, float(code))
+        self.controller_tripped = True
+        self.note(t, "controller state", name)
+
+    def _cycle(self, i: int, t_loop: float) -> None:
+        """The controller cycle, its setpoint for the interpolator, the snapshot."""
+        c_in, c_out, e_out, fb = self.c_in, self.c_out, self.e_out, self.fb
+        c_in.t = t_loop
+        c_in.sequence = fb.sequence
+        c_in.q[:] = fb.q
+        c_in.current[:] = fb.current
+        c_in.wrench_base[:] = e_out.wrench
+        status = e_out.status
+        self.held = held = self.enable_level is not None and self.enable_level(t_loop)
+        self.ready = ready = (status == EstimatorStatus.OK and c_out.state != State.FAULT
+                              and self.ending is None and self.controller_ready)
+        c_in.deadman = self.enabling.update(held, ready)
+        c_in.estimator_status = int(status)
+        self.controller.update(c_in, c_out)
+        if self.rezero_samples:
+            zero_velocity_update(self.estimator, c_out.rest_s, self.settle_s, self.cycle_s,
+                                  self.rezero_samples)
+        self.interpolator.set_target(c_out.q, c_out.qd)
+        if self.controller.event_count != self.seen:
+            self._drain()
+        if self.deferred and self.at_rest():
+            operator_link.apply_deferred(self, t_loop)
+        if self.board is not None:
+            operator_link.publish(self, i, t_loop)
+
+    # ------------------------------------------------------------------ events
+    def note(self, t: float, label: str, detail: str) -> None:
+        """A loop event (recorded, logged, the snapshot's notice)."""
+        self.events.append(SessionEvent(t=t, kind="loop", label=label, cause=detail))
+        log.info("t = %.3f s: %s: %s", t, label, detail)
+        if self.board is not None:
+            self.board.notice = f"{label}: {detail}"
+
+    def mark(self, t: float, label: str | None) -> None:
+        """A mark at ``t`` (``label`` None: ``P<k>``)."""
+        mark = Mark(t=t, label=label if label is not None else f"P{len(self.marks) + 1}")
+        self.marks.append(mark)
+        self.events.append(SessionEvent(t=t, kind="mark", label=mark.label))
+        if self.board is not None:
+            self.board.marks = tuple(self.marks)
+
+    def _drain(self) -> None:
+        """The controller's new transitions into the session's events."""
+        count = self.controller.event_count
+        for e in self.controller.events_since(self.seen):
+            self.events.append(transition_event(e))
+            if self.board is not None and e.to_state == State.FAULT:
+                self.board.fault_cause = transition_event(e).cause
+        self.seen = count
+
+
+def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests | None,
+                   deadman: Callable[[float], bool] | None) -> Callable[[float], bool] | None:
+    """The enabling device's level at the loop's time; None: no enabling device."""
+    if deadman is not None:
+        return deadman
+    bit = options.enable_input
+    if bit is not None:
+        return lambda t: input_bit(loop.inputs, bit)
+    if options.software_enable and requests is not None:
+        return lambda t: requests.enable_held
+    return None
+
+
+def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
+                          cycle_s: float, samples: int) -> None:
+    """Re-zero the estimator once the commanded motion has been at rest for ``settle_s``
+    (in the first controller cycle past it); abandon the re-zero if the motion restarts."""
+    if rest_s == 0.0:
+        if estimator.rezeroing:
+            estimator.cancel_rezero()
+    elif settle_s <= rest_s < settle_s + cycle_s:
+        estimator.rezero(samples)
+
+
+def transition_event(e: Event) -> SessionEvent:
+    """A controller's state transition as a session event (``cause`` or ``cause:fault``)."""
+    cause = e.cause.name if e.fault.name == "NONE" else f"{e.cause.name}:{e.fault.name}"
+    return SessionEvent(t=e.t, kind="transition",
+                        label=f"{e.from_state.name}->{e.to_state.name}", cause=cause)
+
+
+def sleep_until(deadline: float) -> None:
+    """Sleep until ``deadline`` (``time.perf_counter`` seconds), at once if past."""
+    remaining = deadline - time.perf_counter()
+    if remaining > 0:
+        time.sleep(remaining)

@@ -1,0 +1,160 @@
+"""One servo period at a time with a caller-supplied enabling function, and the preallocated
+recording, for a runner that drives the periods itself (the pendant's live session,
+:mod:`leadthrough.pendant.backend`). :func:`leadthrough.session.loop.run_session` runs
+:class:`~leadthrough.session.servo_loop.ServoLoop` instead (requests, enabling inputs, link
+faults, recording to disk).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from leadthrough.control.guiding import GuidingController
+from leadthrough.control.interpolation import JointInterpolator
+from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
+from leadthrough.errors import ControlError
+from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
+from leadthrough.session.record import SessionEvent, SessionLog
+from leadthrough.session.servo_loop import sleep_until, zero_velocity_update
+
+__all__ = ["ServoPeriods", "SessionBuffers"]
+
+Array = NDArray[np.float64]
+
+
+class ServoPeriods:
+    """One servo period of the loop at a time (preallocated inputs and outputs)."""
+
+    def __init__(self, driver: Driver, estimator: ExternalForceEstimator,
+                 controller: GuidingController, interpolator: JointInterpolator, every: int,
+                 deadman: Callable[[float], bool] | None,
+                 applied_wrench: Callable[[], Array] | None) -> None:
+        self.driver, self.estimator, self.controller = driver, estimator, controller
+        self.interpolator, self.every = interpolator, every
+        self.deadman, self.applied_wrench = deadman, applied_wrench
+        self.e_in, self.e_out = estimator.make_input(), estimator.make_output()
+        # the feedback's arrays are the estimator input's and the command's velocity is its
+        # qd_cmd (the command sent this period until the interpolator writes the next at its
+        # end): the driver fills what the estimator reads, with no copies in the period
+        self.e_in.q[:] = self.e_in.current[:] = np.nan
+        self.fb = DriverFeedback(t=float("nan"), q=self.e_in.q, current=self.e_in.current,
+                                 sequence=-1)
+        self.cmd = JointCommand(q=np.zeros(driver.n), qd=self.e_in.qd_cmd)
+        self.c_in, self.c_out = controller.make_input(), controller.make_output()
+        cfg = controller.config
+        self.settle_s, self.cycle_s = cfg.settle_s, cfg.dt
+        self.rezero_samples = round(cfg.rezero_s / driver.dt)
+
+    def start(self) -> float:
+        """The first sample: every part reset there, their compiled code loaded; returns the
+        sample's time [s]."""
+        driver, fb = self.driver, self.fb
+        driver.step()
+        if not driver.read(fb):
+            raise ControlError("no feedback on the first read (the robot must report a "
+                               "position to start from)", field="driver",
+                               value=type(driver).__name__,
+                               expected="a fresh sample on the first read")
+        q0 = fb.q.copy()
+        self.estimator.reset(q0)
+        self.controller.reset(q0, fb.t)
+        self.interpolator.reset(q0)
+        for part in (self.estimator, self.controller, self.interpolator):
+            part.warm_up()
+        self.interpolator.update(self.cmd)
+        return fb.t
+
+    def period(self, i: int, t_loop: float, deadline: float | None) -> float:
+        """Servo period ``i``: send the command, step, read, estimate, every ``every``
+        periods the controller cycle, interpolate. Returns the compute time [µs]."""
+        driver, fb, cmd = self.driver, self.fb, self.cmd
+        driver.write(cmd)
+        if deadline is not None:
+            sleep_until(deadline)
+        driver.step()
+        fresh = driver.read(fb)
+        t0 = time.perf_counter()
+        if fresh:
+            self.e_in.t = fb.t
+            self.estimator.update(self.e_in, self.e_out)
+        if i % self.every == 0:
+            self._cycle(t_loop)
+        self.interpolator.update(cmd)
+        return (time.perf_counter() - t0) * 1e6
+
+    def _cycle(self, t_loop: float) -> None:
+        """The controller cycle and its setpoint for the interpolator."""
+        c_in, c_out, e_out, fb = self.c_in, self.c_out, self.e_out, self.fb
+        c_in.t = t_loop
+        c_in.sequence = fb.sequence
+        c_in.q[:] = fb.q
+        c_in.current[:] = fb.current
+        c_in.wrench_base[:] = e_out.wrench
+        status = e_out.status
+        held = True if self.deadman is None else self.deadman(t_loop)
+        c_in.deadman = held and status == EstimatorStatus.OK
+        c_in.estimator_status = int(status)
+        self.controller.update(c_in, c_out)
+        if self.rezero_samples:
+            zero_velocity_update(self.estimator, c_out.rest_s, self.settle_s, self.cycle_s,
+                                  self.rezero_samples)
+        self.interpolator.set_target(c_out.q, c_out.qd)
+
+    def store(self, rec: SessionBuffers, i: int, t_loop: float) -> None:
+        """Record servo period ``i``."""
+        fb, cmd, e_out, c_out = self.fb, self.cmd, self.e_out, self.c_out
+        rec.store(i, t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
+                  c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
+                  int(c_out.fault),
+                  self.applied_wrench() if self.applied_wrench is not None else None)
+
+
+class SessionBuffers:
+    """Preallocated session arrays."""
+
+    def __init__(self, steps: int, n: int, with_truth: bool) -> None:
+        self.time = np.zeros(steps)
+        self.q = np.zeros((steps, n))
+        self.current = np.zeros((steps, n))
+        self.tau_ext = np.zeros((steps, n))
+        self.wrench = np.zeros((steps, 6))
+        self.q_cmd = np.zeros((steps, n))
+        self.qd_cmd = np.zeros((steps, n))
+        self.tcp = np.zeros((steps, 3))
+        self.rot = np.zeros((steps, 3, 3))
+        self.twist = np.zeros((steps, 6))
+        self.state = np.zeros(steps, dtype=np.int64)
+        self.fault = np.zeros(steps, dtype=np.int64)
+        self.applied = np.zeros((steps, 6)) if with_truth else None
+
+    def store(self, i: int, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
+              q_cmd: Array, qd_cmd: Array, transform: Array, twist: Array, state: int,
+              fault: int, applied: Array | None) -> None:
+        self.time[i] = t
+        self.q[i] = q
+        self.current[i] = current
+        self.tau_ext[i] = tau_ext
+        self.wrench[i] = wrench
+        self.q_cmd[i] = q_cmd
+        self.qd_cmd[i] = qd_cmd
+        self.tcp[i] = transform[:3, 3]
+        self.rot[i] = transform[:3, :3]
+        self.twist[i] = twist
+        self.state[i] = state
+        self.fault[i] = fault
+        if self.applied is not None and applied is not None:
+            self.applied[i] = applied
+
+    def to_log(self, robot: str, events: list[SessionEvent],
+               settings: dict[str, object]) -> SessionLog:
+        quat = Rotation.from_matrix(self.rot).as_quat()  # x, y, z, w
+        return SessionLog(robot=robot, time=self.time, q=self.q, current=self.current,
+                          tau_ext=self.tau_ext, wrench_base=self.wrench, q_cmd=self.q_cmd,
+                          qd_cmd=self.qd_cmd, tcp_cmd_base=self.tcp, tcp_cmd_quat=quat,
+                          twist_cmd_base=self.twist, state=self.state, fault=self.fault,
+                          wrench_applied_base=self.applied, events=events, settings=settings)

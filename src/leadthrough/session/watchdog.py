@@ -1,0 +1,94 @@
+"""The loop's watchdog on its driver: a driver call (``write``, ``step``, ``read``) that blocks.
+
+The loop times every exchange with its driver. One that returns late is caught by the loop
+itself, as a fault (``Fault.DRIVER_TIMEOUT``) followed by a commanded stop. One that never
+returns cannot be: the loop's thread is stuck inside it. :class:`DriverWatchdog` is a thread that
+looks at the exchange in progress every quarter of the timeout; past the timeout it logs the
+stall at once, and past ``abort_s`` (the link is taken as gone: a controller whose cycle is
+milliseconds has long stopped the robot by itself) it calls the driver's ``abort()`` if it has
+one (see :mod:`leadthrough.drivers.protocol`), which makes the blocked call return by raising;
+the loop then ends without commanding further (the controller's own watchdog stops the robot).
+An exchange that returns between the two is a ``Fault.DRIVER_TIMEOUT`` and the loop commands
+its stop.
+
+The loop's side is two attribute writes per period (:meth:`enter`, :meth:`leave`): no lock, no
+allocation.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+
+__all__ = ["DriverWatchdog"]
+
+log = logging.getLogger("leadthrough.session")
+
+
+class DriverWatchdog:
+    """Watches the loop's driver exchanges from a thread (see the module doc).
+
+    Args:
+        timeout_s: An exchange longer than this is a stall (logged) [s].
+        abort_s: A stall longer than this is aborted [s] (>= ``timeout_s``).
+        abort: Called once per stall past ``abort_s``, from the watchdog's thread (the
+            driver's ``abort``), or None.
+
+    Attributes:
+        started_at: ``time.perf_counter()`` when the exchange in progress began (inf: none).
+        fired: The watchdog aborted the exchange in progress (reset by :meth:`enter`).
+    """
+
+    def __init__(self, timeout_s: float, abort_s: float,
+                 abort: Callable[[], None] | None) -> None:
+        self.timeout_s, self.abort_s = timeout_s, max(abort_s, timeout_s)
+        self._abort = abort
+        self.started_at = math.inf
+        self.fired = False
+        self._logged = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="leadthrough-watchdog",
+                                        daemon=True)
+
+    def start(self) -> None:
+        """Start watching."""
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop watching (joins the thread)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+    def enter(self, now: float) -> None:
+        """An exchange begins at ``now`` (``time.perf_counter()``)."""
+        self.fired = self._logged = False
+        self.started_at = now
+
+    def leave(self) -> None:
+        """The exchange is over."""
+        self.started_at = math.inf
+
+    def _watch(self) -> None:
+        period = self.timeout_s / 4.0
+        while not self._stop.wait(period):
+            started = self.started_at
+            blocked = time.perf_counter() - started
+            if started != self.started_at or self.fired:
+                continue
+            if blocked > self.timeout_s and not self._logged:
+                self._logged = True
+                log.error("driver call blocked for %.3f s (watchdog %.3f s)", blocked,
+                          self.timeout_s)
+            if blocked > self.abort_s:
+                self.fired = True
+                log.error("driver call blocked for %.3f s (abort after %.3f s)%s", blocked,
+                          self.abort_s, ": aborting it" if self._abort else "")
+                if self._abort is not None:
+                    try:
+                        self._abort()
+                    except Exception:
+                        log.exception("the driver's abort() raised")

@@ -1,0 +1,162 @@
+"""``leadthrough guide --driver D --host H --enable-input 0 --mark-input 1`` end to end against
+``leadthrough emulate D`` in its own process, for each of the three protocols over loopback.
+
+The emulator presses the enabling device (its input 0) for 1 s every 2 s and the mark button
+once in each press, from 1 s after its start: whenever the guide command's loop becomes ready,
+presses begin after it. Checked: guiding starts only inside a press (a fresh press) and ends
+after each release; the marks are in the recording streamed to disk; SIGINT (Ctrl-C) ends the
+session with a commanded stop at rest, then the driver disconnects; the emulator's own record
+has no refused command and nothing non-finite or beyond its limits; ``teach`` reads the marks.
+The watchdog is 0.5 s: a machine as loaded as a shared runner stalls a process for a few
+hundred ms now and then (a 50 ms watchdog's fault is tested in tests/test_loop_faults.py).
+The emulated arm has no operator pushing it, so the guided robot holds still: the taught line
+is too short for ``teach``, which says so naming the two marks (a line needs a push, covered on
+the simulator by tests/test_teach.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leadthrough.control.safety_states import State
+from leadthrough.drivers.controllers import DEFAULT_PORTS
+from leadthrough.session.record import SessionLog, load_session
+from leadthrough.sim.emulators.kuka_rsi import IPOC_START
+from leadthrough.sim.guiding_params import shipped_params_path
+from wire_helpers import POSE, free_loopback_address, spawn_emulator, stop_process
+
+KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
+PRESSES = [(1.0 + 2 * k, 2.0 + 2 * k) for k in range(60)]
+
+
+def _emulator_args() -> list[str]:
+    args = ["--seed", "1", "--q0", *map(str, POSE)]
+    for a, b in PRESSES:
+        args += ["--enable", f"{a}:{b}", "--mark", f"{a + 0.4}:{a + 0.5}"]
+    return args
+
+
+def _guide(kind: str, host: str, out: Path, *extra: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "leadthrough", "guide", "--driver", kind, "--host", host,
+         "--robot", "er20", "--params", str(shipped_params_path("er20")), "--enable-input", "0",
+         "--mark-input", "1", "-o", str(out), "--watchdog", "0.5", *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for_line(proc: subprocess.Popen[str], start: str, timeout: float) -> str:
+    assert proc.stderr is not None
+    deadline = time.monotonic() + timeout
+    lines = []
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        lines.append(line)
+        if line.startswith(start) or (not line and proc.poll() is not None):
+            break
+    assert lines[-1].startswith(start), "".join(lines)
+    return "".join(lines)
+
+
+def _guiding_starts_and_ends(log: SessionLog) -> tuple[list[float], list[float]]:
+    guiding = log.state == int(State.GUIDING)
+    edges = np.diff(guiding.astype(int))
+    return (list(log.time[1:][edges == 1]), list(log.time[1:][edges == -1]))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_guide_against_the_emulator_until_ctrl_c(kind: str, tmp_path: Path) -> None:
+    port = DEFAULT_PORTS[kind]
+    host = free_loopback_address(port)
+    out = tmp_path / "session.parquet"
+    if kind == "kuka-rsi":      # the PC listens: start it first, then the robot sends to it
+        guide = _guide(kind, host, out)
+        _wait_for_line(guide, "compiling the loop done", 120)
+        # RSI's 12 ms (IPO) mode: at 4 ms a machine as loaded as a shared CI runner answers
+        # late now and then, which is a refused command and a latched fault (correctly)
+        emu = spawn_emulator(kind, "er20", host, port, "--cycle-ms", "12", *_emulator_args())
+    else:
+        emu = spawn_emulator(kind, "er20", host, port, *_emulator_args())
+        guide = _guide(kind, host, out)
+    try:
+        _wait_for_line(guide, "leadthrough: guiding", 120)
+        time.sleep(6.0)                          # three presses
+        guide.send_signal(signal.SIGINT)
+        stdout, stderr = guide.communicate(timeout=60)
+    finally:
+        if guide.poll() is None:
+            guide.kill()
+        report = stop_process(emu)
+    assert guide.returncode == 0, stderr
+    assert "session ended: stop requested" in stdout and "Traceback" not in stderr
+    assert out.exists() and not out.with_name(out.name + ".partial").exists()
+    log = load_session(out)
+    if kind == "kuka-rsi":        # the RSI clock is the IPOC [ms]; the emulator's starts here
+        log = dataclasses.replace(log, time=log.time - IPOC_START * 1e-3, events=[
+            dataclasses.replace(e, t=e.t - IPOC_START * 1e-3) for e in log.events])
+    # fresh presses: each guiding phase starts in a press and ends at its release, at Ctrl-C's
+    # stop or at a fault (on a loaded machine a late answer is a refused command: RSI, J519)
+    starts, ends = _guiding_starts_and_ends(log)
+    assert starts, (log.time[0], log.time[-1],
+                    [(round(e.t, 3), e.kind, e.label, e.cause) for e in log.events])
+    # the recording's time is the loop's clock, on the controller's (the emulator's windows'):
+    # an input change reaches the next packet (the emulator samples its inputs once per
+    # cycle), is read in the sample after it and acted on at the next controller cycle (8,
+    # 10, 12 ms here): within three cycles of the slowest
+    slack = 0.037
+    for t in starts:
+        assert any(a - slack <= t <= a + slack for a, _ in PRESSES), (t, starts)
+    stops = [e for e in log.events if e.kind == "loop" and e.label == "stop"]
+    assert stops and stops[-1].cause == "stop requested"
+    faults = [e.t for e in log.events if e.kind == "transition" and e.label.endswith("FAULT")]
+    for t in ends:
+        assert (any(b - slack <= t <= b + slack for _, b in PRESSES)
+                or stops[-1].t <= t <= stops[-1].t + slack
+                or any(f <= t <= f + slack for f in faults)), (t, ends, log.events)
+    # every press after the first guided one, before a fault or the stop, guides again
+    last = min([stops[-1].t, *faults])
+    for a, b in PRESSES:
+        if starts[0] <= a and b < last:
+            assert any(a - slack <= t <= a + slack for t in starts), (a, starts, log.events)
+    t0 = float(log.time[0])
+    held_at_start = [w for w in PRESSES if w[0] < t0 < w[1]]
+    for _, b in held_at_start:        # held when the loop started: no guiding in that press
+        inside = (log.time > t0) & (log.time < b)
+        assert not np.any(log.state[inside] == int(State.GUIDING))
+    # marks from the mark input, in the file
+    marks = [e for e in log.events if e.kind == "mark"]
+    assert len(marks) >= 2 and [m.label for m in marks[:2]] == ["P1", "P2"]
+    for m in marks:
+        assert any(a + 0.4 - slack <= m.t <= a + 0.5 + slack for a, _ in PRESSES), m
+    # Ctrl-C: a stop request, the commanded motion at rest at the end, then the disconnect
+    assert log.state[-1] != int(State.GUIDING) and not log.qd_cmd[-1].any()
+    assert "violations: ()" in report and "refused: 0" in report, report
+    taught = subprocess.run([sys.executable, "-m", "leadthrough", "teach", str(out), "-o",
+                             str(tmp_path / "path.json")], capture_output=True, text=True,
+                            timeout=120)
+    assert "P1" in taught.stderr + taught.stdout, taught
+
+
+def test_guide_on_a_robot_needs_an_enabling_input_and_a_live_controller(tmp_path: Path) -> None:
+    """No --enable-input, a simulator setting with --driver, and a controller that does not
+    answer: each a one-line error, exit 2, before any command."""
+    out = tmp_path / "s.parquet"
+    params = str(shipped_params_path("er20"))
+    base = [sys.executable, "-m", "leadthrough", "guide", "--robot", "er20", "--params", params,
+            "-o", str(out), "--driver", "fanuc-j519", "--host", "127.0.0.1"]
+    no_enable = subprocess.run(base, capture_output=True, text=True, timeout=120)
+    assert no_enable.returncode == 2 and "--enable-input" in no_enable.stderr
+    operator = subprocess.run([*base, "--enable-input", "0", "--operator", "push-x"],
+                              capture_output=True, text=True, timeout=120)
+    assert operator.returncode == 2 and "--operator" in operator.stderr
+    dead = subprocess.run([*base, "--enable-input", "0", "--port", "9"], capture_output=True,
+                          text=True, timeout=120)
+    assert dead.returncode == 2 and "Traceback" not in dead.stderr, dead.stderr
+    assert not out.exists()

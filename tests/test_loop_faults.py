@@ -1,0 +1,226 @@
+"""The loop's ways out on the simulator: the robot controller's own stops, driver exceptions,
+a lost link, a late and a blocked exchange (the watchdog); each ends in a commanded stop at the
+acceleration limit (or no command once the link is gone), latched and logged, and a fault reset
+re-arms without restarting."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from leadthrough.control.safety_states import Fault, State
+from leadthrough.drivers.protocol import ControllerState, Driver, JointCommand, WrappedDriver
+from leadthrough.identification.params_file import ParamsFile
+from leadthrough.robot import Robot
+from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session.loop import EndCause, LoopResult, run_session
+from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
+from leadthrough.session.record import SessionLog
+from leadthrough.session.requests import LoopRequests
+from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, InputScript, SimDriver
+from leadthrough.sim.robot import SimConfig, SimRobot
+from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
+
+LIMIT_ACC = 0.4  # m/s², Table IV
+LIGHT = LoopConfig(guiding=light_guiding())
+
+
+class Scripted(WrappedDriver):
+    """Runs actions in the loop's thread at the first sample at or after their time."""
+
+    def __init__(self, driver: Driver, actions: list[tuple[float, Callable[[], None]]]) -> None:
+        super().__init__(driver)
+        self._actions = sorted(actions, key=lambda a: a[0])
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = self._driver.read(fb)
+        while self._actions and fresh and fb.t >= self._actions[0][0] - 1e-9:
+            self._actions.pop(0)[1]()
+        return fresh
+
+
+class Real(WrappedDriver):
+    """The simulated driver, presented as a real one: the loop's watchdog watches it."""
+
+    simulated = False  # type: ignore[assignment]
+
+
+def _stops_at_the_limit(log: SessionLog) -> None:
+    cycles = log.twist_cmd_base[::10, :3]
+    assert (np.linalg.norm(np.diff(cycles, axis=0), axis=1) / 0.01).max() <= LIMIT_ACC + 1e-9
+    assert np.all(np.abs(np.diff(log.q_cmd, axis=0)) < 1e-3)      # no position jump
+
+
+def _fault_at(log: SessionLog) -> tuple[float, Fault]:
+    first = int(np.argmax(log.state == int(State.FAULT)))
+    return float(log.time[first]), Fault(int(log.fault[first]))
+
+
+def _notes(log: SessionLog) -> list[tuple[str, str]]:
+    return [(e.label, e.cause) for e in log.events if e.kind == "loop"]
+
+
+def test_emergency_stop_latches_stops_and_resets_to_a_fresh_press(
+        er20: Robot, calibrated_params: ParamsFile) -> None:
+    """E-stop at 2 s during the push, released at 3.5 s. A reset at 3 s is refused (the
+    controller still reports it), one at 4 s is made: the loop restarts at the measured
+    position and tares again; the device held through the reset does not count, a fresh press
+    after the tare guides again."""
+    req = LoopRequests()
+    actions: list[tuple[float, Callable[[], None]]] = [(3.0, req.reset_fault),
+                                                       (4.0, req.reset_fault)]
+    cfg = SimSessionConfig(
+        operator="push-x", duration_s=7.0, loop=LIGHT,
+        faults=(InjectedFault(InjectedFaultKind.ESTOP, t_start=2.0, t_end=3.5),),
+        enable_held_s=((1.0, 4.5), (5.8, math.inf)))
+    s = run_sim_session(er20, calibrated_params, cfg,
+                        wrap_driver=lambda d: Scripted(d, actions), requests=req)
+    log = s.log
+    t_fault, fault = _fault_at(log)
+    assert fault is Fault.CONTROLLER_STATE and 2.0 <= t_fault < 2.011
+    assert np.linalg.norm(log.twist_cmd_base[np.searchsorted(log.time, 1.99), :3]) > 0.05
+    notes = _notes(log)
+    assert notes[0] == ("controller state", "ESTOP")
+    assert notes[1][0] == "reset refused" and "ESTOP" in notes[1][1]
+    assert notes[2][0] == "fault reset"
+    during = (log.time >= t_fault) & (log.time < 4.0)
+    assert np.all(log.state[during] == int(State.FAULT))         # latched
+    moved = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    assert np.all(moved[(log.time > 3.0) & (log.time < 5.8)] == 0.0)
+    _stops_at_the_limit(_before(log, 4.0))
+    transitions = [(round(e.t, 3), e.label, e.cause) for e in log.events
+                   if e.kind == "transition"]
+    assert (4.0, "FAULT->IDLE", "RESET") in transitions
+    again = [t for t, label, cause in transitions if cause == "DEADMAN_PRESSED"]
+    assert len(again) == 2 and 5.8 <= again[1] < 5.811
+    assert s.result.end.cause is EndCause.DURATION
+
+
+def _before(log: SessionLog, t: float) -> SessionLog:
+    """The log's rows before ``t`` (for the checks of a stop)."""
+    keep = log.time < t
+    return SessionLog(robot=log.robot, time=log.time[keep], q=log.q[keep],
+                      current=log.current[keep], tau_ext=log.tau_ext[keep],
+                      wrench_base=log.wrench_base[keep], q_cmd=log.q_cmd[keep],
+                      qd_cmd=log.qd_cmd[keep], tcp_cmd_base=log.tcp_cmd_base[keep],
+                      tcp_cmd_quat=log.tcp_cmd_quat[keep], twist_cmd_base=log.twist_cmd_base[keep],
+                      state=log.state[keep], fault=log.fault[keep])
+
+
+@pytest.mark.parametrize(("kind", "state"), [
+    (InjectedFaultKind.PROTECTIVE_STOP, ControllerState.PROTECTIVE_STOP),
+    (InjectedFaultKind.REJECTED, ControllerState.COMMAND_REJECTED)])
+def test_controller_states_are_fault_inputs(er20: Robot, nominal_params: ParamsFile,
+                                            kind: InjectedFaultKind,
+                                            state: ControllerState) -> None:
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(
+        operator="rest", duration_s=2.0, faults=(InjectedFault(kind, 1.5, 1.52),)))
+    t_fault, fault = _fault_at(s.log)
+    assert fault is Fault.CONTROLLER_STATE and 1.5 <= t_fault < 1.511
+    assert np.all(s.log.state[s.log.time >= t_fault] == int(State.FAULT))
+    assert ("controller state", state.name) in _notes(s.log)
+
+
+def test_one_driver_exception_stops_at_the_limit_and_resets(
+        er20: Robot, calibrated_params: ParamsFile) -> None:
+    """One read raises at 2 s, mid-push: DRIVER_ERROR, the stop at the limit is still
+    commanded (the link works again), and a reset at rest clears it."""
+    req = LoopRequests()
+    s = run_sim_session(er20, calibrated_params, SimSessionConfig(
+        operator="push-x", duration_s=5.0, loop=LIGHT,
+        faults=(InjectedFault(InjectedFaultKind.RAISE, 2.0, 2.0005),)),
+        wrap_driver=lambda d: Scripted(d, [(4.5, req.reset_fault)]), requests=req)
+    log = s.log
+    t_fault, fault = _fault_at(log)
+    assert fault is Fault.DRIVER_ERROR and 2.0 <= t_fault < 2.011
+    assert np.linalg.norm(log.twist_cmd_base[np.searchsorted(log.time, 1.99), :3]) > 0.05
+    _stops_at_the_limit(_before(log, 4.5))
+    notes = _notes(log)
+    assert notes[0][0] == "driver error" and "injected link failure" in notes[0][1]
+    assert notes[1][0] == "fault reset"
+    assert State(int(log.state[-1])) is State.IDLE and s.result.end.cause is EndCause.DURATION
+
+
+def test_a_lost_link_ends_the_loop_without_commanding(er20: Robot,
+                                                      nominal_params: ParamsFile) -> None:
+    """Every read raises from 2 s on: the first failure latches the fault, the second ends the
+    loop (LINK_LOST) at once; nothing is written after it, and nothing escapes the loop."""
+    drivers: list[SimDriver] = []
+
+    def keep(d: Driver) -> Driver:
+        assert isinstance(d, SimDriver)
+        drivers.append(d)
+        return d
+
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(
+        operator="push-x", duration_s=5.0,
+        faults=(InjectedFault(InjectedFaultKind.RAISE, 2.0),)), wrap_driver=keep)
+    end = s.result.end
+    assert end.cause is EndCause.LINK_LOST and 2.0 < end.t < 2.0025
+    assert end.fault is Fault.DRIVER_ERROR and "injected link failure" in end.detail
+    assert drivers[0].writes == len(s.log.time)       # one write per period, none after
+    assert [label for label, _ in _notes(s.log)] == ["driver error", "link lost"]
+
+
+def test_any_exception_of_a_driver_is_a_fault(er20: Robot, nominal_params: ParamsFile) -> None:
+    """A driver with a bug (its write raises ZeroDivisionError once): a fault, not a crash."""
+    class Buggy(WrappedDriver):
+        calls = 0
+
+        def write(self, cmd: JointCommand) -> None:
+            self.calls += 1
+            if self.calls == 1500:
+                raise ZeroDivisionError("division by zero")
+            super().write(cmd)
+
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(operator="rest", duration_s=2.0),
+                        wrap_driver=Buggy)
+    t_fault, fault = _fault_at(s.log)
+    assert fault is Fault.DRIVER_ERROR and 1.499 <= t_fault < 1.511
+    assert _notes(s.log)[0] == ("driver error", "ZeroDivisionError: division by zero")
+
+
+def _real_session(robot: Robot, params: ParamsFile, fault: InjectedFault, watchdog_s: float,
+                  duration_s: float) -> LoopResult:
+    """A session on the simulated robot presented as a real one (the watchdog is on)."""
+    sim = SimDriver(SimRobot(robot, SimConfig(seed=1), q0=guide_start_pose(robot)))
+    sim.inject(fault)
+    sim.script_input(InputScript(0, ((1.0, math.inf),)))
+    parts = build_loop(robot, params, LoopConfig(), sim.dt)
+    return run_session(Real(sim), *parts, duration_s,
+                       options=LoopOptions(enable_input=0, watchdog_s=watchdog_s))
+
+
+def test_a_late_exchange_is_a_timeout_fault(er20: Robot, nominal_params: ParamsFile) -> None:
+    """A step that blocks 0.6 s at 1.5 s (watchdog 0.15 s): DRIVER_TIMEOUT with the time it
+    took; the link answered, so the loop goes on to its end."""
+    r = _real_session(er20, nominal_params,
+                      InjectedFault(InjectedFaultKind.BLOCK, 1.5, block_s=0.6), 0.15, 2.0)
+    assert r.log is not None
+    t_fault, fault = _fault_at(r.log)
+    assert fault is Fault.DRIVER_TIMEOUT and 1.5 <= t_fault < 1.511
+    label, detail = _notes(r.log)[0]
+    assert label == "driver timeout" and "watchdog 150 ms" in detail
+    took = float(detail.split("took ")[1].split(" ms")[0])
+    assert 600.0 <= took < 2000.0
+    assert r.end.cause is EndCause.DURATION
+
+
+def test_a_blocked_exchange_is_aborted_by_the_watchdog(er20: Robot,
+                                                       nominal_params: ParamsFile) -> None:
+    """A step that would block for ever at 1.5 s: the watchdog aborts it, and the loop ends
+    (LINK_LOST, DRIVER_TIMEOUT) instead of hanging."""
+    out: list[LoopResult] = []
+    worker = threading.Thread(target=lambda: out.append(_real_session(
+        er20, nominal_params, InjectedFault(InjectedFaultKind.BLOCK, 1.5, block_s=math.inf),
+        0.15, 3.0)))
+    worker.start()
+    worker.join(timeout=300)
+    assert not worker.is_alive() and out
+    end = out[0].end
+    assert end.cause is EndCause.LINK_LOST and end.fault is Fault.DRIVER_TIMEOUT
+    assert 1.5 <= end.t < 1.511 and "aborted" in end.detail
