@@ -15,6 +15,7 @@ from leadthrough.robot.description import load_robot
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.record import save_session
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import (
     SimSessionConfig,
     light_guiding,
@@ -58,6 +59,9 @@ def register(sub: Any) -> None:
     p.add_argument("--operator-seed", type=int, default=None, metavar="N",
                    help="seed of the random operator's pushes (default: --seed); vary this "
                         "for other push sequences on the same robot")
+    p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                   help="simulated plant: realistic (default) or ideal (the plant before issue "
+                        "24); the one the params were recorded on")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -73,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     loop = LoopConfig(guiding=replace(guiding, controller=args.controller,
                                       friction_mode=args.friction))
     cfg = SimSessionConfig(operator=args.operator, duration_s=args.duration, seed=seed,
-                           operator_seed=args.operator_seed, paced=args.realtime, loop=loop)
+                           operator_seed=args.operator_seed, paced=args.realtime, loop=loop,
+                           plant=args.plant)
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
     save_session(session.result.log, args.output)

@@ -34,6 +34,7 @@ from leadthrough.sim.drivetrain import (
 from leadthrough.sim.link_truth import true_link_inertias
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
+from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.sensors import CurrentSensor, SensorConfig
 from leadthrough.sim.servo import CascadedServo, design_servo_gains
 
@@ -47,8 +48,8 @@ class SimConfig:
     """Settings of the simulated robot.
 
     Attributes:
-        seed: Seeds the robot instance: true parameters and sensor noise (same seed and run,
-            bit-identical recording).
+        seed: Seeds the robot instance: true parameters and sensor noise (same seed, run and
+            plant, bit-identical recording).
         run: Recording number on the same robot instance: each run gets independent sensor
             noise while the true parameters stay those of ``seed``.
         timestep: Physics and servo step [s].
@@ -56,6 +57,8 @@ class SimConfig:
         drive: How the true drive train is drawn.
         sensors: Sensor noise model.
         servo_bandwidth_hz: Velocity-loop bandwidth of the position servo [Hz].
+        plant: Which plant plays the robot (:mod:`leadthrough.sim.plant`): ``realistic``
+            (default) or ``ideal`` (the plant before issue 24, bit-identical).
     """
 
     seed: int = 0
@@ -65,8 +68,10 @@ class SimConfig:
     drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
     servo_bandwidth_hz: float = 20.0
+    plant: PlantPreset = PlantPreset.REALISTIC
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "plant", plant_preset(self.plant))
         if self.seed < 0 or self.run < 0:
             raise SimulationError("must be >= 0", field="seed/run", value=(self.seed, self.run),
                                   expected="non-negative integers")

@@ -1,0 +1,77 @@
+"""Plant presets: the ideal plant is the plant before issue 24 bit for bit; the preset reaches
+the simulator from the configuration, the recording helpers, sessions and the CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leadthrough.cli import main
+from leadthrough.data.io import load_recording
+from leadthrough.errors import SimulationError
+from leadthrough.excitation.fourier import TrajectorySamples
+from leadthrough.excitation.trajectory_file import save_trajectory
+from leadthrough.robot import Robot
+from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, run_trajectory
+from leadthrough.sim.plant import PlantPreset
+from leadthrough.sim.session import SimSessionConfig
+
+DATA = Path(__file__).parent / "data"
+POSE = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
+
+
+def _golden_run(robot: Robot, plant: str) -> dict[str, np.ndarray]:
+    """The run stored in ``data/ideal_plant_seed5.npz`` (made with commit 40b2d16, before the
+    presets existed): motion on every joint and a wrench from 0.3 s."""
+    sim = SimRobot(robot, SimConfig(seed=5, run=2, plant=plant), q0=POSE,
+                   operator=ConstantWrench((40.0, -20.0, 10.0, 1.0, 0.0, -2.0), 0.3))
+    t = np.arange(600) * 1e-3
+    log = run_trajectory(sim, POSE + 0.05 * np.sin(2 * np.pi * t)[:, None] * np.ones(6))
+    return {"q": log.q, "current": log.current, "true_current": log.truth.current,
+            "true_q": log.truth.q}
+
+
+def test_ideal_plant_is_bit_identical_to_the_plant_before_presets(er20: Robot) -> None:
+    golden = np.load(DATA / "ideal_plant_seed5.npz")
+    run = _golden_run(er20, "ideal")
+    for name in ("q", "current", "true_current", "true_q"):
+        np.testing.assert_array_equal(run[name], golden[name], err_msg=name)
+
+
+def test_realistic_is_the_default_and_names_are_checked() -> None:
+    assert SimConfig().plant is PlantPreset.REALISTIC
+    assert SimSessionConfig().plant is PlantPreset.REALISTIC
+    assert SimConfig(plant="ideal").plant is PlantPreset.IDEAL
+    with pytest.raises(SimulationError, match=r"plant.*'perfect'.*realistic, ideal"):
+        SimConfig(plant="perfect")  # type: ignore[arg-type]
+    with pytest.raises(SimulationError, match=r"session\.plant"):
+        SimSessionConfig(plant="perfect")  # type: ignore[arg-type]
+
+
+def _trajectory(path: Path, robot: Robot) -> TrajectorySamples:
+    t = np.arange(800) * 1e-3
+    s = np.sin(np.pi * t)[:, None] * np.ones(robot.n)
+    c = np.pi * np.cos(np.pi * t)[:, None] * np.ones(robot.n)
+    traj = TrajectorySamples(time=t, q=POSE + 0.05 * s, qd=0.05 * c,
+                             qdd=-0.05 * np.pi * s * np.pi)
+    save_trajectory(path, traj, robot.name)
+    return traj
+
+
+def test_record_cli_runs_the_chosen_plant(er20: Robot, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    traj = _trajectory(tmp_path / "traj.csv", er20)
+    out = tmp_path / "ideal.parquet"
+    assert main(["record", "--robot", "er20", "--trajectory", str(tmp_path / "traj.csv"),
+                 "--seed", "3", "--plant", "ideal", "--json", "-o", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["plant"] == "ideal"
+    sim = SimRobot(er20, SimConfig(seed=3, plant="ideal"), q0=traj.q[0])
+    direct = run_trajectory(sim, traj.q, traj.qd)
+    np.testing.assert_array_equal(load_recording(out).current, direct.current)
+    with pytest.raises(SystemExit) as e:
+        main(["record", "--robot", "er20", "--trajectory", str(tmp_path / "traj.csv"),
+              "--plant", "perfect", "-o", str(tmp_path / "x.parquet")])
+    assert e.value.code == 2 and "invalid choice: 'perfect'" in capsys.readouterr().err
