@@ -16,7 +16,10 @@ from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot import Robot
 from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, run_trajectory
+from leadthrough.sim.dress_pack import DressPackConfig, arm_links, dress_pack_inertias
+from leadthrough.sim.link_truth import outside_box, second_moment
 from leadthrough.sim.plant import PlantPreset
+from leadthrough.sim.robot import draw_true_parameters
 from leadthrough.sim.session import SimSessionConfig
 
 DATA = Path(__file__).parent / "data"
@@ -75,3 +78,37 @@ def test_record_cli_runs_the_chosen_plant(er20: Robot, tmp_path: Path,
         main(["record", "--robot", "er20", "--trajectory", str(tmp_path / "traj.csv"),
               "--plant", "perfect", "-o", str(tmp_path / "x.parquet")])
     assert e.value.code == 2 and "invalid choice: 'perfect'" in capsys.readouterr().err
+
+
+def test_realistic_links_leave_the_box_consistently(er20: Robot) -> None:
+    """About one link in five has a quantity outside the identifiers' ±30 % box; every link is
+    physically consistent; the dress pack adds a few kg over the ideal plant's links."""
+    seeds = range(200)
+    outside, added = [], []
+    for seed in seeds:
+        real, _ = draw_true_parameters(er20, SimConfig(seed=seed))
+        ideal, _ = draw_true_parameters(er20, SimConfig(seed=seed, plant="ideal"))
+        for j, link in enumerate(real, start=1):
+            outside.append(outside_box(er20.model.inertias[j], link, 0.3))
+            assert link.mass > 0.0
+            # positive semi-definite second moment: the inertia's triangle inequalities
+            assert np.linalg.eigvalsh(second_moment(link.inertia)).min() >= -1e-12
+        added.append(sum(r.mass - i.mass for r, i in zip(real, ideal, strict=True)))
+    assert 0.15 <= np.mean(outside) <= 0.25
+    arm = sum(er20.model.inertias[j].mass for j in arm_links(er20.model))
+    assert arm == pytest.approx(38.0 + 18.0)  # the er20's upper arm and forearm
+    # the median instance has no mass outlier: what it adds is the pack (5–10 % of the arm)
+    assert 0.05 * arm <= np.median(added) <= 0.10 * arm
+
+
+def test_dress_pack_hangs_beside_the_arm(er20: Robot) -> None:
+    pack = dress_pack_inertias(er20.model, DressPackConfig(), np.random.default_rng(7))
+    assert set(pack) == set(arm_links(er20.model)) == {2, 4}
+    for j, inertia in pack.items():
+        tip = np.asarray(er20.model.jointPlacements[j + 1].translation)
+        c = np.asarray(inertia.lever)
+        along = float(c @ tip) / float(tip @ tip)
+        beside = float(np.linalg.norm(c - along * tip))
+        assert along == pytest.approx(0.5) and 0.08 <= beside <= 0.15
+    with pytest.raises(SimulationError, match=r"dress_pack\.start/end"):
+        DressPackConfig(start=0.9, end=0.2)

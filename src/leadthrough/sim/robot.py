@@ -31,14 +31,18 @@ from leadthrough.sim.drivetrain import (
     DriveTrainTruth,
     sample_drive_truth,
 )
-from leadthrough.sim.link_truth import true_link_inertias
+from leadthrough.sim.link_truth import (
+    LinkMismatchConfig,
+    true_link_inertias,
+    with_model_mismatch,
+)
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
 from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.sensors import CurrentSensor, SensorConfig
 from leadthrough.sim.servo import CascadedServo, design_servo_gains
 
-__all__ = ["Feedback", "SimConfig", "SimRobot", "SimTruth"]
+__all__ = ["Feedback", "SimConfig", "SimRobot", "SimTruth", "draw_true_parameters"]
 
 Array = NDArray[np.float64]
 
@@ -54,6 +58,7 @@ class SimConfig:
             noise while the true parameters stay those of ``seed``.
         timestep: Physics and servo step [s].
         link_deviation: True link parameters deviate from nominal by up to this (eq. 37 sense).
+        links: How the realistic plant's links leave that box (outliers, dress pack).
         drive: How the true drive train is drawn.
         sensors: Sensor noise model.
         servo_bandwidth_hz: Velocity-loop bandwidth of the position servo [Hz].
@@ -65,6 +70,7 @@ class SimConfig:
     run: int = 0
     timestep: float = 1e-3
     link_deviation: float = 0.3
+    links: LinkMismatchConfig = field(default_factory=LinkMismatchConfig)
     drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
     servo_bandwidth_hz: float = 20.0
@@ -124,6 +130,30 @@ class Feedback:
     sequence: int
 
 
+def draw_true_parameters(robot: Robot, config: SimConfig
+                         ) -> tuple[list[pin.Inertia], DriveTrainTruth]:
+    """The true links and drive train of robot instance ``config.seed`` on ``config.plant``.
+
+    The ideal plant's draws come first from the instance's stream (as before the presets); the
+    realistic plant adds its mismatch from streams of its own, so that both plants of one seed
+    share the in-box links and the friction levels.
+
+    Args:
+        robot: The robot (nominal model and drives).
+        config: Simulator settings (seed, plant, deviations).
+
+    Returns:
+        The true link inertias (joint order) and drive-train parameters.
+    """
+    rng_truth = np.random.default_rng([config.seed, 1])
+    inertias = true_link_inertias(robot.model, rng_truth, config.link_deviation)
+    drive = sample_drive_truth(robot, config.drive, rng_truth)
+    if config.plant is PlantPreset.REALISTIC:
+        inertias = with_model_mismatch(robot.model, inertias,
+                                       np.random.default_rng([config.seed, 4]), config.links)
+    return inertias, drive
+
+
 class SimRobot:
     """Simulated position-controlled robot.
 
@@ -146,10 +176,8 @@ class SimRobot:
     ) -> None:
         self.robot = robot
         self.config = config = config if config is not None else SimConfig()
-        rng_truth = np.random.default_rng([config.seed, 1])
         rng_noise = np.random.default_rng([config.seed, 2, config.run])
-        inertias = true_link_inertias(robot.model, rng_truth, config.link_deviation)
-        drive = sample_drive_truth(robot, config.drive, rng_truth)
+        inertias, drive = draw_true_parameters(robot, config)
         self._drive = DriveTrain(drive, robot.gear_ratio)
         self._sensor = CurrentSensor(config.sensors, robot.max_current, rng_noise,
                                      config.timestep,
