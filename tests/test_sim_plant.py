@@ -17,6 +17,7 @@ from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot import Robot
 from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, run_trajectory
 from leadthrough.sim.dress_pack import DressPackConfig, arm_links, dress_pack_inertias
+from leadthrough.sim.drivetrain import DriveTrain, DriveTrainTruth
 from leadthrough.sim.link_truth import outside_box, second_moment
 from leadthrough.sim.plant import PlantPreset
 from leadthrough.sim.robot import draw_true_parameters
@@ -112,3 +113,43 @@ def test_dress_pack_hangs_beside_the_arm(er20: Robot) -> None:
         assert along == pytest.approx(0.5) and 0.08 <= beside <= 0.15
     with pytest.raises(SimulationError, match=r"dress_pack\.start/end"):
         DressPackConfig(start=0.9, end=0.2)
+
+
+def _steady_friction(drive: DriveTrainTruth, robot: Robot, q: np.ndarray, qd: np.ndarray
+                     ) -> np.ndarray:
+    """The drive train's friction after sliding at constant ``qd`` (the bristles settled)."""
+    train = DriveTrain(drive, robot.gear_ratio)
+    for _ in range(3000):
+        train.update(q, qd, np.zeros(robot.n), 1e-3)
+    return train.friction.copy()
+
+
+def test_realistic_friction_has_its_own_stribeck_shape_and_nonlinear_viscous(er20: Robot
+                                                                             ) -> None:
+    ideal = draw_true_parameters(er20, SimConfig(seed=4, plant="ideal"))[1]
+    real = draw_true_parameters(er20, SimConfig(seed=4))[1]
+    exponents = np.concatenate([draw_true_parameters(er20, SimConfig(seed=s))[1]
+                                .stribeck_exponent_gear for s in range(30)])
+    assert exponents.min() >= 0.5 and exponents.max() <= 2.0
+    assert np.ptp(exponents) > 1.2  # drawn over the range, not eq. 15's 2
+    # the same levels; the viscous friction at the velocity limit split, not changed
+    np.testing.assert_array_equal(real.coulomb_gear, ideal.coulomb_gear)
+    vmax = er20.velocity_limit
+    np.testing.assert_allclose(real.viscous * vmax + real.viscous_power
+                               * vmax**real.viscous_exponent, ideal.viscous * vmax, rtol=1e-12)
+    q = np.zeros(er20.n)
+    for v in (0.002, 0.03, 0.3):
+        qd = np.full(er20.n, v)
+        ripple = 1.0 + real.ripple * np.sin(q * real.ripple_frequency + real.ripple_phase)
+        shape = (real.coulomb_motor + real.coulomb_gear + real.bristle
+                 + real.stribeck_motor * np.exp(-np.abs(er20.gear_ratio * v
+                                                        / real.stribeck_velocity_motor)
+                                                ** real.stribeck_exponent_motor)
+                 + real.stribeck_gear * np.exp(-np.abs(v / real.stribeck_velocity_gear)
+                                               ** real.stribeck_exponent_gear))
+        expected = shape * ripple + real.viscous_power * v**real.viscous_exponent
+        np.testing.assert_allclose(_steady_friction(real, er20, q, qd), expected, rtol=1e-6)
+    # the degressive viscous part: at a tenth of the limit above the linear law
+    v = 0.1 * vmax
+    total = real.viscous * v + real.viscous_power * v**real.viscous_exponent
+    assert np.all(total > 1.05 * ideal.viscous * v)

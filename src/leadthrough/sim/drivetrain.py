@@ -28,6 +28,11 @@ unconditionally stable; the bristle force is applied explicitly (its stiffness i
 
 Only f1 ≈ Coulomb_total + g_d, f2, q̇sm, f3, q̇sg and f4 ≈ viscous_total are representable by
 eq. 15; the presliding dynamics, load dependence and ripple are deliberate model mismatch.
+
+This is the ideal plant's drive train. The realistic plant (:mod:`leadthrough.sim.plant`) draws
+more mismatch into the same parameters (:mod:`leadthrough.sim.drive_mismatch`): Stribeck
+exponents δ other than 2 (exp(−|q̇/q̇ₛ|^δ)) and a nonlinear viscous part f_p·sgn(q̇)·|q̇|^α,
+applied explicitly with the bristle force (the linear part stays MuJoCo damping).
 """
 
 from __future__ import annotations
@@ -122,6 +127,11 @@ class DriveTrainTruth:
         bristle_damping_velocity: q̇_d [rad/s].
         load_coefficient: μ [-]. ripple: ε [-]. ripple_frequency: k·R [periods/rad joint].
         ripple_phase: ϕ [rad].
+        stribeck_exponent_motor: δ of exp(−|R·q̇/q̇sm|^δ) [-] (2 on the ideal plant).
+        stribeck_exponent_gear: δ of exp(−|q̇/q̇sg|^δ) [-] (2 on the ideal plant).
+        viscous_power: f_p of the nonlinear viscous part f_p·sgn(q̇)·|q̇|^α
+            [N·m/(rad/s)^α] (0 on the ideal plant; :mod:`leadthrough.sim.drive_mismatch`).
+        viscous_exponent: α [-].
     """
 
     armature: Array
@@ -141,6 +151,10 @@ class DriveTrainTruth:
     ripple: Array
     ripple_frequency: Array
     ripple_phase: Array
+    stribeck_exponent_motor: Array
+    stribeck_exponent_gear: Array
+    viscous_power: Array
+    viscous_exponent: Array
 
     def equivalent_eq15(self) -> dict[str, Array]:
         """The closest eq. 15 parameters (for tests and noise floors): f1..f4, q̇sm, q̇sg."""
@@ -202,6 +216,10 @@ def sample_drive_truth(
         ripple=draw(config.ripple),
         ripple_frequency=config.ripple_periods_per_motor_rev * robot.gear_ratio,
         ripple_phase=rng.uniform(0.0, 2.0 * np.pi, n),
+        stribeck_exponent_motor=np.full(n, 2.0),
+        stribeck_exponent_gear=np.full(n, 2.0),
+        viscous_power=np.zeros(n),
+        viscous_exponent=np.ones(n),
     )
 
 
@@ -223,6 +241,10 @@ class DriveTrain:
         # no static friction at all (σ0 = 0): the bristle force is identically zero
         self._inv_sigma0 = np.divide(1.0, truth.bristle_stiffness,
                                      out=np.zeros(n), where=truth.bristle_stiffness > 0.0)
+        # eq. 15's Gaussian Stribeck shape is squared (the ideal plant, bit for bit)
+        self._gaussian = bool(np.all(truth.stribeck_exponent_motor == 2.0)
+                              and np.all(truth.stribeck_exponent_gear == 2.0))
+        self._power_viscous = bool(np.any(truth.viscous_power != 0.0))
         self.z = np.zeros(n)
         self.static = np.zeros(n)
         self.friction = np.zeros(n)
@@ -235,6 +257,17 @@ class DriveTrain:
         self.z[:] = 0.0
         self.friction[:] = 0.0
 
+    def _stribeck(self, qd: Array, scale: Array, exponent: Array, out: Array) -> None:
+        """out = exp(−|scale·q̇|^δ)."""
+        np.multiply(qd, scale, out=out)
+        if self._gaussian:
+            np.square(out, out=out)
+        else:
+            np.abs(out, out=out)
+            np.power(out, exponent, out=out)
+        np.negative(out, out=out)
+        np.exp(out, out=out)
+
     def update(self, q: Array, qd: Array, transmitted: Array, dt: float) -> None:
         """Advance one step: fills :attr:`static` (friction level g) and :attr:`friction`.
 
@@ -245,17 +278,11 @@ class DriveTrain:
             dt: Step [s].
         """
         tr = self.truth
-        t1, t2, st = self._t1, self._t2, self.static
+        t1, st = self._t1, self.static
         # Stribeck curve (motor and gear side) + Coulomb.
-        np.multiply(qd, self._a_motor, out=t1)
-        np.square(t1, out=t1)
-        np.negative(t1, out=t1)
-        np.exp(t1, out=t1)
+        self._stribeck(qd, self._a_motor, tr.stribeck_exponent_motor, t1)
         np.multiply(t1, tr.stribeck_motor, out=st)
-        np.multiply(qd, self._a_gear, out=t1)
-        np.square(t1, out=t1)
-        np.negative(t1, out=t1)
-        np.exp(t1, out=t1)
+        self._stribeck(qd, self._a_gear, tr.stribeck_exponent_gear, t1)
         np.multiply(t1, tr.stribeck_gear, out=t1)
         st += t1
         st += self._coulomb
@@ -270,9 +297,17 @@ class DriveTrain:
         np.abs(transmitted, out=t1)
         t1 *= tr.load_coefficient
         st += t1
-        # Bristles: dz/dt = v - |v| z / z_ss with z_ss = g / σ0, exact for constant v.
+        self._bristles(qd, dt)
+        if self._power_viscous:
+            self._add_power_viscous(qd)
+
+    def _bristles(self, qd: Array, dt: float) -> None:
+        """LuGre bristles at level :attr:`static`: advances z, sets :attr:`friction`."""
+        tr = self.truth
+        t1, t2 = self._t1, self._t2
+        # dz/dt = v - |v| z / z_ss with z_ss = g / σ0, exact for constant v.
         self._z_old[:] = self.z
-        np.multiply(st, self._inv_sigma0, out=t2)      # z_ss(v) [rad]
+        np.multiply(self.static, self._inv_sigma0, out=t2)  # z_ss(v) [rad]
         np.maximum(t2, 1e-15, out=t2)
         np.abs(qd, out=t1)
         t1 *= -dt
@@ -294,3 +329,13 @@ class DriveTrain:
         t2 *= t1
         np.multiply(self.z, tr.bristle_stiffness, out=self.friction)
         self.friction += t2
+
+    def _add_power_viscous(self, qd: Array) -> None:
+        """friction += f_p·sgn(q̇)·|q̇|^α (the realistic plant's degressive viscous part)."""
+        t1, t2 = self._t1, self._t2
+        np.abs(qd, out=t1)
+        np.power(t1, self.truth.viscous_exponent, out=t1)
+        t1 *= self.truth.viscous_power
+        np.sign(qd, out=t2)
+        t1 *= t2
+        self.friction += t1

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from leadthrough.dynamics.regressor import standard_parameters
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
+from leadthrough.sim.drive_mismatch import DriveMismatchConfig, with_drive_mismatch
 from leadthrough.sim.drivetrain import (
     DriveTrain,
     DriveTrainConfig,
@@ -60,6 +61,7 @@ class SimConfig:
         link_deviation: True link parameters deviate from nominal by up to this (eq. 37 sense).
         links: How the realistic plant's links leave that box (outliers, dress pack).
         drive: How the true drive train is drawn.
+        drive_mismatch: What the realistic plant's drive trains add (friction shape, ...).
         sensors: Sensor noise model.
         servo_bandwidth_hz: Velocity-loop bandwidth of the position servo [Hz].
         plant: Which plant plays the robot (:mod:`leadthrough.sim.plant`): ``realistic``
@@ -72,6 +74,7 @@ class SimConfig:
     link_deviation: float = 0.3
     links: LinkMismatchConfig = field(default_factory=LinkMismatchConfig)
     drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
+    drive_mismatch: DriveMismatchConfig = field(default_factory=DriveMismatchConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
     servo_bandwidth_hz: float = 20.0
     plant: PlantPreset = PlantPreset.REALISTIC
@@ -151,6 +154,8 @@ def draw_true_parameters(robot: Robot, config: SimConfig
     if config.plant is PlantPreset.REALISTIC:
         inertias = with_model_mismatch(robot.model, inertias,
                                        np.random.default_rng([config.seed, 4]), config.links)
+        drive = with_drive_mismatch(drive, robot, config.drive_mismatch,
+                                    np.random.default_rng([config.seed, 5]))
     return inertias, drive
 
 
@@ -342,7 +347,8 @@ class SimRobot:
 
     @property
     def true_friction_torque(self) -> Array:
-        """Drive-train friction torque (all but viscous) of the last step [N·m] (truth)."""
+        """Drive-train friction torque (all but the linear viscous part) of the last step [N·m]
+        (truth)."""
         return self._drive.friction.copy()
 
     @property
