@@ -153,3 +153,22 @@ def test_realistic_friction_has_its_own_stribeck_shape_and_nonlinear_viscous(er2
     v = 0.1 * vmax
     total = real.viscous * v + real.viscous_power * v**real.viscous_exponent
     assert np.all(total > 1.05 * ideal.viscous * v)
+
+
+def test_realistic_coulomb_friction_grows_with_the_transmitted_torque(er20: Robot) -> None:
+    """μ·|τ| with μ of several per cent (the ideal plant: 1 %), on the sliding friction."""
+    mus = np.concatenate([draw_true_parameters(er20, SimConfig(seed=s))[1].load_coefficient
+                          for s in range(30)])
+    assert mus.min() >= 0.03 and mus.max() <= 0.10 and 0.05 < mus.mean() < 0.08
+    ideal = draw_true_parameters(er20, SimConfig(seed=4, plant="ideal"))[1]
+    assert np.all(ideal.load_coefficient < 0.0125)
+    real = draw_true_parameters(er20, SimConfig(seed=4))[1]
+    q, qd = np.zeros(er20.n), np.full(er20.n, 0.05)
+    tau = 0.3 * er20.max_torque * np.array([1, -1, 1, -1, 1, -1])
+    free = DriveTrain(real, er20.gear_ratio)
+    loaded = DriveTrain(real, er20.gear_ratio)
+    for _ in range(3000):
+        free.update(q, qd, np.zeros(er20.n), 1e-3)
+        loaded.update(q, qd, tau, 1e-3)
+    np.testing.assert_allclose(loaded.friction - free.friction,
+                               real.load_coefficient * np.abs(tau), rtol=1e-6)
