@@ -11,7 +11,7 @@ import pytest
 
 from leadthrough.cli import main
 from leadthrough.data.io import load_recording
-from leadthrough.errors import SimulationError
+from leadthrough.errors import ControlError, SimulationError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot import Robot
@@ -22,6 +22,7 @@ from leadthrough.sim.link_truth import outside_box, second_moment
 from leadthrough.sim.plant import PlantPreset
 from leadthrough.sim.robot import draw_true_parameters
 from leadthrough.sim.session import SimSessionConfig
+from leadthrough.sim.thermal import ThermalConfig, production_loss
 
 DATA = Path(__file__).parent / "data"
 POSE = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
@@ -53,6 +54,8 @@ def test_realistic_is_the_default_and_names_are_checked() -> None:
         SimConfig(plant="perfect")  # type: ignore[arg-type]
     with pytest.raises(SimulationError, match=r"session\.plant"):
         SimSessionConfig(plant="perfect")  # type: ignore[arg-type]
+    with pytest.raises(ControlError, match=r"session\.warm_up_s.*ideal plant"):
+        SimSessionConfig(plant="ideal", warm_up_s=60.0)
 
 
 def _trajectory(path: Path, robot: Robot) -> TrajectorySamples:
@@ -81,14 +84,31 @@ def test_record_cli_runs_the_chosen_plant(er20: Robot, tmp_path: Path,
     assert e.value.code == 2 and "invalid choice: 'perfect'" in capsys.readouterr().err
 
 
+def test_record_cli_warms_the_robot_up(er20: Robot, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    traj = _trajectory(tmp_path / "traj.csv", er20)
+    args = ["record", "--robot", "er20", "--trajectory", str(tmp_path / "traj.csv"),
+            "--seed", "3", "--json"]
+    assert main([*args, "--warm-up", "60", "-o", str(tmp_path / "warm.parquet")]) == 0
+    assert json.loads(capsys.readouterr().out)["warm_up_min"] == 60.0
+    sim = SimRobot(er20, SimConfig(seed=3, warm_up_s=3600.0), q0=traj.q[0])
+    direct = run_trajectory(sim, traj.q, traj.qd)
+    np.testing.assert_array_equal(load_recording(tmp_path / "warm.parquet").current,
+                                  direct.current)
+    for bad in (["--warm-up", "-5"], ["--warm-up", "nan"], ["--plant", "ideal", "--warm-up", "1"]):
+        out = tmp_path / "bad.parquet"
+        assert main([*args, *bad, "-o", str(out)]) == 2, bad
+        assert "warm" in capsys.readouterr().err and not out.exists()
+
+
 def test_realistic_links_leave_the_box_consistently(er20: Robot) -> None:
     """About one link in five has a quantity outside the identifiers' ±30 % box; every link is
     physically consistent; the dress pack adds a few kg over the ideal plant's links."""
     seeds = range(200)
     outside, added = [], []
     for seed in seeds:
-        real, _ = draw_true_parameters(er20, SimConfig(seed=seed))
-        ideal, _ = draw_true_parameters(er20, SimConfig(seed=seed, plant="ideal"))
+        real = draw_true_parameters(er20, SimConfig(seed=seed)).inertias
+        ideal = draw_true_parameters(er20, SimConfig(seed=seed, plant="ideal")).inertias
         for j, link in enumerate(real, start=1):
             outside.append(outside_box(er20.model.inertias[j], link, 0.3))
             assert link.mass > 0.0
@@ -126,9 +146,9 @@ def _steady_friction(drive: DriveTrainTruth, robot: Robot, q: np.ndarray, qd: np
 
 def test_realistic_friction_has_its_own_stribeck_shape_and_nonlinear_viscous(er20: Robot
                                                                              ) -> None:
-    ideal = draw_true_parameters(er20, SimConfig(seed=4, plant="ideal"))[1]
-    real = draw_true_parameters(er20, SimConfig(seed=4))[1]
-    exponents = np.concatenate([draw_true_parameters(er20, SimConfig(seed=s))[1]
+    ideal = draw_true_parameters(er20, SimConfig(seed=4, plant="ideal")).drive
+    real = draw_true_parameters(er20, SimConfig(seed=4)).drive
+    exponents = np.concatenate([draw_true_parameters(er20, SimConfig(seed=s)).drive
                                 .stribeck_exponent_gear for s in range(30)])
     assert exponents.min() >= 0.5 and exponents.max() <= 2.0
     assert np.ptp(exponents) > 1.2  # drawn over the range, not eq. 15's 2
@@ -157,12 +177,12 @@ def test_realistic_friction_has_its_own_stribeck_shape_and_nonlinear_viscous(er2
 
 def test_realistic_coulomb_friction_grows_with_the_transmitted_torque(er20: Robot) -> None:
     """μ·|τ| with μ of several per cent (the ideal plant: 1 %), on the sliding friction."""
-    mus = np.concatenate([draw_true_parameters(er20, SimConfig(seed=s))[1].load_coefficient
+    mus = np.concatenate([draw_true_parameters(er20, SimConfig(seed=s)).drive.load_coefficient
                           for s in range(30)])
     assert mus.min() >= 0.03 and mus.max() <= 0.10 and 0.05 < mus.mean() < 0.08
-    ideal = draw_true_parameters(er20, SimConfig(seed=4, plant="ideal"))[1]
+    ideal = draw_true_parameters(er20, SimConfig(seed=4, plant="ideal")).drive
     assert np.all(ideal.load_coefficient < 0.0125)
-    real = draw_true_parameters(er20, SimConfig(seed=4))[1]
+    real = draw_true_parameters(er20, SimConfig(seed=4)).drive
     q, qd = np.zeros(er20.n), np.full(er20.n, 0.05)
     tau = 0.3 * er20.max_torque * np.array([1, -1, 1, -1, 1, -1])
     free = DriveTrain(real, er20.gear_ratio)
@@ -172,3 +192,71 @@ def test_realistic_coulomb_friction_grows_with_the_transmitted_torque(er20: Robo
         loaded.update(q, qd, tau, 1e-3)
     np.testing.assert_allclose(loaded.friction - free.friction,
                                real.load_coefficient * np.abs(tau), rtol=1e-6)
+
+
+def _sliding_friction_in_motion(sim: SimRobot, speed: float = 0.05) -> np.ndarray:
+    """Mean friction torque (bristles, power-law and linear viscous) while every joint slides
+    at ``speed`` [rad/s], the last second of two."""
+    q0 = sim.q_command
+    dt = sim.config.timestep
+    friction = []
+    for k in range(2000):
+        sim.command(q0 + speed * k * dt, np.full(sim.robot.n, speed))
+        sim.step()
+        if k >= 1000:
+            qd = sim.true_state()[1]
+            friction.append(sim.true_friction_torque
+                            + sim.mj_model.dof_damping * qd)
+    return np.mean(friction, axis=0)
+
+
+def test_friction_of_a_cold_robot_falls_after_an_hour_of_production(er20: Robot) -> None:
+    cold = SimRobot(er20, SimConfig(seed=2), q0=POSE)
+    warm = SimRobot(er20, SimConfig(seed=2, warm_up_s=3600.0), q0=POSE)
+    assert np.all(cold.temperature_c == 20.0)
+    assert np.all(warm.temperature_c > 30.0) and np.all(warm.temperature_c < 60.0)
+    assert warm.time == 0.0  # a fast-forward: the robot's time and state did not move
+    ratio = _sliding_friction_in_motion(cold) / _sliding_friction_in_motion(warm)
+    assert np.all(ratio > 1.15) and np.all(ratio < 2.0), ratio  # tens of per cent
+
+
+def test_joints_heat_by_their_friction_losses(er20: Robot) -> None:
+    """Short of the time constant, T − T_a = R_th·E/τ_th with E the friction energy."""
+    sim = SimRobot(er20, SimConfig(seed=3), q0=POSE)
+    th = sim.truth.thermal
+    assert th is not None
+    t = np.arange(10000) * 1e-3
+    w = 2 * np.pi * 0.5
+    energy = np.zeros(er20.n)
+    for k in range(t.size):
+        sim.command(POSE + 0.3 * np.sin(w * t[k]), np.full(er20.n, 0.3 * w * np.cos(w * t[k])))
+        sim.step()
+        qd = sim.true_state()[1]
+        energy += np.abs((sim.true_friction_torque + sim.mj_model.dof_damping * qd) * qd) * 1e-3
+    expected = th.resistance * energy / th.time_constant_s
+    np.testing.assert_allclose(sim.temperature_c - th.ambient_c, expected, rtol=0.02)
+
+
+def test_warm_up_settles_where_heating_meets_cooling(er20: Robot) -> None:
+    sim = SimRobot(er20, SimConfig(seed=5), q0=POSE)
+    th = sim.truth.thermal
+    assert th is not None
+    sim.warm_up(12 * 3600.0)
+    loss = production_loss(sim.truth.drive, er20, ThermalConfig(),
+                           np.exp(-th.beta_static * (sim.temperature_c - th.ambient_c)),
+                           np.exp(-th.beta_viscous * (sim.temperature_c - th.ambient_c)))
+    np.testing.assert_allclose(sim.temperature_c, th.ambient_c + th.resistance * loss, rtol=1e-6)
+    # below the rise at cold friction (20-35 K), because the warm joints lose less
+    assert np.all(sim.temperature_c - th.ambient_c < 35.0)
+    sim.set_temperature(np.full(er20.n, th.ambient_c))
+    _sliding_friction_in_motion(sim, 0.0)  # held at rest: presliding only, no heating
+    assert np.all(np.abs(sim.temperature_c - th.ambient_c) < 1e-4)
+
+
+def test_the_ideal_plant_has_no_temperature(er20: Robot) -> None:
+    with pytest.raises(SimulationError, match="ideal plant has no thermal model"):
+        SimConfig(plant="ideal", warm_up_s=60.0)
+    with pytest.raises(SimulationError, match="ideal plant has no thermal model"):
+        SimRobot(er20, SimConfig(plant="ideal")).warm_up(60.0)
+    with pytest.raises(SimulationError, match="warm_up_s"):
+        SimRobot(er20, SimConfig()).warm_up(-1.0)

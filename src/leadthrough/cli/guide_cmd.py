@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from leadthrough.cli.arg_checks import warm_up_seconds
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
@@ -62,6 +63,9 @@ def register(sub: Any) -> None:
     p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
                    help="simulated plant: realistic (default) or ideal (the plant before issue "
                         "24); the one the params were recorded on")
+    p.add_argument("--warm-up", type=float, default=0.0, metavar="MINUTES",
+                   help="production-like motion the realistic robot did before the session "
+                        "[min] (default 0: cold, as a calibration in the morning)")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
                                       friction_mode=args.friction))
     cfg = SimSessionConfig(operator=args.operator, duration_s=args.duration, seed=seed,
                            operator_seed=args.operator_seed, paced=args.realtime, loop=loop,
-                           plant=args.plant)
+                           plant=args.plant, warm_up_s=warm_up_seconds(args.warm_up))
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
     save_session(session.result.log, args.output)

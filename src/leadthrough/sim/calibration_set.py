@@ -116,6 +116,7 @@ def record_friction_sweep(
     sweep_config: FrictionSweepConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
     plant: PlantPreset | str = PlantPreset.REALISTIC,
+    warm_up_s: float = 0.0,
 ) -> SimRecording:
     """Run a friction sweep (:func:`design_friction_sweep`) on simulated robot ``seed``.
 
@@ -127,11 +128,12 @@ def record_friction_sweep(
         sweep_config: Sweep layout.
         progress: Progress callback.
         plant: Simulated plant (:mod:`leadthrough.sim.plant`).
+        warm_up_s: Production-like motion before the recording (realistic plant) [s].
 
     Returns:
         Measured and true recordings.
     """
-    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant))
+    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant), warm_up_s=warm_up_s)
     layout = sweep_config if sweep_config is not None else FrictionSweepConfig()
     sweep = design_friction_sweep(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
     return _run(robot, sweep.samples, config, None, progress, " friction sweep")
@@ -145,6 +147,7 @@ def record_presliding_test(
     test_config: PreslidingTestConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
     plant: PlantPreset | str = PlantPreset.REALISTIC,
+    warm_up_s: float = 0.0,
 ) -> SimRecording:
     """Run a presliding test (:func:`design_presliding_test`) on simulated robot ``seed``.
 
@@ -156,11 +159,12 @@ def record_presliding_test(
         test_config: Test layout.
         progress: Progress callback.
         plant: Simulated plant (:mod:`leadthrough.sim.plant`).
+        warm_up_s: Production-like motion before the recording (realistic plant) [s].
 
     Returns:
         Measured and true recordings.
     """
-    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant))
+    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant), warm_up_s=warm_up_s)
     layout = test_config if test_config is not None else PreslidingTestConfig()
     test = design_presliding_test(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
     return _run(robot, test.samples, config, None, progress, " presliding test")
@@ -173,6 +177,7 @@ def record_calibration_set(
     excitation_config: ExcitationConfig | None = None,
     progress: Callable[[str], None] | None = None,
     plant: PlantPreset | str = PlantPreset.REALISTIC,
+    warm_up_s: float = 0.0,
 ) -> CalibrationSet:
     """Design two excitation trajectories and record both on robot instance ``seed``.
 
@@ -183,6 +188,7 @@ def record_calibration_set(
         excitation_config: Design settings (its seed is used for identification, +1 held out).
         progress: Called with a line of text after each step.
         plant: Simulated plant (:mod:`leadthrough.sim.plant`).
+        warm_up_s: Production-like motion before each recording (realistic plant) [s].
 
     Returns:
         The data set.
@@ -195,8 +201,10 @@ def record_calibration_set(
     exc_h = design_excitation(robot, held_cfg)
     say(f"held-out trajectory designed: cond = {exc_h.condition_number:.1f}")
     preset = plant_preset(plant)
-    ident = record_excitation(robot, exc, duration, SimConfig(seed=seed, run=0, plant=preset))
-    held = record_excitation(robot, exc_h, duration, SimConfig(seed=seed, run=1, plant=preset))
+    ident = record_excitation(robot, exc, duration, SimConfig(seed=seed, run=0, plant=preset,
+                                                              warm_up_s=warm_up_s))
+    held = record_excitation(robot, exc_h, duration, SimConfig(seed=seed, run=1, plant=preset,
+                                                               warm_up_s=warm_up_s))
     say(f"recorded 2 × {duration:g} s at 1 kHz; max tracking error "
         f"{1e3 * float(np.max(np.abs(ident.log.truth.q - ident.log.q_cmd))):.2f} mrad")
     return CalibrationSet(identification=ident, held_out=held, excitation=exc,

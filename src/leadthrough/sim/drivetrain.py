@@ -46,7 +46,8 @@ from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.servo import mid_range_link_inertia
 
-__all__ = ["DriveTrain", "DriveTrainConfig", "DriveTrainTruth", "sample_drive_truth"]
+__all__ = ["DriveTrain", "DriveTrainConfig", "DriveTrainTruth", "sample_drive_truth",
+           "sliding_friction"]
 
 Array = NDArray[np.float64]
 
@@ -223,17 +224,50 @@ def sample_drive_truth(
     )
 
 
+def sliding_friction(truth: DriveTrainTruth, gear_ratio: Array, speed: Array,
+                     transmitted: Array) -> tuple[Array, Array]:
+    """Steady sliding friction at a joint speed, mean over the mesh ripple, cold.
+
+    Args:
+        truth: Drive-train parameters.
+        gear_ratio: R per joint, shape (n,).
+        speed: Joint speeds |q̇| [rad/s], shape (n,).
+        transmitted: Torque through the gears [N·m], shape (n,).
+
+    Returns:
+        The level g of the bristles (Coulomb, Stribeck, load) and the viscous friction
+        (linear and power law) [N·m], each shape (n,).
+    """
+    v = np.abs(speed)
+    level = (truth.coulomb_motor + truth.coulomb_gear + truth.bristle
+             + truth.stribeck_motor * np.exp(-np.abs(gear_ratio * v
+                                                     / truth.stribeck_velocity_motor)
+                                             ** truth.stribeck_exponent_motor)
+             + truth.stribeck_gear * np.exp(-np.abs(v / truth.stribeck_velocity_gear)
+                                            ** truth.stribeck_exponent_gear)
+             + truth.load_coefficient * np.abs(transmitted))
+    return level, truth.viscous * v + truth.viscous_power * v**truth.viscous_exponent
+
+
 class DriveTrain:
     """Per-step evaluation of the true friction, with preallocated buffers.
 
     Args:
         truth: Drive-train parameters.
         gear_ratio: R per joint, shape (n,).
+        thermal: Scale the friction by :attr:`static_scale` and :attr:`viscous_scale` (set by
+            the joint temperatures, :mod:`leadthrough.sim.thermal`) and accumulate the
+            friction losses in :attr:`heat`.
     """
 
-    def __init__(self, truth: DriveTrainTruth, gear_ratio: Array) -> None:
+    def __init__(self, truth: DriveTrainTruth, gear_ratio: Array, thermal: bool = False
+                 ) -> None:
         self.truth = truth
         n = gear_ratio.size
+        self._thermal = thermal
+        self.static_scale = np.ones(n)
+        self.viscous_scale = np.ones(n)
+        self.heat = np.zeros(n)
         self._a_motor = gear_ratio / truth.stribeck_velocity_motor
         self._a_gear = 1.0 / truth.stribeck_velocity_gear
         self._a_damp = 1.0 / truth.bristle_damping_velocity
@@ -297,9 +331,13 @@ class DriveTrain:
         np.abs(transmitted, out=t1)
         t1 *= tr.load_coefficient
         st += t1
+        if self._thermal:
+            st *= self.static_scale
         self._bristles(qd, dt)
         if self._power_viscous:
             self._add_power_viscous(qd)
+        if self._thermal:
+            self._heat(qd, dt)
 
     def _bristles(self, qd: Array, dt: float) -> None:
         """LuGre bristles at level :attr:`static`: advances z, sets :attr:`friction`."""
@@ -336,6 +374,20 @@ class DriveTrain:
         np.abs(qd, out=t1)
         np.power(t1, self.truth.viscous_exponent, out=t1)
         t1 *= self.truth.viscous_power
+        if self._thermal:
+            t1 *= self.viscous_scale
         np.sign(qd, out=t2)
         t1 *= t2
         self.friction += t1
+
+    def _heat(self, qd: Array, dt: float) -> None:
+        """heat += (|F·q̇| + φ_v·c·q̇²)·dt, the step's friction loss [J]."""
+        t1, t2 = self._t1, self._t2
+        np.multiply(self.friction, qd, out=t1)
+        np.abs(t1, out=t1)
+        np.square(qd, out=t2)
+        t2 *= self.truth.viscous
+        t2 *= self.viscous_scale
+        t1 += t2
+        t1 *= dt
+        self.heat += t1

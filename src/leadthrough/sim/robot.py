@@ -15,105 +15,26 @@ Each step (dt = 1 ms):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.dynamics.regressor import standard_parameters
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
-from leadthrough.sim.drive_mismatch import DriveMismatchConfig, with_drive_mismatch
-from leadthrough.sim.drivetrain import (
-    DriveTrain,
-    DriveTrainConfig,
-    DriveTrainTruth,
-    sample_drive_truth,
-)
-from leadthrough.sim.link_truth import (
-    LinkMismatchConfig,
-    true_link_inertias,
-    with_model_mismatch,
-)
+from leadthrough.sim.drivetrain import DriveTrain
+from leadthrough.sim.instance import SimConfig, SimTruth, draw_true_parameters
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
-from leadthrough.sim.plant import PlantPreset, plant_preset
-from leadthrough.sim.sensors import CurrentSensor, SensorConfig
+from leadthrough.sim.sensors import CurrentSensor
 from leadthrough.sim.servo import CascadedServo, design_servo_gains
+from leadthrough.sim.thermal import JointTemperatures
 
 __all__ = ["Feedback", "SimConfig", "SimRobot", "SimTruth", "draw_true_parameters"]
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Settings of the simulated robot.
-
-    Attributes:
-        seed: Seeds the robot instance: true parameters and sensor noise (same seed, run and
-            plant, bit-identical recording).
-        run: Recording number on the same robot instance: each run gets independent sensor
-            noise while the true parameters stay those of ``seed``.
-        timestep: Physics and servo step [s].
-        link_deviation: True link parameters deviate from nominal by up to this (eq. 37 sense).
-        links: How the realistic plant's links leave that box (outliers, dress pack).
-        drive: How the true drive train is drawn.
-        drive_mismatch: What the realistic plant's drive trains add (friction shape, ...).
-        sensors: Sensor noise model.
-        servo_bandwidth_hz: Velocity-loop bandwidth of the position servo [Hz].
-        plant: Which plant plays the robot (:mod:`leadthrough.sim.plant`): ``realistic``
-            (default) or ``ideal`` (the plant before issue 24, bit-identical).
-    """
-
-    seed: int = 0
-    run: int = 0
-    timestep: float = 1e-3
-    link_deviation: float = 0.3
-    links: LinkMismatchConfig = field(default_factory=LinkMismatchConfig)
-    drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
-    drive_mismatch: DriveMismatchConfig = field(default_factory=DriveMismatchConfig)
-    sensors: SensorConfig = field(default_factory=SensorConfig)
-    servo_bandwidth_hz: float = 20.0
-    plant: PlantPreset = PlantPreset.REALISTIC
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "plant", plant_preset(self.plant))
-        if self.seed < 0 or self.run < 0:
-            raise SimulationError("must be >= 0", field="seed/run", value=(self.seed, self.run),
-                                  expected="non-negative integers")
-        if not (0.0 < self.timestep <= 0.01):
-            raise SimulationError("out of range", field="timestep", value=self.timestep,
-                                  expected="0 < timestep <= 0.01 s")
-        if not (0.0 <= self.link_deviation < 1.0):
-            raise SimulationError("out of range", field="link_deviation",
-                                  value=self.link_deviation, expected="0 <= deviation < 1")
-        if not (0.0 < self.servo_bandwidth_hz <= 0.1 / self.timestep):
-            raise SimulationError("out of range", field="servo_bandwidth_hz",
-                                  value=self.servo_bandwidth_hz,
-                                  expected=f"0 < bandwidth <= {0.1 / self.timestep:g} Hz")
-
-
-@dataclass(frozen=True)
-class SimTruth:
-    """What the simulator knows and a real robot would not tell.
-
-    Attributes:
-        inertias: True link inertias, joint order.
-        phi: True standard link parameters, shape (10·n,).
-        drive: True drive-train parameters.
-        current_bias: Current-sensor bias [A], shape (n,).
-        current_noise: Current-sensor noise σ in motion (white and slow parts combined) [A],
-            shape (n,).
-    """
-
-    inertias: tuple[pin.Inertia, ...]
-    phi: Array
-    drive: DriveTrainTruth
-    current_bias: Array
-    current_noise: Array
 
 
 @dataclass(frozen=True)
@@ -131,32 +52,6 @@ class Feedback:
     q: Array
     current: Array
     sequence: int
-
-
-def draw_true_parameters(robot: Robot, config: SimConfig
-                         ) -> tuple[list[pin.Inertia], DriveTrainTruth]:
-    """The true links and drive train of robot instance ``config.seed`` on ``config.plant``.
-
-    The ideal plant's draws come first from the instance's stream (as before the presets); the
-    realistic plant adds its mismatch from streams of its own, so that both plants of one seed
-    share the in-box links and the friction levels.
-
-    Args:
-        robot: The robot (nominal model and drives).
-        config: Simulator settings (seed, plant, deviations).
-
-    Returns:
-        The true link inertias (joint order) and drive-train parameters.
-    """
-    rng_truth = np.random.default_rng([config.seed, 1])
-    inertias = true_link_inertias(robot.model, rng_truth, config.link_deviation)
-    drive = sample_drive_truth(robot, config.drive, rng_truth)
-    if config.plant is PlantPreset.REALISTIC:
-        inertias = with_model_mismatch(robot.model, inertias,
-                                       np.random.default_rng([config.seed, 4]), config.links)
-        drive = with_drive_mismatch(drive, robot, config.drive_mismatch,
-                                    np.random.default_rng([config.seed, 5]))
-    return inertias, drive
 
 
 class SimRobot:
@@ -182,8 +77,11 @@ class SimRobot:
         self.robot = robot
         self.config = config = config if config is not None else SimConfig()
         rng_noise = np.random.default_rng([config.seed, 2, config.run])
-        inertias, drive = draw_true_parameters(robot, config)
-        self._drive = DriveTrain(drive, robot.gear_ratio)
+        inertias, drive, thermal = draw_true_parameters(robot, config)
+        self._drive = DriveTrain(drive, robot.gear_ratio, thermal=thermal is not None)
+        self._temperatures = None if thermal is None else JointTemperatures(thermal)
+        self._heat_every = max(1, round(config.thermal.update_period_s / config.timestep))
+        self._heat_steps = 0
         self._sensor = CurrentSensor(config.sensors, robot.max_current, rng_noise,
                                      config.timestep,
                                      bias_rng=np.random.default_rng([config.seed, 3]))
@@ -194,6 +92,7 @@ class SimRobot:
             inertias=tuple(inertias),
             phi=standard_parameters(model_true),
             drive=drive,
+            thermal=thermal,
             current_bias=self._sensor.bias.copy(),
             current_noise=self._sensor.sigma.copy(),
         )
@@ -217,6 +116,8 @@ class SimRobot:
         self._seq = 0
         self._build()
         self.reset(robot.neutral() if q0 is None else q0)
+        if config.warm_up_s > 0.0:
+            self.warm_up(config.warm_up_s)
 
     # ----------------------------------------------------------------------------------- setup
     def _build(self) -> None:
@@ -227,6 +128,62 @@ class SimRobot:
         self.mj_data = mujoco.MjData(self.mj_model)
         self._tcp_site = mujoco.mj_name2id(self.mj_model, mujoco.mjtObj.mjOBJ_SITE, TCP_SITE)
         self._tcp_body = int(self.mj_model.site_bodyid[self._tcp_site])
+        self._sync_thermal()
+
+    # ---------------------------------------------------------------------------- temperature
+    def _sync_thermal(self) -> None:
+        """Give the drive train and MuJoCo's damping the friction scales of the temperatures."""
+        temps = self._temperatures
+        if temps is None:
+            return
+        self._drive.static_scale[:] = temps.static_scale
+        self._drive.viscous_scale[:] = temps.viscous_scale
+        np.multiply(self.truth.drive.viscous, temps.viscous_scale,
+                    out=self.mj_model.dof_damping)
+
+    def _apply_heat(self) -> None:
+        """Advance the temperatures by the losses accumulated since the last update."""
+        assert self._temperatures is not None
+        duration = self._heat_steps * self.config.timestep
+        self._temperatures.advance(self._drive.heat / duration, duration)
+        self._drive.heat[:] = 0.0
+        self._heat_steps = 0
+        self._sync_thermal()
+
+    def _thermal_or_raise(self) -> JointTemperatures:
+        if self._temperatures is None:
+            raise SimulationError("the ideal plant has no thermal model", field="plant",
+                                  value=str(self.config.plant), expected="realistic")
+        return self._temperatures
+
+    @property
+    def temperature_c(self) -> Array:
+        """Joint temperatures [°C], shape (n,) (simulator truth; realistic plant).
+
+        Raises:
+            SimulationError: On the ideal plant.
+        """
+        return self._thermal_or_raise().temperature_c.copy()
+
+    def set_temperature(self, temperature_c: Array) -> None:
+        """Set the joint temperatures [°C], shape (n,) (realistic plant).
+
+        Raises:
+            SimulationError: On the ideal plant, or bad temperatures.
+        """
+        self._thermal_or_raise().set(temperature_c)
+        self._sync_thermal()
+
+    def warm_up(self, duration_s: float) -> None:
+        """Fast-forward the joint temperatures through ``duration_s`` of production-like motion
+        (:mod:`leadthrough.sim.thermal`); the robot's state and time do not change.
+
+        Raises:
+            SimulationError: On the ideal plant, or a negative duration.
+        """
+        self._thermal_or_raise().warm_up(duration_s, self.truth.drive, self.robot,
+                                         self.config.thermal)
+        self._sync_thermal()
 
     def attach_payload(self, payload: Payload | None) -> None:
         """Attach (or with None, remove) a payload, keeping the state and settling the servo."""
@@ -313,6 +270,10 @@ class SimRobot:
             self._wrench[:] = 0.0
         mujoco.mj_step2(m, d)
         self._seq += 1
+        if self._temperatures is not None:
+            self._heat_steps += 1
+            if self._heat_steps >= self._heat_every:
+                self._apply_heat()
 
     def _apply_operator(self) -> None:
         assert self.operator is not None

@@ -61,6 +61,8 @@ class SimSessionConfig:
         faults: Feedback faults injected by the simulated driver (safety tests).
         plant: Simulated plant (:mod:`leadthrough.sim.plant`): the one the params were
             identified on.
+        warm_up_s: Production-like motion the (realistic) robot did before the session [s]:
+            its friction has fallen from the cold robot's (:mod:`leadthrough.sim.thermal`).
     """
 
     operator: str = "push-x"
@@ -73,6 +75,7 @@ class SimSessionConfig:
     paced: bool = False
     faults: tuple[InjectedFault, ...] = ()
     plant: PlantPreset = PlantPreset.REALISTIC
+    warm_up_s: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "plant", plant_preset(self.plant, "session.plant"))
@@ -83,6 +86,10 @@ class SimSessionConfig:
             ("operator_seed", self.operator_seed is None
              or (isinstance(self.operator_seed, int) and self.operator_seed >= 0),
              "None or an integer >= 0"),
+            ("warm_up_s", bool(np.isfinite(self.warm_up_s)) and self.warm_up_s >= 0.0,
+             "a finite duration >= 0 s"),
+            ("warm_up_s", self.warm_up_s == 0.0 or self.plant is PlantPreset.REALISTIC,
+             "0 on the ideal plant (it has no thermal model)"),
         ], ControlError)
 
 
@@ -174,8 +181,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     op_seed = config.seed if config.operator_seed is None else config.operator_seed
     operator = make_operator(config.operator, seed=op_seed, tcp_start_base=tcp0)
     duration = operator.duration_s if config.duration_s is None else config.duration_s
-    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run, plant=config.plant), q0=q0,
-                   operator=operator)
+    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run, plant=config.plant,
+                                    warm_up_s=config.warm_up_s), q0=q0, operator=operator)
     sim_driver = SimDriver(sim)
     for fault in config.faults:
         sim_driver.inject(fault)
@@ -188,8 +195,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
         "operator": config.operator, "controller": guiding.controller, "seed": config.seed,
-        "plant": str(config.plant), "run": config.run, "operator_seed": op_seed,
-        "duration_s": duration,
+        "plant": str(config.plant), "warm_up_s": config.warm_up_s, "run": config.run,
+        "operator_seed": op_seed, "duration_s": duration,
         "params_method": params.method,
         "estimator": {"method": est_cfg.method, "axes": est_cfg.axes,
                       "output_cutoff_hz": est_cfg.output_cutoff_hz, "tare_s": est_cfg.tare_s},
