@@ -32,6 +32,14 @@ The ideal plant's sliding friction has exactly eq. 15's shape. The realistic pla
   strain-wave gears) bounds the load-proportional loss from above; the default 3–10 % of the
   transmitted torque is within it. The simulator keeps μ constant over speed (the studies find
   it largest at low speed, where guiding happens).
+* **Torque constant**: the true R·Kt differs from the drive file's by a factor drawn within
+  ±``torque_constant_error`` per joint (motor Kt tolerances of a few per cent, its temperature
+  dependence and the gear's efficiency at the operating point make the datasheet value an
+  estimate). The servo and every model convert with the drive file's value.
+* **Cogging**: a position-periodic motor torque A·sin(k·R·q + ϕ) at the joint, amplitude drawn
+  within ``cogging`` × the joint's max torque and ``cogging_periods_per_motor_rev`` periods per
+  motor revolution (the cogging and torque ripple of a permanent-magnet servo motor, of the
+  order of 1 % of its rated torque; higher harmonics are filtered by the arm's inertia).
 """
 
 from __future__ import annotations
@@ -60,12 +68,18 @@ class DriveMismatchConfig:
             the power law [-].
         viscous_exponent: Range of the power law's exponent α [-].
         load_coefficient: Range of μ, Coulomb friction per N·m transmitted [-].
+        torque_constant_error: Relative deviation of the true R·Kt, drawn within ± this [-].
+        cogging: Range of the cogging amplitude, fraction of the joint's max torque [-].
+        cogging_periods_per_motor_rev: Cogging periods per motor revolution k [-].
     """
 
     stribeck_exponent: tuple[float, float] = (0.5, 2.0)
     viscous_power_share: float = 0.3
     viscous_exponent: tuple[float, float] = (0.5, 0.9)
     load_coefficient: tuple[float, float] = (0.03, 0.10)
+    torque_constant_error: float = 0.04
+    cogging: tuple[float, float] = (0.001, 0.004)
+    cogging_periods_per_motor_rev: float = 12.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -79,6 +93,9 @@ class DriveMismatchConfig:
                                   field="drive_mismatch.stribeck_exponent/viscous_exponent",
                                   value=(self.stribeck_exponent, self.viscous_exponent),
                                   expected="exponents > 0")
+        if self.torque_constant_error >= 0.5:
+            raise SimulationError("out of range", field="drive_mismatch.torque_constant_error",
+                                  value=self.torque_constant_error, expected="0 <= error < 0.5")
         if self.viscous_power_share > 1.0:
             raise SimulationError("out of range", field="drive_mismatch.viscous_power_share",
                                   value=self.viscous_power_share, expected="0 <= share <= 1")
@@ -96,7 +113,7 @@ def with_drive_mismatch(truth: DriveTrainTruth, robot: Robot, config: DriveMisma
 
     Returns:
         The realistic drive train: same friction levels, other shapes, larger load
-        dependence.
+        dependence, torque-constant errors and cogging.
     """
     n = robot.n
 
@@ -115,4 +132,9 @@ def with_drive_mismatch(truth: DriveTrainTruth, robot: Robot, config: DriveMisma
         viscous_power=share * viscous_at_limit / vmax**alpha,
         viscous_exponent=alpha,
         load_coefficient=draw(config.load_coefficient),
+        torque_constant_scale=1.0 + draw((-config.torque_constant_error,
+                                          config.torque_constant_error)),
+        cogging=draw(config.cogging) * robot.max_torque,
+        cogging_frequency=config.cogging_periods_per_motor_rev * robot.gear_ratio,
+        cogging_phase=draw((0.0, 2.0 * np.pi)),
     )

@@ -8,8 +8,9 @@ parameters, true state, true current and true external joint torque) lives apart
 Each step (dt = 1 ms):
 1. sensors read the state at t_k (encoder quantisation; current noise, bias, ADC);
 2. the cascaded servo turns the commanded position into a current command (saturated);
-3. the drive train turns current into torque R·Kt·i and sets the true friction
-   (see :mod:`leadthrough.sim.drivetrain`);
+3. the drive train turns current into torque R·Kt·i (the true Kt: on the realistic plant a few
+   per cent off the drive file's, plus the motors' cogging) and sets the true friction
+   (see :mod:`leadthrough.sim.drivetrain`, :mod:`leadthrough.sim.drive_friction`);
 4. the operator's wrench is applied at the TCP, and MuJoCo integrates to t_{k+1}.
 """
 
@@ -24,7 +25,7 @@ from numpy.typing import NDArray
 from leadthrough.dynamics.regressor import standard_parameters
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
-from leadthrough.sim.drivetrain import DriveTrain
+from leadthrough.sim.drive_friction import DriveTrain
 from leadthrough.sim.instance import SimConfig, SimTruth, draw_true_parameters
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
@@ -103,7 +104,10 @@ class SimRobot:
         n = robot.n
         self._res = robot.encoder_resolution
         self._inv_res = 1.0 / self._res
-        self._tpa = robot.torque_per_amp
+        # the true R·Kt (the servo converts with the drive file's)
+        self._tpa = robot.torque_per_amp * drive.torque_constant_scale
+        self._cogging = bool(np.any(drive.cogging != 0.0))
+        self._tau_cog = np.zeros(n)
         self._q_meas = np.zeros(n)
         self._q_cmd = np.zeros(n)
         self._qd_ff = np.zeros(n)
@@ -214,8 +218,11 @@ class SimRobot:
         d.qpos[:] = q0
         mujoco.mj_forward(self.mj_model, d)
         hold = d.qfrc_bias.copy()
+        if self._cogging:
+            hold -= self.true_cogging_torque(q0)
         self._drive.reset()
-        self._servo.reset(self._quantise(q0), hold)
+        # the servo commands nominal torque; the true torque constant delivers the hold
+        self._servo.reset(self._quantise(q0), hold / self.truth.drive.torque_constant_scale)
         self._q_cmd[:] = q0
         self._qd_ff[:] = 0.0
         self._i_true[:] = self._servo.current
@@ -263,6 +270,8 @@ class SimRobot:
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
         mujoco.mj_step1(m, d)
         np.subtract(self._tau_motor, self._drive.friction, out=d.qfrc_applied)
+        if self._cogging:
+            self._add_cogging(d.qpos, d.qfrc_applied)
         if self.operator is not None:
             self._apply_operator()
         elif self._tau_ext.any():
@@ -274,6 +283,15 @@ class SimRobot:
             self._heat_steps += 1
             if self._heat_steps >= self._heat_every:
                 self._apply_heat()
+
+    def _add_cogging(self, q: Array, out: Array) -> None:
+        """out += A·sin(k·R·q + ϕ), the motors' cogging torque at the joints."""
+        dr, c = self.truth.drive, self._tau_cog
+        np.multiply(q, dr.cogging_frequency, out=c)
+        c += dr.cogging_phase
+        np.sin(c, out=c)
+        c *= dr.cogging
+        out += c
 
     def _apply_operator(self) -> None:
         assert self.operator is not None
@@ -321,6 +339,17 @@ class SimRobot:
     def applied_wrench(self) -> Array:
         """Wrench the operator applied in the last step, base frame [N, N·m] (truth)."""
         return self._wrench.copy()
+
+    @property
+    def true_torque_per_amp(self) -> Array:
+        """True R·Kt per joint [N·m/A], shape (n,) (simulator truth)."""
+        return self._tpa.copy()
+
+    def true_cogging_torque(self, q: Array) -> Array:
+        """The motors' cogging torque at ``q``, joint side [N·m], shape (n,) (truth)."""
+        out = np.zeros(self.robot.n)
+        self._add_cogging(np.asarray(q, dtype=float), out)
+        return out
 
     def true_gravity_torque(self, q: Array) -> Array:
         """Gravity torque of the true links (and payload) at ``q`` [N·m] (simulator truth)."""

@@ -44,7 +44,8 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
-from leadthrough.sim.drivetrain import DriveTrainTruth, sliding_friction
+from leadthrough.sim.drive_friction import sliding_friction
+from leadthrough.sim.drivetrain import DriveTrainTruth
 
 __all__ = ["JointTemperatures", "ThermalConfig", "ThermalTruth", "draw_thermal_truth"]
 
