@@ -19,10 +19,12 @@ from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, run_trajectory
 from leadthrough.sim.checks import check_hold
 from leadthrough.sim.dress_pack import DressPackConfig, arm_links, dress_pack_inertias
 from leadthrough.sim.drive_friction import DriveTrain
+from leadthrough.sim.driver import SimDriver
 from leadthrough.sim.drivetrain import DriveTrainTruth
 from leadthrough.sim.link_truth import outside_box, second_moment
 from leadthrough.sim.plant import PlantPreset
 from leadthrough.sim.robot import draw_true_parameters
+from leadthrough.sim.sensors import DelayLine, SensorConfig
 from leadthrough.sim.session import SimSessionConfig
 from leadthrough.sim.thermal import ThermalConfig, production_loss
 
@@ -288,3 +290,61 @@ def test_realistic_drives_have_their_own_torque_constant_and_cogging(er20: Robot
     # ... which a 4 s average resolves: on the loaded joints 2 and 3, per cent off the file's
     nominal = er20.torque_to_current(sim.true_gravity_torque(POSE))
     assert np.max(np.abs(h.current_mean[1:3] / nominal[1:3] - 1.0)) > 0.01
+
+
+def test_delay_line_interpolates_between_samples() -> None:
+    line = DelayLine(2, 3.0)
+    line.push(np.array([5.0, -5.0]))  # the first sample fills the past
+    np.testing.assert_array_equal(line.delayed(2.5), [5.0, -5.0])
+    for k in range(1, 8):
+        line.push(np.array([float(k), -2.0 * k]))
+    np.testing.assert_allclose(line.delayed(0.0), [7.0, -14.0])
+    np.testing.assert_allclose(line.delayed(1.25), [5.75, -11.5])
+    np.testing.assert_allclose(line.delayed(3.0), [4.0, -8.0])
+
+
+def _quiet(plant: str = "realistic", run: int = 0) -> SimConfig:
+    """Noise-free current sensing (a 32-bit ADC), so that timing shows exactly."""
+    return SimConfig(seed=6, run=run, plant=plant,
+                     sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
+                                          current_bias=0.0, adc_bits=32))
+
+
+def test_realistic_currents_lag_the_positions(er20: Robot) -> None:
+    lags = [draw_true_parameters(er20, SimConfig(seed=s)).current_lag_s for s in range(40)]
+    assert min(lags) >= 0.0 and max(lags) <= 2e-3 and np.ptp(lags) > 1.5e-3
+    t = np.arange(400) * 1e-3
+    q_cmd = POSE + 0.1 * np.sin(2 * np.pi * 2.0 * t)[:, None] * np.ones(er20.n)
+    ideal = run_trajectory(SimRobot(er20, _quiet("ideal"), q0=POSE), q_cmd)
+    np.testing.assert_allclose(ideal.current, ideal.truth.current, rtol=0, atol=1e-6)
+    sim = SimRobot(er20, _quiet(run=3), q0=POSE)
+    lag = sim.truth.current_lag_s / 1e-3
+    assert lag == draw_true_parameters(er20, _quiet(run=0)).current_lag_s / 1e-3  # per robot
+    log = run_trajectory(sim, q_cmd)
+    m, f = int(lag), lag - int(lag)
+    late = (1 - f) * log.truth.current[3 - m:-m or None] + f * log.truth.current[2 - m:-m - 1]
+    np.testing.assert_allclose(log.current[3:], late[:log.current.shape[0] - 3], atol=1e-6)
+
+
+def test_a_driver_can_ask_for_sample_jitter(er20: Robot) -> None:
+    """Each sample is taken up to the jitter before its reported instant: in motion the reported
+    positions trail the unjittered ones by e·q̇, e uniform in [0, jitter]."""
+    speed, jitter = 0.2, 6e-4
+    plain, jittered = SimRobot(er20, _quiet(), q0=POSE), SimRobot(er20, _quiet(), q0=POSE)
+    driver = SimDriver(jittered, sample_jitter_s=jitter)
+    early = []
+    for k in range(600):
+        for sim in (plain, jittered):
+            sim.command(POSE + speed * k * 1e-3, np.full(er20.n, speed))
+        qd = plain.true_state()[1]
+        plain.step()
+        driver.step()
+        if k >= 300:  # the joints move at about 0.2 rad/s: e = trail / q̇ per joint
+            early.append((plain.read().q - jittered.read().q) / qd)
+    e = np.array(early)
+    lsb = er20.encoder_resolution / 0.15  # one count of the encoder at >= 0.15 rad/s
+    assert np.all(e >= -lsb) and np.all(e <= jitter + lsb)
+    assert np.mean(e) == pytest.approx(0.5 * jitter, rel=0.1)
+    assert np.std(e) == pytest.approx(jitter / np.sqrt(12.0), rel=0.15)  # uniform
+    with pytest.raises(SimulationError, match="sample_jitter_s"):
+        SimDriver(SimRobot(er20, _quiet(), q0=POSE), sample_jitter_s=2e-3)

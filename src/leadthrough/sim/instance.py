@@ -101,6 +101,8 @@ class SimTruth:
         phi: True standard link parameters, shape (10·n,).
         drive: True drive-train parameters (cold, on the realistic plant).
         thermal: Thermal parameters (the realistic plant), else None.
+        current_lag_s: Lag of the current samples behind the positions [s] (0 on the ideal
+            plant).
         current_bias: Current-sensor bias [A], shape (n,).
         current_noise: Current-sensor noise σ in motion (white and slow parts combined) [A],
             shape (n,).
@@ -110,6 +112,7 @@ class SimTruth:
     phi: Array
     drive: DriveTrainTruth
     thermal: ThermalTruth | None
+    current_lag_s: float
     current_bias: Array
     current_noise: Array
 
@@ -121,11 +124,13 @@ class TrueParameters(NamedTuple):
         inertias: True link inertias, joint order.
         drive: True drive-train parameters (cold).
         thermal: Thermal parameters (the realistic plant), else None.
+        current_lag_s: Lag of the current samples behind the positions [s].
     """
 
     inertias: list[pin.Inertia]
     drive: DriveTrainTruth
     thermal: ThermalTruth | None
+    current_lag_s: float
 
 
 def draw_true_parameters(robot: Robot, config: SimConfig) -> TrueParameters:
@@ -146,11 +151,12 @@ def draw_true_parameters(robot: Robot, config: SimConfig) -> TrueParameters:
     inertias = true_link_inertias(robot.model, rng_truth, config.link_deviation)
     drive = sample_drive_truth(robot, config.drive, rng_truth)
     if config.plant is PlantPreset.IDEAL:
-        return TrueParameters(inertias, drive, None)
+        return TrueParameters(inertias, drive, None, 0.0)
     inertias = with_model_mismatch(robot.model, inertias,
                                    np.random.default_rng([config.seed, 4]), config.links)
     drive = with_drive_mismatch(drive, robot, config.drive_mismatch,
                                 np.random.default_rng([config.seed, 5]))
     thermal = draw_thermal_truth(drive, robot, config.thermal,
                                  np.random.default_rng([config.seed, 6]))
-    return TrueParameters(inertias, drive, thermal)
+    lag = float(np.random.default_rng([config.seed, 7]).uniform(*config.sensors.current_lag_s))
+    return TrueParameters(inertias, drive, thermal, lag)

@@ -29,7 +29,7 @@ from leadthrough.sim.drive_friction import DriveTrain
 from leadthrough.sim.instance import SimConfig, SimTruth, draw_true_parameters
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
-from leadthrough.sim.sensors import CurrentSensor
+from leadthrough.sim.sensors import MAX_LAG_S, CurrentSensor, DelayLine
 from leadthrough.sim.servo import CascadedServo, design_servo_gains
 from leadthrough.sim.thermal import JointTemperatures
 
@@ -78,7 +78,7 @@ class SimRobot:
         self.robot = robot
         self.config = config = config if config is not None else SimConfig()
         rng_noise = np.random.default_rng([config.seed, 2, config.run])
-        inertias, drive, thermal = draw_true_parameters(robot, config)
+        inertias, drive, thermal, lag = draw_true_parameters(robot, config)
         self._drive = DriveTrain(drive, robot.gear_ratio, thermal=thermal is not None)
         self._temperatures = None if thermal is None else JointTemperatures(thermal)
         self._heat_every = max(1, round(config.thermal.update_period_s / config.timestep))
@@ -94,6 +94,7 @@ class SimRobot:
             phi=standard_parameters(model_true),
             drive=drive,
             thermal=thermal,
+            current_lag_s=lag,
             current_bias=self._sensor.bias.copy(),
             current_noise=self._sensor.sigma.copy(),
         )
@@ -117,6 +118,13 @@ class SimRobot:
         self._i_true = np.zeros(n)
         self._i_meas = np.zeros(n)
         self._speed = np.zeros(n)
+        # sample timing: the current's lag and the jitter a driver asks for (sensors module)
+        self._lag_steps = lag / config.timestep
+        self._jitter_steps = 0.0
+        self._rng_jitter = np.random.default_rng([config.seed, 8, config.run])
+        self._delay = None if lag == 0.0 else DelayLine(n, MAX_LAG_S / config.timestep)
+        self._q_jittered = np.zeros(n)
+        self._q_read = self._q_meas
         self._seq = 0
         self._build()
         self.reset(robot.neutral() if q0 is None else q0)
@@ -223,6 +231,9 @@ class SimRobot:
         self._drive.reset()
         # the servo commands nominal torque; the true torque constant delivers the hold
         self._servo.reset(self._quantise(q0), hold / self.truth.drive.torque_constant_scale)
+        self._q_jittered[:] = self._q_meas
+        if self._delay is not None:
+            self._delay.clear()
         self._q_cmd[:] = q0
         self._qd_ff[:] = 0.0
         self._i_true[:] = self._servo.current
@@ -265,7 +276,10 @@ class SimRobot:
         current = self._servo.update(q_meas, self._q_cmd, self._qd_ff, dt)
         self._i_true[:] = current
         np.abs(d.qvel, out=self._speed)
-        self._i_meas[:] = self._sensor.read(current, self._speed)
+        if self._delay is None:
+            self._i_meas[:] = self._sensor.read(current, self._speed)
+        else:
+            self._sample_late(current)
         np.multiply(current, self._tpa, out=self._tau_motor)
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
         mujoco.mj_step1(m, d)
@@ -283,6 +297,42 @@ class SimRobot:
             self._heat_steps += 1
             if self._heat_steps >= self._heat_every:
                 self._apply_heat()
+
+    def set_sample_jitter(self, jitter_s: float) -> None:
+        """From now on, take each sample a random time within [0, ``jitter_s``] before the
+        instant it is reported for (positions and currents; the servo's own loop keeps its
+        clock). What a driver asks for to test timing (:mod:`leadthrough.sim.sensors`).
+
+        Args:
+            jitter_s: Largest timing error [s], from 0 (none) to one timestep.
+
+        Raises:
+            SimulationError: Out of range.
+        """
+        dt = self.config.timestep
+        if not (np.isfinite(jitter_s) and 0.0 <= jitter_s <= dt):
+            raise SimulationError("out of range", field="sample_jitter_s", value=jitter_s,
+                                  expected=f"0 <= jitter <= {dt:g} s (one timestep)")
+        self._jitter_steps = jitter_s / dt
+        if self._delay is None and jitter_s > 0.0:
+            self._delay = DelayLine(self.robot.n, MAX_LAG_S / dt)
+        self._q_read = self._q_jittered if jitter_s > 0.0 else self._q_meas
+
+    def _sample_late(self, current: Array) -> None:
+        """Measured current of a lagged (and jittered) instant; jittered positions."""
+        assert self._delay is not None
+        self._delay.push(current)
+        early = self._jitter_steps * self._rng_jitter.uniform() if self._jitter_steps else 0.0
+        self._i_meas[:] = self._sensor.read(self._delay.delayed(self._lag_steps + early),
+                                            self._speed)
+        if self._jitter_steps:
+            d = self.mj_data
+            q = self._q_jittered
+            np.multiply(d.qvel, -early * self.config.timestep, out=q)
+            q += d.qpos
+            q *= self._inv_res
+            np.rint(q, out=q)
+            q *= self._res
 
     def _add_cogging(self, q: Array, out: Array) -> None:
         """out += A·sin(k·R·q + ϕ), the motors' cogging torque at the joints."""
@@ -305,13 +355,15 @@ class SimRobot:
             d.qfrc_applied += self._tau_ext
 
     def read(self) -> Feedback:
-        """The last sample as a real controller reports it (positions and currents at t_k).
+        """The last sample as a real controller reports it (positions and currents at t_k; on
+        the realistic plant the currents of an instant the fixed lag earlier, and with a
+        sample jitter both of a random instant up to the jitter earlier).
 
         Returns:
             Time, encoder positions, measured currents and sequence number of the last step.
         """
         dt = self.config.timestep
-        return Feedback(t=(self._seq - 1) * dt if self._seq else 0.0, q=self._q_meas.copy(),
+        return Feedback(t=(self._seq - 1) * dt if self._seq else 0.0, q=self._q_read.copy(),
                         current=self._i_meas.copy(), sequence=self._seq)
 
     # ---------------------------------------------------------------------------------- truth
