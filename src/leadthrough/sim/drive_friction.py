@@ -51,9 +51,9 @@ class DriveTrain:
     Args:
         truth: Drive-train parameters.
         gear_ratio: R per joint, shape (n,).
-        thermal: Scale the friction by :attr:`static_scale` and :attr:`viscous_scale` (set by
-            the joint temperatures, :mod:`leadthrough.sim.thermal`) and accumulate the
-            friction losses in :attr:`heat`.
+        thermal: Scale the friction by the joint temperatures' factors
+            (:meth:`set_temperature_scales`, :mod:`leadthrough.sim.thermal`) and accumulate
+            the friction losses (:meth:`take_losses`).
     """
 
     def __init__(self, truth: DriveTrainTruth, gear_ratio: Array, thermal: bool = False
@@ -61,13 +61,19 @@ class DriveTrain:
         self.truth = truth
         n = gear_ratio.size
         self._thermal = thermal
-        self.static_scale = np.ones(n)
         self.viscous_scale = np.ones(n)
-        self.heat = np.zeros(n)
+        self._heat = np.zeros(n)          # Σ|F·q̇| over the steps since the last take [N·m·rad/s]
+        self._speed_sq = np.zeros(n)      # Σq̇² likewise [rad²/s²]
         self._a_motor = gear_ratio / truth.stribeck_velocity_motor
         self._a_gear = 1.0 / truth.stribeck_velocity_gear
         self._a_damp = 1.0 / truth.bristle_damping_velocity
-        self._coulomb = truth.coulomb_motor + truth.coulomb_gear + truth.bristle
+        # the friction levels now: the drawn (cold) ones, scaled by temperature if thermal
+        self._cold_coulomb = truth.coulomb_motor + truth.coulomb_gear + truth.bristle
+        self._coulomb = self._cold_coulomb.copy() if thermal else self._cold_coulomb
+        self._stribeck_m = truth.stribeck_motor.copy() if thermal else truth.stribeck_motor
+        self._stribeck_g = truth.stribeck_gear.copy() if thermal else truth.stribeck_gear
+        self._load = truth.load_coefficient.copy() if thermal else truth.load_coefficient
+        self._viscous_power = truth.viscous_power.copy()
         # no static friction at all (σ0 = 0): the bristle force is identically zero
         self._inv_sigma0 = np.divide(1.0, truth.bristle_stiffness,
                                      out=np.zeros(n), where=truth.bristle_stiffness > 0.0)
@@ -86,6 +92,25 @@ class DriveTrain:
         """Zero the bristle state (no friction carried at rest)."""
         self.z[:] = 0.0
         self.friction[:] = 0.0
+
+    def set_temperature_scales(self, static: Array, viscous: Array) -> None:
+        """Scale the cold friction: Coulomb, Stribeck and load by ``static``, the power-law
+        viscous part (and the linear one in :meth:`take_losses`) by ``viscous``, each (n,)."""
+        tr = self.truth
+        np.multiply(self._cold_coulomb, static, out=self._coulomb)
+        np.multiply(tr.stribeck_motor, static, out=self._stribeck_m)
+        np.multiply(tr.stribeck_gear, static, out=self._stribeck_g)
+        np.multiply(tr.load_coefficient, static, out=self._load)
+        np.multiply(tr.viscous_power, viscous, out=self._viscous_power)
+        self.viscous_scale[:] = viscous
+
+    def take_losses(self, dt: float) -> Array:
+        """The friction energy since the last take [J], shape (n,): Σ(|F·q̇| + c·q̇²)·dt with
+        c the linear viscous coefficient at the current temperature; restarts the sums."""
+        energy = (self._heat + self.truth.viscous * self.viscous_scale * self._speed_sq) * dt
+        self._heat[:] = 0.0
+        self._speed_sq[:] = 0.0
+        return energy
 
     def _stribeck(self, qd: Array, scale: Array, exponent: Array, out: Array) -> None:
         """out = exp(−|scale·q̇|^δ)."""
@@ -111,9 +136,9 @@ class DriveTrain:
         t1, st = self._t1, self.static
         # Stribeck curve (motor and gear side) + Coulomb.
         self._stribeck(qd, self._a_motor, tr.stribeck_exponent_motor, t1)
-        np.multiply(t1, tr.stribeck_motor, out=st)
+        np.multiply(t1, self._stribeck_m, out=st)
         self._stribeck(qd, self._a_gear, tr.stribeck_exponent_gear, t1)
-        np.multiply(t1, tr.stribeck_gear, out=t1)
+        np.multiply(t1, self._stribeck_g, out=t1)
         st += t1
         st += self._coulomb
         # Mesh ripple modulation.
@@ -125,15 +150,13 @@ class DriveTrain:
         st *= t1
         # Load-dependent part.
         np.abs(transmitted, out=t1)
-        t1 *= tr.load_coefficient
+        t1 *= self._load
         st += t1
-        if self._thermal:
-            st *= self.static_scale
         self._bristles(qd, dt)
         if self._power_viscous:
             self._add_power_viscous(qd)
         if self._thermal:
-            self._heat(qd, dt)
+            self._add_losses(qd)
 
     def _bristles(self, qd: Array, dt: float) -> None:
         """LuGre bristles at level :attr:`static`: advances z, sets :attr:`friction`."""
@@ -166,24 +189,18 @@ class DriveTrain:
 
     def _add_power_viscous(self, qd: Array) -> None:
         """friction += f_p·sgn(q̇)·|q̇|^α (the realistic plant's degressive viscous part)."""
-        t1, t2 = self._t1, self._t2
+        t1 = self._t1
         np.abs(qd, out=t1)
         np.power(t1, self.truth.viscous_exponent, out=t1)
-        t1 *= self.truth.viscous_power
-        if self._thermal:
-            t1 *= self.viscous_scale
-        np.sign(qd, out=t2)
-        t1 *= t2
+        t1 *= self._viscous_power
+        np.copysign(t1, qd, out=t1)
         self.friction += t1
 
-    def _heat(self, qd: Array, dt: float) -> None:
-        """heat += (|F·q̇| + φ_v·c·q̇²)·dt, the step's friction loss [J]."""
-        t1, t2 = self._t1, self._t2
+    def _add_losses(self, qd: Array) -> None:
+        """Sum the step's |F·q̇| and q̇² (:meth:`take_losses`)."""
+        t1 = self._t1
         np.multiply(self.friction, qd, out=t1)
         np.abs(t1, out=t1)
-        np.square(qd, out=t2)
-        t2 *= self.truth.viscous
-        t2 *= self.viscous_scale
-        t1 += t2
-        t1 *= dt
-        self.heat += t1
+        self._heat += t1
+        np.square(qd, out=t1)
+        self._speed_sq += t1

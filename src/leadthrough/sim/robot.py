@@ -148,17 +148,16 @@ class SimRobot:
         temps = self._temperatures
         if temps is None:
             return
-        self._drive.static_scale[:] = temps.static_scale
-        self._drive.viscous_scale[:] = temps.viscous_scale
+        self._drive.set_temperature_scales(temps.static_scale, temps.viscous_scale)
         np.multiply(self.truth.drive.viscous, temps.viscous_scale,
                     out=self.mj_model.dof_damping)
 
     def _apply_heat(self) -> None:
         """Advance the temperatures by the losses accumulated since the last update."""
         assert self._temperatures is not None
-        duration = self._heat_steps * self.config.timestep
-        self._temperatures.advance(self._drive.heat / duration, duration)
-        self._drive.heat[:] = 0.0
+        dt = self.config.timestep
+        duration = self._heat_steps * dt
+        self._temperatures.advance(self._drive.take_losses(dt) / duration, duration)
         self._heat_steps = 0
         self._sync_thermal()
 
