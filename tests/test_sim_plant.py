@@ -19,9 +19,10 @@ from leadthrough.sim import ConstantWrench, SimConfig, SimRobot, run_trajectory
 from leadthrough.sim.checks import check_hold
 from leadthrough.sim.dress_pack import DressPackConfig, arm_links, dress_pack_inertias
 from leadthrough.sim.drive_friction import DriveTrain
+from leadthrough.sim.drive_mismatch import DriveMismatchConfig
 from leadthrough.sim.driver import SimDriver
 from leadthrough.sim.drivetrain import DriveTrainTruth
-from leadthrough.sim.link_truth import outside_box, second_moment
+from leadthrough.sim.link_truth import LinkMismatchConfig, outside_box, second_moment
 from leadthrough.sim.plant import PlantPreset
 from leadthrough.sim.robot import draw_true_parameters
 from leadthrough.sim.sensors import DelayLine, SensorConfig
@@ -348,3 +349,18 @@ def test_a_driver_can_ask_for_sample_jitter(er20: Robot) -> None:
     assert np.std(e) == pytest.approx(jitter / np.sqrt(12.0), rel=0.15)  # uniform
     with pytest.raises(SimulationError, match="sample_jitter_s"):
         SimDriver(SimRobot(er20, _quiet(), q0=POSE), sample_jitter_s=2e-3)
+
+
+@pytest.mark.parametrize(("make", "field"), [
+    (lambda: ThermalConfig(time_constant_min=(0.0, 30.0)), "thermal.time_constant_min"),
+    (lambda: ThermalConfig(static_ratio=(0.8, 1.2)), "thermal.static_ratio"),
+    (lambda: DressPackConfig(offset=(0.2, 0.1)), "dress_pack.offset"),
+    (lambda: DriveMismatchConfig(cogging=(-0.01, 0.0)), "drive_mismatch.cogging"),
+    (lambda: DriveMismatchConfig(stribeck_exponent=(0.0, 2.0)), "drive_mismatch.stribeck"),
+    (lambda: LinkMismatchConfig(outlier_deviation=(0.5, 1.5)), "links.outlier_deviation"),
+    (lambda: SensorConfig(current_lag_s=(0.0, 0.5)), "sensors.current_lag_s"),
+])
+def test_bad_realistic_settings_name_their_field(make: object, field: str) -> None:
+    with pytest.raises(SimulationError) as e:
+        make()  # type: ignore[operator]
+    assert e.value.field is not None and e.value.field.startswith(field)

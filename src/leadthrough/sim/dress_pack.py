@@ -17,13 +17,14 @@ where it moves the mass, the centre of mass and the inertia of both links.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.errors import SimulationError
+from leadthrough.sim.plant import check_draw_ranges
 
 __all__ = ["DressPackConfig", "arm_links", "dress_pack_inertias"]
 
@@ -49,12 +50,7 @@ class DressPackConfig:
     end: float = 0.85
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            lo, hi = value if isinstance(value, tuple) else (value, value)
-            if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo <= hi):
-                raise SimulationError("bad range", field=f"dress_pack.{f.name}", value=value,
-                                      expected="finite numbers 0 <= low <= high")
+        check_draw_ranges("dress_pack", self)
         if self.mass_fraction[1] >= 1.0 or self.upper_arm_share[1] > 1.0:
             raise SimulationError("fraction out of range", field="dress_pack.mass_fraction",
                                   value=(self.mass_fraction, self.upper_arm_share),

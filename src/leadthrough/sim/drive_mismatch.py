@@ -44,7 +44,7 @@ The ideal plant's sliding friction has exactly eq. 15's shape. The realistic pla
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.drivetrain import DriveTrainTruth
+from leadthrough.sim.plant import check_draw_ranges
 
 __all__ = ["DriveMismatchConfig", "with_drive_mismatch"]
 
@@ -82,12 +83,7 @@ class DriveMismatchConfig:
     cogging_periods_per_motor_rev: float = 12.0
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            lo, hi = value if isinstance(value, tuple) else (value, value)
-            if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo <= hi):
-                raise SimulationError("bad range", field=f"drive_mismatch.{f.name}",
-                                      value=value, expected="finite numbers 0 <= low <= high")
+        check_draw_ranges("drive_mismatch", self)
         if self.stribeck_exponent[0] <= 0.0 or self.viscous_exponent[0] <= 0.0:
             raise SimulationError("exponents must be > 0",
                                   field="drive_mismatch.stribeck_exponent/viscous_exponent",

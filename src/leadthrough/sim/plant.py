@@ -16,11 +16,15 @@ robot instance's seed, so a seed and a preset name one robot.
 
 from __future__ import annotations
 
+from dataclasses import fields
 from enum import StrEnum
+from typing import Any
+
+import numpy as np
 
 from leadthrough.errors import SimulationError
 
-__all__ = ["PLANT_NAMES", "PlantPreset", "plant_preset"]
+__all__ = ["PLANT_NAMES", "PlantPreset", "check_draw_ranges", "plant_preset"]
 
 
 class PlantPreset(StrEnum):
@@ -49,3 +53,25 @@ def plant_preset(value: PlantPreset | str, field: str = "plant") -> PlantPreset:
     except ValueError as e:
         raise SimulationError("unknown plant", field=field, value=value,
                               expected="one of " + ", ".join(PLANT_NAMES)) from e
+
+
+def check_draw_ranges(prefix: str, settings: Any, skip: tuple[str, ...] = ()) -> None:
+    """Check the fields of a realistic plant's settings: each a number or a (low, high) range
+    to draw from, finite and 0 <= low <= high.
+
+    Args:
+        prefix: Prefix of the field names in messages (e.g. ``"thermal"``).
+        settings: A dataclass of such fields.
+        skip: Fields checked elsewhere.
+
+    Raises:
+        SimulationError: Naming the first bad field and its value.
+    """
+    for f in fields(settings):
+        if f.name in skip:
+            continue
+        value = getattr(settings, f.name)
+        lo, hi = value if isinstance(value, tuple) else (value, value)
+        if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo <= hi):
+            raise SimulationError("bad range", field=f"{prefix}.{f.name}", value=value,
+                                  expected="finite numbers 0 <= low <= high")

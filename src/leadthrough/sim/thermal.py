@@ -46,6 +46,7 @@ from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.drive_friction import sliding_friction
 from leadthrough.sim.drivetrain import DriveTrainTruth
+from leadthrough.sim.plant import check_draw_ranges
 
 __all__ = ["JointTemperatures", "ThermalConfig", "ThermalTruth", "draw_thermal_truth"]
 
@@ -83,13 +84,13 @@ class ThermalConfig:
     warm_up_step_s: float = 10.0
 
     def __post_init__(self) -> None:
+        check_draw_ranges("thermal", self, skip=("ambient_c",))
+        if not np.isfinite(self.ambient_c):
+            raise SimulationError("not finite", field="thermal.ambient_c", value=self.ambient_c,
+                                  expected="a temperature [°C]")
         for f in fields(self):
             value = getattr(self, f.name)
-            lo, hi = value if isinstance(value, tuple) else (value, value)
-            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
-                raise SimulationError("bad range", field=f"thermal.{f.name}", value=value,
-                                      expected="finite numbers, low <= high")
-            if f.name != "ambient_c" and lo <= 0.0:
+            if f.name != "ambient_c" and min(value if isinstance(value, tuple) else (value,)) <= 0:
                 raise SimulationError("must be > 0", field=f"thermal.{f.name}", value=value,
                                       expected="> 0")
         if self.static_ratio[0] < 1.0 or self.viscous_ratio[0] < 1.0:
