@@ -31,13 +31,16 @@ def test_demo_quick_writes_summary(tmp_path: Path, capsys: pytest.CaptureFixture
     # every step left its result: Table II/III, sessions, the taught path, the report
     assert {"ols-cv", "proposed", "consistent"} <= set(saved["table2"]["held-out"])
     assert len(saved["table3"]["consistent"]) == 4
-    assert all(abs(r["error_pct"]) < 10 for r in saved["table3"]["consistent"])
+    # Table III's goal, 1 %, met by the guiding method even in the quick demo (measured ≤ 0.8 %)
+    assert all(abs(r["error_pct"]) < 1.0 for r in saved["table3"]["consistent"])
     rest = saved["guiding"]["rest/virtual-friction"]
     assert rest["max_linear_speed"] == 0.0 and rest["rest_drift_m"] == 0.0
     assert saved["guiding"]["rest/velocity"]["rest_drift_m"] > 0.0  # the baseline drifts
     for name in ("report.html", "report.md", "path.json", "path.csv", "fig3.png", "fig4.png",
                  "fig5.png", "fig6.png", "params_consistent.toml",
-                 "session_seam_virtual-friction.parquet"):
+                 "session_seam_virtual-friction.parquet",
+                 # the taught seam as robot programs, each solved back before it was written
+                 "seam.script", "seam.src", "seam.dat", "seam.ls", "seam.mod"):
         assert (tmp_path / name).is_file(), name
     assert saved["teach"]["waypoints"] >= 2
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp files left

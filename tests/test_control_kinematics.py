@@ -404,7 +404,17 @@ def test_eq36_floor_and_singularity(er20: Robot) -> None:
     J, mu = _jacobian(er20, Q_WRIST_SINGULAR, "base")
     auto.update(J, mu, d, ds)
     assert np.isfinite(d).all() and np.isfinite(ds).all()
-    assert d.max() < 1e4
+    # bounded by the damped least squares' largest gain: |(J Jᵀ + λ²)⁻¹ J τ̄| ≤ |τ̄| / (2λ)
+    cfg = auto.config
+    lam = damping_of(mu, cfg.manipulability_threshold, cfg.max_damping)
+    assert lam > 0.5 * cfg.max_damping                  # the pose is near singular indeed
+    gain_bound = np.linalg.norm(np.full(6, 1.0)) / (2.0 * lam)
+    assert np.all(d <= np.maximum(np.asarray(cfg.min_friction),
+                                  cfg.guiding_ratio * gain_bound) + 1e-9)
+    # and it is that damped solution itself
+    damped = np.abs(np.linalg.solve(J @ J.T + lam**2 * np.eye(6), J @ np.full(6, 1.0)))
+    np.testing.assert_allclose(d, np.maximum(cfg.guiding_ratio * damped,
+                                             np.asarray(cfg.min_friction)), rtol=1e-9)
 
 
 def test_eq36_config_errors() -> None:

@@ -29,6 +29,7 @@ from leadthrough.estimation.wrench import friction_weights, wrench_from_torque
 from leadthrough.robot import Robot
 from leadthrough.sim import ConstantWrench, Payload, SimConfig, SimRobot, hold
 from leadthrough.sim.mujoco_model import build_mujoco_model
+from leadthrough.state_records import view
 from test_identification import _trajectory
 
 Q0 = np.array([0.3, -0.6, 0.4, 0.5, 0.8, 0.2])
@@ -282,10 +283,20 @@ def test_rezero_takes_any_window_without_raising(er20: Robot) -> None:
     inp, out = est.make_input(), est.make_output()
     est.reset(Q0)
     inp.q[:] = Q0
-    for samples in (float("inf"), float("nan"), 2**70, -3, 0):
+    for k in range(3000):                 # past the start's settling (rezero waits for it)
+        inp.t = k * 1e-3
+        est.update(inp, out)
+    assert out.status == Status.OK
+    # documented clamping (the loop calls it in the hot path, so it never raises): NaN or
+    # less than one sample is a one-sample window, a huge window is capped at 2**31
+    for samples, window in ((float("inf"), 2**31), (2**70, 2**31), (float("nan"), 1), (-3, 1),
+                            (0, 1), (0.5, 1), (7, 7)):
         est.rezero(samples)  # type: ignore[arg-type]
         assert est.rezeroing
+        assert int(view(est.record).rezero_left) == window
+        inp.t += 1e-3
         est.update(inp, out)
+        assert est.rezeroing == (window > 1)
     assert np.all(np.isfinite(out.wrench))
 
 
@@ -421,7 +432,11 @@ def test_payload_from_motion_with_the_nominal_model(er20: Robot) -> None:
     np.testing.assert_allclose(est.com_tcp, [0.02, -0.01, 0.12], atol=5e-3)
     with pytest.raises(DataError, match="unknown method"):
         estimate_payload(rec, er20, params, "guess")
-    assert build_mujoco_model(er20) is not None
+    mj = build_mujoco_model(er20)
+    assert mj.nq == er20.n
+    # the same links: MuJoCo's total mass is Pinocchio's
+    pin_mass = sum(er20.model.inertias[i].mass for i in range(1, er20.model.njoints))
+    assert float(mj.body_mass.sum()) == pytest.approx(pin_mass, rel=1e-12)
 
 
 def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
@@ -442,11 +457,12 @@ def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
     assert est.mass_kg == pytest.approx(-1.0, abs=0.05) and est.com_tcp is None
 
 
-@pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt"])
+@pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt", "stribeck-load",
+                                   "cbrt-load"])
 def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: str) -> None:
     """The estimator's per-sample model (its identified links in Pinocchio, its compiled
     friction with the smoothed sign, rotor inertia and offset) equals the offline eq. 21 for
-    |q̇| > v_ε."""
+    |q̇| > v_ε; with a load-dependent Coulomb level, given the same τ_load (the link torque)."""
     from dataclasses import replace
 
     from leadthrough.dynamics import FrictionModel, model_torque
@@ -465,7 +481,9 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
         "coulomb-viscous": replace(base, coulomb=12 * ones, viscous=3 * ones),
         "cbrt": replace(base, friction_model=FrictionModel.CBRT,
                         coulomb=12 * ones, viscous=3 * ones, cbrt=4 * ones),
-    }[model]
+    }[model.removesuffix("-load")]
+    if model.endswith("-load"):
+        params = replace(params, load_friction=np.linspace(0.01, 0.1, n))
     rt = IdentifiedModel(er20, params)
     rng = np.random.default_rng(3)
     out, sign, friction = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -473,8 +491,9 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
         q = rng.uniform(er20.lower_limits, er20.upper_limits)
         qd = rng.choice([-1.0, 1.0], n) * rng.uniform(0.03, 2.0, n)
         qdd = rng.normal(size=n)
-        smoothed_friction(qd, np.full(n, 1 / 0.02), rt.friction[0], sign, friction)
-        out[:] = pin.rnea(rt.model, rt.data, q, qd, qdd) + friction + rt.rotor * qdd + rt.offset
+        links = pin.rnea(rt.model, rt.data, q, qd, qdd)
+        smoothed_friction(qd, np.full(n, 1 / 0.02), rt.friction[0], links, sign, friction)
+        out[:] = links + friction + rt.rotor * qdd + rt.offset
         expected = model_torque(er20, params, q[None], qd[None], qdd[None])[0]
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-9)
 

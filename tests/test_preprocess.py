@@ -34,7 +34,9 @@ def test_derivatives_and_zero_phase(er20: Robot) -> None:
     # zero phase: the filtered current is not delayed, and the noise is reduced
     expected = er20.current_to_torque(np.cos(w * data.time)[:, None] * np.ones(6))
     err = data.torque - expected
-    assert np.abs(err).max() < 0.05 * er20.torque_per_amp.max()
+    # per joint: the largest error stays below one σ of the raw current noise (0.05 A) in
+    # that joint's own torque units
+    assert np.all(np.abs(err).max(axis=0) < 0.05 * er20.torque_per_amp)
 
 
 def test_standstill_and_decimation(er20: Robot) -> None:

@@ -36,8 +36,10 @@ def test_push_changes_currents_by_jacobian_transpose(er20: Robot, force: tuple) 
     wrench = np.array([*force, 0.0, 0.0, 0.0], dtype=float)
     p = check_push(er20, SimConfig(seed=2), POSES[0], wrench)
     assert np.all(p.error_in_sigma < WITHIN_NOISE)
-    # the push is clearly visible: the largest current change is many noise-free widths
-    assert np.max(np.abs(p.expected_delta)) > 3 * WITHIN_NOISE * p.noise_sigma.max() / 10
+    # the push is clearly visible: on some joint the expected current change exceeds 4 of that
+    # joint's per-sample noise σ (5.3-10 σ for these pushes), and the check's mean over many
+    # samples resolves it far more finely
+    assert np.max(np.abs(p.expected_delta) / p.noise_sigma) > 4.0
 
 
 def test_true_external_torque_is_jacobian_transpose(er20: Robot) -> None:

@@ -182,7 +182,8 @@ def test_estimate_and_sensor_share_frame_sign_and_units(ur5: dict) -> None:
 
 @needs_data
 def test_consistent_beats_plain_ols_on_standstill_pushes_along_x(ur5: dict) -> None:
-    """No10_All (pushes in all directions at rest): ours is clearly better on Fx only."""
+    """No10_All (pushes in all directions at rest): ours is clearly better on Fx and better
+    overall (the ratio the README reports; the 0.7 goal is not met, and Fy is 6 % worse)."""
     from ur5_ft import estimate
 
     rec = ur5["recs"]["No10_All"]
@@ -192,4 +193,4 @@ def test_consistent_beats_plain_ols_on_standstill_pushes_along_x(ur5: dict) -> N
            for m in ("consistent", "ols-cv")}
     ratio = err["consistent"] / err["ols-cv"]
     assert ratio[0] < 0.9                       # measured 0.84
-    assert np.sqrt(np.mean(ratio**2)) > 0.7     # but far from the 0.7 goal overall
+    assert np.sqrt(np.mean(ratio**2)) < 1.0     # better overall: measured 0.93 (Fy 1.06)

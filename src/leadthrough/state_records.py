@@ -10,7 +10,9 @@ record scalar (``record[0]``) of a large layout in about ten. Python reads and w
 fields with attribute access through :func:`view` (:class:`Fields`: views made once, so an
 access costs a dictionary lookup). Codes (states, faults, statuses) are ``IntEnum`` members
 stored in integer fields; compiled code compares and assigns the members themselves, so every
-code is defined once.
+code is defined once. Each layout is built once per size (``functools.cache`` on its builder):
+Numba's dispatcher caches an array's type by its dtype, and compares an equal but new dtype
+field by field on every call.
 
 :class:`RecordView` turns a record into a typed public object (``GuidingOutput``,
 ``EstimatorOutput`` ...) whose attributes are :func:`field` descriptors: arrays are read-only

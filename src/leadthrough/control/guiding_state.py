@@ -10,6 +10,7 @@ the controller's frame, linear first; poses are a rotation (3, 3) and a position
 from __future__ import annotations
 
 from enum import IntEnum
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,7 @@ class Law(IntEnum):
     VELOCITY = 1
 
 
+@cache
 def controller_dtype(n: int) -> np.dtype[Any]:
     """The controller's record for ``n`` joints: settings, then state."""
     f8, i8, b1 = np.float64, np.int64, np.bool_

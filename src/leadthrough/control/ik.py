@@ -29,6 +29,7 @@ guiding cycle runs it in its own compiled call. Pinocchio computes the kinematic
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -45,6 +46,7 @@ __all__ = ["DifferentialIK", "IKConfig", "IKResult", "ik_dtype"]
 Array = NDArray[np.float64]
 
 
+@cache
 def ik_dtype(n: int) -> np.dtype[Any]:
     """The IK's record for ``n`` joints: settings, the kinematics at the last q, work space."""
     f8 = np.float64

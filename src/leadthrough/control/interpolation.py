@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import cache
 from typing import Any, Protocol
 
 import numpy as np
@@ -105,6 +106,7 @@ class JointInterpolator(Protocol):
         ...
 
 
+@cache
 def interpolator_dtype(n: int, substeps: int) -> np.dtype[Any]:
     """The Hermite interpolator's record for ``n`` joints and ``substeps`` commands a segment."""
     f8 = np.float64

@@ -19,6 +19,7 @@ Codes are the members of :class:`~leadthrough.control.safety_states.State`, ``Fa
 from __future__ import annotations
 
 import math
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -55,6 +56,7 @@ EVENT_DTYPE = np.dtype([
     ("fault", np.int64), ("value", np.float64), ("index", np.int64)])
 
 
+@cache
 def supervisor_dtype(n: int) -> np.dtype[Any]:
     """The supervisor's record for ``n`` joints: settings, then state."""
     f8, i8, b1 = np.float64, np.int64, np.bool_
