@@ -43,8 +43,9 @@ from leadthrough.identification.params_file import ParamsFile, load_params, save
 from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig, build_loop
-from leadthrough.session.metrics import release_overruns
+from leadthrough.session.metrics import force_error_in_motion, phantom_forces, release_overruns
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
+from leadthrough.session.record import SessionLog
 from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import (
@@ -53,6 +54,7 @@ from leadthrough.sim.session import (
     light_guiding,
     replay_session,
     run_sim_session,
+    sim_robot_seed,
 )
 from realtime_probe import ProbeDriver, compiled_allocations
 
@@ -95,6 +97,8 @@ def main() -> None:
     parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
                         help="simulated plant (default realistic; ideal: the plant before "
                              "issue 24)")
+    parser.add_argument("--seed", type=int, default=1,
+                        help="simulated robot instance (calibration and sessions)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     robot = load_robot("er20")
@@ -102,15 +106,15 @@ def main() -> None:
         pf = load_params(args.params, robot)
         print(f"Parameters: {args.params}")
     else:
-        cal = record_calibration_set(robot, seed=1, duration=60.0,
+        cal = record_calibration_set(robot, seed=args.seed, duration=60.0,
                                      excitation_config=ExcitationConfig(starts=4),
                                      plant=args.plant)
-        sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot),
+        sweep = record_friction_sweep(robot, seed=args.seed, run=2, q_start=guide_start_pose(robot),
                                       plant=args.plant)
         sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
         r = sc.result
         path = save_params(args.out / "guiding_params.toml", robot, r.method, r.params,
-                           r.stats, sim_seed=1)
+                           r.stats, sim_seed=args.seed)
         pf = load_params(path, robot)
         print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
               + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + f" N·m -> {path}")
@@ -137,6 +141,7 @@ def section_rest(robot: Robot, pf: ParamsFile, poses_n: int, seconds: float,
         vmax, drift, nonzero, faults = 0.0, 0.0, 0, 0
         for k, q0 in enumerate(poses):
             s = run_sim_session(robot, pf, SimSessionConfig(
+                seed=sim_robot_seed(None, pf),
                 operator="rest", duration_s=seconds, q0=tuple(q0), run=600 + k, plant=plant,
                 loop=LoopConfig(guiding=GuidingConfig(controller=ctl))))
             vmax = max(vmax, s.summary.max_linear_speed, s.summary.max_angular_speed)
@@ -157,6 +162,7 @@ def section_push(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NAM
     for ctl in CONTROLLERS:
         guiding = replace(light_guiding(), controller=ctl)
         s = run_sim_session(robot, pf, SimSessionConfig(operator="push-x", plant=plant,
+                                                        seed=sim_robot_seed(None, pf),
                                                         loop=LoopConfig(guiding=guiding)))
         log = logs[ctl] = s.result.log
         v = log.twist_cmd_base[:, :3]
@@ -169,10 +175,21 @@ def section_push(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NAM
               f"overshoot of 0.2 m/s {over:.3f}, |v| at end {end:.3f} m/s, "
               f"faults {s.summary.faults or 'none'}")
         err = log.wrench_base[:, :3] - log.wrench_applied_base[:, :3]  # type: ignore[index]
-        print(f"  {'':<17} force estimate error RMS {np.sqrt(np.mean(np.sum(err**2, 1))):.1f} N")
+        print(f"  {'':<17} force estimate error RMS {np.sqrt(np.mean(np.sum(err**2, 1))):.1f} N"
+              + _in_motion(log))
     print("  ->", plot_force_velocity({"virtual friction": logs["virtual-friction"],
                                       "velocity [14]": logs["velocity"]},
                                      out / "fig4_push_x.png"))
+
+
+def _in_motion(log: SessionLog) -> str:
+    """Issue 24's figures: force error RMS while the TCP moves >= 0.02 m/s, and the largest
+    estimated force within 0.5 s after a release (goals 5 N and δ = 15 N)."""
+    rms, phantom = force_error_in_motion(log), phantom_forces(log)
+    text = "" if rms is None else f"; in motion (>= 0.02 m/s) {rms:.1f} N RMS"
+    if phantom is not None and phantom.size:
+        text += f"; phantom after release (0.5 s) max {phantom.max():.1f} N"
+    return text
 
 
 def section_paths(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NAMES[0]
@@ -181,7 +198,7 @@ def section_paths(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NA
     print("\n3. Diagonal and seam sessions (virtual friction)")
     paths, targets, timed = {}, {}, []
     for op in ("diagonal", "seam"):
-        cfg = SimSessionConfig(operator=op, plant=plant)
+        cfg = SimSessionConfig(operator=op, plant=plant, seed=sim_robot_seed(None, pf))
         probe: list[ProbeDriver] = []
 
         def wrap(d: Driver, keep: list[ProbeDriver] = probe) -> Driver:
@@ -201,7 +218,7 @@ def section_paths(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NA
         if s.p1_base is not None and s.p2_base is not None:
             targets.update({"P1": s.p1_base, "P2": s.p2_base})
         print(f"  {op:<9} max speed {s.summary.max_linear_speed:.3f} m/s, faults "
-              f"{s.summary.faults or 'none'}")
+              f"{s.summary.faults or 'none'}" + _in_motion(log))
     print("  ->", plot_path_3d(paths, out / "fig5_paths.png", targets=targets))
     return timed
 
@@ -216,6 +233,7 @@ def section_random(robot: Robot, pf: ParamsFile, sessions: int, plant: str = PLA
     overruns, faults = [], []
     for k in range(sessions):
         s = run_sim_session(robot, pf, SimSessionConfig(operator="random", operator_seed=k,
+                                                        seed=sim_robot_seed(None, pf),
                                                         loop=LoopConfig(guiding=light),
                                                         plant=plant))
         over = release_overruns(s.result.log, a_max)

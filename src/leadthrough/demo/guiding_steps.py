@@ -129,6 +129,10 @@ def run_guiding_demo(robot: Robot, params: ParamsFile, seed: int, out: Path,
         save_session(s.result.log, out / f"session_{op}_{ctl}.parquet")
         sm = s.summary
         drift = "" if sm.rest_drift_m is None else f", rest drift {1000 * sm.rest_drift_m:.2f} mm"
+        if sm.force_rms_in_motion_n is not None:
+            drift += f", force RMS in motion {sm.force_rms_in_motion_n:.1f} N"
+        if sm.phantom_force_n is not None:
+            drift += f", phantom {sm.phantom_force_n:.1f} N"
         say(f"      {op:<8} {ctl:<16} max {sm.max_linear_speed:.3f} m/s{drift}, "
             f"faults {', '.join(sm.faults) or 'none'}")
     logs: dict[str, SessionLog] = {k: v.result.log for k, v in sessions.items()}
