@@ -11,12 +11,14 @@ slip by a few mrad before the servo's integrator pulls it back, and the gear the
 friction of that return motion (a slipped joint reads up to its full Coulomb level too high; see
 sim.drivetrain). The eq. 15 friction of a measured velocity is zero at standstill and cannot
 know this; the friction with memory ("presliding": ``friction_velocity="command"``, driven by
-the measured motion while nothing is commanded) follows the slip and its return: with one
-z₀ = 2e-4 rad for every joint, or ("+presliding test") with each joint's z₀ identified by a
-presliding test at the guiding start pose (:mod:`leadthrough.identification.presliding`).
+the measured motion while nothing is commanded) follows the slip and its return: with the
+estimator's robot-independent z₀ (``DEFAULT_PRESLIDING_RAD``) for every joint, or
+("+presliding test") with each joint's z₀ measured by a presliding test at the guiding start
+pose (:mod:`leadthrough.identification.presliding`). No setting comes from the simulator's
+truth (issue 24); ``--seed`` picks the robot instance.
 "tare" zeroes the estimate over 0.5–0.75 s, before the push, like a force sensor.
 
-    python benchmarks/force_estimation.py [--poses 10]
+    python benchmarks/force_estimation.py [--poses 10] [--seed 1] [--plant realistic|ideal]
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from leadthrough.sim.calibration_set import (
     record_friction_sweep,
     record_presliding_test,
 )
+from leadthrough.sim.plant import PLANT_NAMES
 
 DIRECTIONS = np.vstack([np.eye(3), -np.eye(3)])
 
@@ -47,17 +50,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--poses", type=int, default=10)
+    parser.add_argument("--seed", type=int, default=1, help="simulated robot instance")
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
     args = parser.parse_args()
     robot = load_robot("er20")
-    cal = record_calibration_set(robot, seed=1, duration=60.0,
-                                 excitation_config=ExcitationConfig(starts=4))
+    plant = args.plant
+    cal = record_calibration_set(robot, seed=args.seed, duration=60.0,
+                                 excitation_config=ExcitationConfig(starts=4), plant=plant)
     res = identify(cal.identification.measured, robot, "consistent",
                    # eq. 21 as the paper writes it (no load term): the README's figures
                    IdentifyConfig(load_friction=False))
-    sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
+    sweep = record_friction_sweep(robot, seed=args.seed, run=2, q_start=guide_start_pose(robot),
+                                  plant=plant)
     res_sweep = identify_with_sweep(cal.identification.measured, sweep.measured, robot).result
-    pre = fit_presliding(record_presliding_test(robot, seed=1, run=3,
-                                                q_start=guide_start_pose(robot)).measured, robot)
+    pre = fit_presliding(record_presliding_test(robot, seed=args.seed, run=3,
+                                                q_start=guide_start_pose(robot),
+                                                plant=plant).measured, robot)
     print("presliding test: z0 [1e-4 rad] " + " ".join(f"{z:.2f}" for z in 1e4 * pre.presliding)
           + "; level [N·m] " + " ".join(f"{g:.2f}" for g in pre.level))
     rng = np.random.default_rng(0)
@@ -72,13 +82,13 @@ def main() -> None:
             name = f"{m}/force presliding{' tare' if tare else ''}"
             variants[name] = (*plain, EstimatorConfig(method=m, axes="force",
                                                       friction_velocity="command",
-                                                      presliding_length=2e-4, tare_s=tare))
+                                                      tare_s=tare))
         for kappa in (0.0, 1.0):
             for label, chosen in (("+sweep", swept), ("+sweep +presliding test", tested)):
                 name = f"{m}/force presliding tare{' weighted' if kappa else ''} {label}"
                 variants[name] = (*chosen, EstimatorConfig(
-                    method=m, axes="force", friction_velocity="command", presliding_length=2e-4,
-                    tare_s=0.25, friction_weighting=kappa))
+                    method=m, axes="force", friction_velocity="command", tare_s=0.25,
+                    friction_weighting=kappa))
     stats: dict[str, dict[str, list[float]]] = {v: {"rms": [], "settle": [], "rest": []}
                                                 for v in variants}
     lever, slip = [], []                # per pose: shortest lever arm [m]; per push: slip [mrad]
@@ -92,7 +102,7 @@ def main() -> None:
             magnitude = 20.0 + 80.0 * (k % 5) / 4.0
             k += 1
             force = magnitude * d
-            sim = SimRobot(robot, SimConfig(seed=1, run=100 + k), q0=q0,
+            sim = SimRobot(robot, SimConfig(seed=args.seed, run=100 + k, plant=plant), q0=q0,
                            operator=ConstantWrench((*force, 0.0, 0.0, 0.0), 1.0, 3.0))
             log = hold(sim, 3.5)
             slip.append(1e3 * float(np.abs(log.truth.q - q0).max()))
@@ -120,7 +130,8 @@ def main() -> None:
                 stats[name]["settle"].append(settle)
                 stats[name]["rest"].append(float(np.sqrt(np.mean(
                     np.linalg.norm(f[rest], axis=1) ** 2))))
-    print(f"\n{args.poses} poses × 6 directions, 20–100 N, consistent parameters (sim seed 1)")
+    print(f"\n{args.poses} poses × 6 directions, 20–100 N, consistent parameters (sim seed "
+          f"{args.seed}, {plant} plant)")
     print(f"{'estimator':<56} {'RMS error [N]':>14} {'worst [N]':>10} {'settling [s]':>13} "
           f"{'no-force RMS [N]':>17}")
     for name, s in stats.items():

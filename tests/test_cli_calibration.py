@@ -286,8 +286,10 @@ def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
     pre, rec = tmp_path / "pre.csv", tmp_path / "pre.parquet"
     assert main(["excite", "--robot", "er20", "--presliding", "-o", str(pre), "--json"]) == 0
     assert _json(capsys)["trials"] == 20
+    # the ideal plant: the z₀ range below is its gears' (the CLI's plumbing is under test here;
+    # the fit itself on the realistic plant: tests/test_presliding.py)
     assert main(["record", "--robot", "er20", "--trajectory", str(pre), "--seed", "1",
-                 "--run", "3", "-o", str(rec)]) == 0
+                 "--run", "3", "--plant", "ideal", "-o", str(rec)]) == 0
     capsys.readouterr()
     out = tmp_path / "p.toml"
     assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",

@@ -14,14 +14,16 @@ from leadthrough.cli import main
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.friction import StribeckParameters, stribeck_friction
 from leadthrough.errors import DataError
+from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
 from leadthrough.excitation.trajectory_file import load_trajectory
-from leadthrough.identification.api import identify
+from leadthrough.identification.api import identify, identify_with_sweep
 from leadthrough.identification.friction_sweep import fit_sweep_friction, sweep_points
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig
+from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import (
     SimSessionConfig,
@@ -97,6 +99,18 @@ def test_too_few_passes_is_a_clear_error(er20: Robot) -> None:
     assert e.value.source == "short.parquet"
 
 
+@pytest.fixture(scope="module")
+def sweep_calibration(er20: Robot) -> tuple[object, object, object]:
+    # overrides conftest's: the ideal plant, whose bounds these are (eq. 15 + a 1 % load part;
+    # issue 24)
+    cal = record_calibration_set(er20, seed=1, duration=30.0,
+                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60),
+                                 plant="ideal")
+    sweep = record_friction_sweep(er20, seed=1, run=2, q_start=guide_start_pose(er20),
+                                  plant="ideal")
+    return cal, sweep, identify_with_sweep(cal.identification.measured, sweep.measured, er20)
+
+
 def test_sweep_on_the_simulator_measures_the_plants_low_speed_friction(
         er20: Robot, sweep_calibration: tuple[object, object, object]) -> None:
     """The simulated gears' steady friction is eq. 15 plus a load-dependent part (≈ 1 % of
@@ -107,7 +121,7 @@ def test_sweep_on_the_simulator_measures_the_plants_low_speed_friction(
     and sliding at 0.25–0.4 rad/s it reads 5–10 % above eq. 15 + the static load part on J1/J2
     (the load part also grows with the friction torque itself)."""
     _, _, sc = sweep_calibration
-    sim = SimRobot(er20, SimConfig(seed=1))
+    sim = SimRobot(er20, SimConfig(seed=1, plant="ideal"))
     drive = sim.truth.drive
     eq15 = StribeckParameters(**drive.equivalent_eq15())
     # the load-dependent part at the sweep's pose (the transmitted torque is mostly gravity)
@@ -147,7 +161,7 @@ def test_push_x_with_sweep_parameters_reaches_the_cap_and_stops(
     reaches the 0.2 m/s cap without overshoot, and the robot comes to rest after release."""
     _, _, sc = sweep_calibration
     pf = ParamsFile.from_result(sc.result)  # type: ignore[attr-defined]
-    s = run_sim_session(er20, pf, SimSessionConfig(operator="push-x",
+    s = run_sim_session(er20, pf, SimSessionConfig(operator="push-x", plant="ideal",
                                                    loop=LoopConfig(guiding=light_guiding())))
     v = s.result.log.twist_cmd_base
     main = float(np.max(v[:, 0]))

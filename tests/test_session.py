@@ -23,7 +23,7 @@ from leadthrough.identification.params_file import ParamsFile, load_params, save
 from leadthrough.robot import Robot
 from leadthrough.session.loop import run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
-from leadthrough.session.metrics import release_overruns
+from leadthrough.session.metrics import force_error_in_motion, phantom_forces, release_overruns
 from leadthrough.session.record import SessionLog, load_session, save_session
 from leadthrough.sim.driver import InjectedFault as Fault
 from leadthrough.sim.driver import InjectedFaultKind as FaultKind
@@ -286,6 +286,36 @@ def test_release_overruns_measure_travel_beyond_the_shortest_stop() -> None:
     assert over is not None and over[0] == pytest.approx(0.1, abs=5e-4)
     bare = replace(log_with(stop), wrench_applied_base=None)
     assert release_overruns(bare, a) is None
+
+
+def test_force_error_in_motion_and_phantom_forces() -> None:
+    """A 40 N push along x for 1 s at 0.1 m/s (slow start: 0.01 m/s for the first 0.2 s),
+    estimated 3 N too high along y throughout, and 12 N along x for 0.3 s after the release,
+    then 0: the RMS in motion counts only the samples at >= 0.02 m/s (3 N), the phantom is
+    12 N (the 0.5 s window). No truth, no figures."""
+    dt = 1e-3
+    t = np.arange(0.0, 2.0, dt)
+    n, z6 = t.size, np.zeros((t.size, 6))
+    pushed = t < 1.0
+    twist, applied, est = z6.copy(), z6.copy(), z6.copy()
+    twist[pushed, 0] = np.where(t[pushed] < 0.2, 0.01, 0.1)
+    applied[pushed, 0] = 40.0
+    est[:, 1] = 3.0
+    est[pushed, 0] = 40.0
+    est[(t >= 1.0) & (t < 1.3), 0] = 12.0
+    est[(t >= 1.0) & (t < 1.3), 1] = 0.0
+    est[t >= 1.3, 1] = 0.0
+    est[(t < 0.2), 1] = 50.0            # slow: not counted
+    log = SessionLog(robot="er20", time=t, q=z6, current=z6, tau_ext=z6, wrench_base=est,
+                     q_cmd=z6, qd_cmd=z6, tcp_cmd_base=np.zeros((n, 3)),
+                     tcp_cmd_quat=np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), twist_cmd_base=twist,
+                     state=np.zeros(n, np.int64), fault=np.zeros(n, np.int64),
+                     wrench_applied_base=applied)
+    assert force_error_in_motion(log) == pytest.approx(3.0)
+    phantom = phantom_forces(log)
+    assert phantom is not None and phantom.shape == (1,) and phantom[0] == pytest.approx(12.0)
+    bare = replace(log, wrench_applied_base=None)
+    assert force_error_in_motion(bare) is None and phantom_forces(bare) is None
 
 
 def test_corrupt_or_foreign_session_files_are_clear_errors(tmp_path: Path) -> None:

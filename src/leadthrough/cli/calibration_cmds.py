@@ -15,6 +15,7 @@ from leadthrough.cli.arg_checks import (
     MAX_PAYLOAD_COM_M,
     check_output,
     check_trajectory_limits,
+    warm_up_seconds,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
 from leadthrough.cli.record_robot import add_driver_arguments, record_on_robot
@@ -42,6 +43,7 @@ from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.robot.urdf_export import write_urdf_with_inertias
 from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import run_trajectory
 
@@ -108,6 +110,13 @@ def _register_record(sub: Any) -> None:
                    help="simulated robot instance (true parameters; default 0)")
     p.add_argument("--run", type=int, default=None,
                    help="simulated recording number (sensor noise; default 0)")
+    p.add_argument("--plant", choices=PLANT_NAMES, default=None,
+                   help="simulated plant: realistic (default; model mismatch, load- and "
+                        "temperature-dependent friction) or ideal (the plant before issue 24)")
+    p.add_argument("--warm-up", type=float, default=None, metavar="MINUTES",
+                   help="production-like motion the simulated robot did before the recording "
+                        "[min] (default 0: a cold robot; its friction is tens of per cent "
+                        "higher than after an hour)")
     p.add_argument("--payload-mass", type=float, default=None,
                    help="simulated payload at the TCP [kg]")
     p.add_argument("--payload-com", type=float, nargs=3, default=None,
@@ -297,7 +306,10 @@ def run_record(args: argparse.Namespace) -> int:
     if args.driver is not None:
         return record_on_robot(args, robot, traj)
     args.seed = 0 if args.seed is None else args.seed
-    config = SimConfig(seed=args.seed, run=0 if args.run is None else args.run)
+    args.plant = PLANT_NAMES[0] if args.plant is None else args.plant
+    args.warm_up = 0.0 if args.warm_up is None else args.warm_up
+    config = SimConfig(seed=args.seed, run=0 if args.run is None else args.run, plant=args.plant,
+                       warm_up_s=warm_up_seconds(args.warm_up))
     t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
     q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
     qd_cmd = np.column_stack([np.interp(t, traj.time, traj.qd[:, j]) for j in range(robot.n)])
@@ -317,7 +329,8 @@ def run_record(args: argparse.Namespace) -> int:
                     robot=robot.name, sim_seed=args.seed)
     save_recording(rec, args.output)
     out = {"robot": robot.name, "samples": rec.samples, "duration_s": rec.duration,
-           "seed": args.seed, "run": config.run, "payload_mass_kg": args.payload_mass,
+           "seed": args.seed, "run": config.run, "plant": args.plant, "warm_up_min": args.warm_up,
+           "payload_mass_kg": args.payload_mass,
            "max_tracking_error_rad": float(np.max(np.abs(log.truth.q - q_cmd))),
            "output": str(args.output)}
     if args.json:

@@ -21,7 +21,7 @@ from leadthrough.session.trajectory_recording import TrajectoryRunConfig, record
 __all__ = ["add_connection_arguments", "add_driver_arguments", "record_on_robot",
            "refuse_settings"]
 
-_SIM_ONLY = ("seed", "run", "payload_mass", "payload_com")
+_SIM_ONLY = ("seed", "run", "plant", "warm_up", "payload_mass", "payload_com")
 
 
 def add_driver_arguments(p: argparse.ArgumentParser) -> None:

@@ -66,7 +66,7 @@ def dahl_step(state: float, displacement: float, level: float, presliding: float
 
 @njit(cache=True, nogil=True)
 def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: Array,
-                             dt: float, command_presliding: float, rest_presliding: Array,
+                             dt: float, command_presliding: Array, rest_presliding: Array,
                              state: Array, out: Array, level: Array) -> None:
     """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
 
@@ -98,7 +98,7 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
         load_torque: τ_load of the load-dependent Coulomb level [N·m], shape (n,) (not read
             where f_cL = 0).
         dt: Step [s].
-        command_presliding: z₀ of the commanded motion [rad].
+        command_presliding: z₀ per joint of the commanded motion [rad], shape (n,).
         rest_presliding: z₀ per joint at rest [rad], shape (n,).
         state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
         out: Friction torque [N·m], shape (n,).
@@ -118,7 +118,7 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
             if g > 0.0:
                 target = g if v > 0.0 else -g
                 state[j] = target + (state[j] - target) * np.exp(
-                    -g0 * abs(v) * dt / (command_presliding * g))
+                    -g0 * abs(v) * dt / (command_presliding[j] * g))
         elif increment[j] != 0.0 and g0 > 0.0:
             state[j] = dahl_step(state[j], increment[j], g0, rest_presliding[j])
         f = state[j] + v * fp.viscous[j]

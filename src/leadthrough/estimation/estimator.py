@@ -59,14 +59,24 @@ from leadthrough.robot.description import Robot
 from leadthrough.state_records import RecordView, field, new_record, view
 
 __all__ = [
+    "DEFAULT_PRESLIDING_RAD",
     "EstimatorConfig",
     "EstimatorInput",
     "EstimatorOutput",
     "EstimatorStatus",
     "ExternalForceEstimator",
+    "presliding_lengths",
 ]
 
 Array = NDArray[np.float64]
+
+
+#: z₀ [rad] where no presliding test measured it: 1.4 arcmin, within the lost motion that
+#: catalogues of the precision reducers in industrial robot joints (RV / cycloidal, strain-wave)
+#: specify, 1-1.5 arcmin at ±3 % of rated torque (lost motion bounds the displacement over which
+#: the gear's torque turns over). Robot-independent and coarse: run the presliding test
+#: (``leadthrough excite --presliding``) to measure each joint's z₀.
+DEFAULT_PRESLIDING_RAD = 4e-4
 
 
 @dataclass(frozen=True)
@@ -109,14 +119,15 @@ class EstimatorConfig:
             ``presliding_kernels.presliding_friction_step``): after a stop, the drives keep the
             friction they had while moving, and so does the model.
         presliding_length: z₀ of the ``"command"`` friction while a joint is commanded to move
-            [rad]: the friction turns over a commanded displacement of a few z₀, which is the
-            gear's presliding plus the servo's lag. A smaller z₀ turns the model's friction
-            ahead of the gear's, a larger one behind it: on the simulated er20 (gear presliding
-            1.5–2.5e-4 rad plus the servo's lag) 1e-3 stalls a 40 N start and 2e-4 over-reads
-            starts and reversals by up to 2×; 4e-4 follows both. A joint commanded to stand
-            still is driven by its measured displacement instead, with the params' identified
-            z₀ per joint (``DriveModelParameters.presliding``, from a presliding test), or
-            this value where none was identified.
+            [rad], and at rest where the params carry no identified z₀: the friction turns over
+            a commanded displacement of a few z₀, the gear's presliding plus the servo's lag. A
+            smaller z₀ turns the model's friction ahead of the gear's, a larger one behind it.
+            None (the default): each joint's z₀ measured by a presliding test
+            (``DriveModelParameters.presliding``, :func:`leadthrough.identification.presliding.
+            fit_presliding`; the params file's ``joints.*.presliding``) where the params carry
+            it, else :data:`DEFAULT_PRESLIDING_RAD`. Nothing here comes from the simulator's
+            own bristle lengths (issue 24). A joint commanded to stand still is driven by its
+            measured displacement with the same z₀.
         presliding_play_counts: Width of the play operator on the encoder that drives the
             friction at rest [encoder counts] (``presliding_kernels.play_step``): chatter
             within it moves nothing. 0 passes every count.
@@ -142,7 +153,7 @@ class EstimatorConfig:
     tare_s: float = 0.0
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
-    presliding_length: float = 4e-4
+    presliding_length: float | None = None
     presliding_play_counts: float = 2.5
     friction_weighting: float = 0.0
 
@@ -164,7 +175,8 @@ class EstimatorConfig:
             ("friction_velocity", self.friction_velocity in ("measured", "command"),
              "'measured' or 'command'"),
             ("presliding_length",
-             0 < self.presliding_length <= MAX_PRESLIDING_RAD,
+             self.presliding_length is None
+             or 0 < self.presliding_length <= MAX_PRESLIDING_RAD,
              f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad"),
             ("presliding_play_counts", 0 <= self.presliding_play_counts < 1e6,
              "0 <= width < 1e6 counts"),
@@ -262,8 +274,8 @@ class ExternalForceEstimator:
         s.rotor_inertia = mdl.rotor
         s.offset = mdl.offset
         s.noise_mean = noise_mean if cfg.remove_mean_noise else 0.0
-        s.rest_presliding = (params.presliding if params.presliding.size
-                             else cfg.presliding_length)
+        s.rest_presliding = presliding_lengths(params.presliding, n, None)
+        s.command_presliding = presliding_lengths(params.presliding, n, cfg.presliding_length)
         s.play_half_width = 0.5 * cfg.presliding_play_counts * robot.encoder_resolution
         self._configure(cfg)
         # views handed to Pinocchio every sample
@@ -287,7 +299,6 @@ class ExternalForceEstimator:
         s.max_damping = cfg.max_damping
         s.min_force_lever = cfg.min_force_lever
         s.friction_follows_command = cfg.friction_velocity == "command"
-        s.command_presliding = cfg.presliding_length
         s.weigh_by_friction = cfg.friction_weighting > 0
         s.friction_weighting = cfg.friction_weighting
         s.envelope_decay = float(np.exp(-cfg.dt * np.pi * cfg.output_cutoff_hz))
@@ -408,6 +419,16 @@ class ExternalForceEstimator:
 
 
 #: The statuses by value (a dictionary lookup is cheaper than the enum's constructor).
+def presliding_lengths(identified: Array, n: int, chosen: float | None) -> Array:
+    """z₀ per joint [rad], shape (n,): ``chosen`` if given, else the presliding test's
+    ``identified`` z₀ (shape (n,), or empty), else :data:`DEFAULT_PRESLIDING_RAD`."""
+    if chosen is not None:
+        return np.full(n, chosen)
+    if identified.size:
+        return np.asarray(identified, dtype=float)
+    return np.full(n, DEFAULT_PRESLIDING_RAD)
+
+
 _STATUS = {int(s): s for s in EstimatorStatus}
 
 #: Longest re-zero window [samples] (about 25 days at 1 kHz).

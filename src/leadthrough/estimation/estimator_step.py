@@ -101,7 +101,7 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("force_only", b1),                   # the force-only fit (else the full wrench)
         ("manipulability_threshold", f8), ("max_damping", f8), ("min_force_lever", f8),
         ("friction_follows_command", b1),     # friction with memory, driven by qd_cmd
-        ("command_presliding", f8),           # its z₀ while commanded to move [rad]
+        ("command_presliding", *joints),      # its z₀ while commanded to move [rad]
         ("weigh_by_friction", b1), ("friction_weighting", f8), ("envelope_decay", f8),
         ("warm_up_samples", i8),
         # per joint constants

@@ -1,4 +1,6 @@
-"""Figures of a guiding session: peak speeds and accelerations, rest drift, faults, cycle time."""
+"""Figures of a guiding session: peak speeds and accelerations, rest drift, faults, cycle time,
+and against the simulator's truth the force error in motion and the phantom force after a
+release (issue 24: both are what the operator feels of the estimate's error)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,13 @@ from leadthrough.errors import ControlError
 from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
-__all__ = ["CycleTime", "SessionSummary", "release_overruns", "rest_drift", "summarize"]
+__all__ = ["CycleTime", "SessionSummary", "force_error_in_motion", "phantom_forces",
+           "release_overruns", "rest_drift", "summarize"]
+
+#: TCP speed from which the force error counts as "in motion" [m/s] (issue 24).
+MOTION_SPEED = 0.02
+#: Time after a release over which an estimated force is a phantom [s] (issue 24).
+PHANTOM_WINDOW_S = 0.5
 
 Array = NDArray[np.float64]
 
@@ -48,6 +56,11 @@ class SessionSummary:
         faults: Faults that occurred, in order (names).
         final_state: Safety state at the end (name).
         cycle_time_us: Compute time per controller cycle.
+        force_rms_in_motion_n: RMS of the estimated minus the applied force while the
+            commanded TCP speed is at least :data:`MOTION_SPEED` (:func:`force_error_in_motion`)
+            [N]; None without the truth or without such motion.
+        phantom_force_n: The largest estimated force within :data:`PHANTOM_WINDOW_S` after a
+            hand let go (:func:`phantom_forces`) [N]; None without the truth or a release.
     """
 
     duration_s: float
@@ -60,6 +73,8 @@ class SessionSummary:
     faults: list[str]
     final_state: str
     cycle_time_us: CycleTime
+    force_rms_in_motion_n: float | None = None
+    phantom_force_n: float | None = None
 
     def to_json(self) -> dict[str, object]:
         """JSON-ready dict."""
@@ -100,6 +115,43 @@ def _hands_off(log: SessionLog) -> list[tuple[int, int]] | None:
     free = ~np.any(log.wrench_applied_base != 0.0, axis=1)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def force_error_in_motion(log: SessionLog, min_speed: float = MOTION_SPEED) -> float | None:
+    """RMS of |estimated − applied force| over the samples whose commanded TCP speed is at least
+    ``min_speed`` [m/s], the estimate in base axes (``wrench_base``) against the simulator's
+    applied wrench.
+
+    Returns:
+        RMS [N], or None without the truth or without a sample that fast.
+    """
+    if log.wrench_applied_base is None:
+        return None
+    moving = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1) >= min_speed
+    if not moving.any():
+        return None
+    err = np.linalg.norm(log.wrench_base[moving, :3] - log.wrench_applied_base[moving, :3], axis=1)
+    return float(np.sqrt(np.mean(err ** 2)))
+
+
+def phantom_forces(log: SessionLog, window_s: float = PHANTOM_WINDOW_S) -> Array | None:
+    """The largest estimated force |f̂| within ``window_s`` after each release (the start of
+    each interval with no applied wrench that follows a push) [N].
+
+    Returns:
+        Per release, shape (releases,); None without the truth.
+    """
+    intervals = _hands_off(log)
+    if intervals is None:
+        return None
+    peaks = []
+    for start, stop in intervals:
+        if start == 0:
+            continue
+        end = int(np.searchsorted(log.time, log.time[start] + window_s))
+        f = np.linalg.norm(log.wrench_base[start:min(stop, end), :3], axis=1)
+        peaks.append(float(f.max()) if f.size else 0.0)
+    return np.asarray(peaks)
 
 
 def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
@@ -156,6 +208,7 @@ def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> 
               if e.kind == "transition" and ":" in e.cause]
     us = result.cycle_us if result.cycle_us.size else np.zeros(1)
     overruns = release_overruns(log, deceleration)
+    phantoms = phantom_forces(log)
     return SessionSummary(
         duration_s=float(log.time[-1] - log.time[0]) if log.time.size else 0.0,
         max_linear_speed=float(np.linalg.norm(twist[:, :3], axis=1).max()),
@@ -169,4 +222,7 @@ def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> 
         final_state=State(int(log.state[-1])).name,
         cycle_time_us=CycleTime(median=float(np.median(us)),
                                 p99=float(np.percentile(us, 99))),
+        force_rms_in_motion_n=force_error_in_motion(log),
+        phantom_force_n=(None if phantoms is None or not phantoms.size
+                         else float(phantoms.max())),
     )

@@ -39,6 +39,7 @@ from leadthrough.session.requests import LoopRequests
 from leadthrough.sim.driver import InjectedFault, InputScript, SimDriver
 from leadthrough.sim.operator import ScriptedOperator
 from leadthrough.sim.operator_scripts import make_operator
+from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.robot import SimConfig, SimRobot
 
 __all__ = ["DEFAULT_SIM_SEED", "ENABLE_INPUT", "MARK_INPUT", "PUSH_MASS_KG", "SimSession",
@@ -84,6 +85,10 @@ class SimSessionConfig:
             never pressed (the loop then never guides).
         software_enable: The enabling device is a page's button (``LoopRequests.set_enable``)
             instead of the script's (``enable_held_s`` is then ignored).
+        plant: Simulated plant (:mod:`leadthrough.sim.plant`): the one the params were
+            identified on.
+        warm_up_s: Production-like motion the (realistic) robot did before the session [s]:
+            its friction has fallen from the cold robot's (:mod:`leadthrough.sim.thermal`).
     """
 
     operator: str = "push-x"
@@ -97,8 +102,11 @@ class SimSessionConfig:
     faults: tuple[InjectedFault, ...] = ()
     enable_held_s: tuple[tuple[float, float], ...] | None = None
     software_enable: bool = False
+    plant: PlantPreset = PlantPreset.REALISTIC
+    warm_up_s: float = 0.0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "plant", plant_preset(self.plant, "session.plant"))
         if self.enable_held_s is not None:
             InputScript(ENABLE_INPUT, self.enable_held_s)       # checks the intervals
         check_fields("session", self, [
@@ -108,6 +116,10 @@ class SimSessionConfig:
             ("operator_seed", self.operator_seed is None
              or (isinstance(self.operator_seed, int) and self.operator_seed >= 0),
              "None or an integer >= 0"),
+            ("warm_up_s", bool(np.isfinite(self.warm_up_s)) and self.warm_up_s >= 0.0,
+             "a finite duration >= 0 s"),
+            ("warm_up_s", self.warm_up_s == 0.0 or self.plant is PlantPreset.REALISTIC,
+             "0 on the ideal plant (it has no thermal model)"),
         ], ControlError)
 
 
@@ -204,7 +216,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     """
     q0, operator, duration = _scene(robot, config)
     op_seed = config.seed if config.operator_seed is None else config.operator_seed
-    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run), q0=q0, operator=operator)
+    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run, plant=config.plant,
+                                    warm_up_s=config.warm_up_s), q0=q0, operator=operator)
     sim_driver = SimDriver(sim)
     for fault in config.faults:
         sim_driver.inject(fault)
@@ -227,7 +240,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
         "operator": config.operator, "controller": guiding.controller, "seed": config.seed,
-        "run": config.run, "operator_seed": op_seed, "duration_s": duration,
+        "plant": str(config.plant), "warm_up_s": config.warm_up_s, "run": config.run,
+        "operator_seed": op_seed, "duration_s": duration,
         "params_method": params.method,
         "estimator": {"method": est_cfg.method, "axes": est_cfg.axes,
                       "output_cutoff_hz": est_cfg.output_cutoff_hz, "tare_s": est_cfg.tare_s},
