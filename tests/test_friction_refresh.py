@@ -37,13 +37,16 @@ GUIDING_SPEEDS = np.geomspace(0.02, 0.3, 12)
 
 @pytest.fixture(scope="module")
 def check(er20: Robot) -> SimRecording:
+    # the ideal plant: its friction is eq. 15, so a known scaling of it is a known drift (the
+    # realistic plant's drift is measured by benchmarks/friction_drift.py)
     return record_friction_sweep(er20, seed=1, run=4, q_start=guide_start_pose(er20),
-                                 sweep_config=FRICTION_CHECK)
+                                 sweep_config=FRICTION_CHECK, plant="ideal")
 
 
 def _true_eq15(robot: Robot) -> StribeckParameters:
     """The simulated drives' friction closest to eq. 15 (to report errors against)."""
-    return StribeckParameters(**SimRobot(robot, SimConfig(seed=1)).truth.drive.equivalent_eq15())
+    return StribeckParameters(**SimRobot(robot, SimConfig(seed=1, plant="ideal"))
+                              .truth.drive.equivalent_eq15())
 
 
 def _scaled(robot: Robot, level: np.ndarray, viscous: np.ndarray) -> DriveModelParameters:

@@ -134,9 +134,14 @@ def test_params_file_round_trip(tmp_path: Path, er20: Robot) -> None:
 
 
 def test_table_ii_ordering_on_the_simulated_robot(er20: Robot) -> None:
-    """Paper's ordering J(proposed) < J(ols-cbrt) < J(ols-cv), ratio <= 0.8, near the floor."""
+    """Paper's ordering J(proposed) < J(ols-cbrt) < J(ols-cv), ratio <= 0.8, near the floor, on
+    the ideal plant (the paper's model class: eq. 15 friction, links inside the box). On the
+    realistic plant the identification-data J of ``proposed`` (held to the ±30 % box) is above
+    ols-cbrt's (seed 1: 49.5 vs 44.8 N·m; README, Limitations); on held-out data the order
+    holds there too (the quick demo's Table II)."""
     cal = record_calibration_set(er20, seed=1, duration=30.0,
-                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60))
+                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60),
+                                 plant="ideal")
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60, polish_iterations=200))
     comp = compare_methods(er20, cal.identification.measured,
                            {"held-out": cal.held_out.measured},

@@ -43,7 +43,7 @@ def excite_friction_experiment(args: argparse.Namespace, robot: Robot) -> int:
     if args.sweep + args.presliding + args.friction_check > 1:
         raise DataError("choose one of the friction experiments", field="--presliding",
                         value=True,
-                        expected="one of --sweep, --friction-check and --presliding")
+                        expected="--sweep or --presliding or --friction-check, one of them")
     q0 = _start(args, robot)
     out: dict[str, Any] = {"robot": robot.name}
     if args.sweep or args.friction_check:
