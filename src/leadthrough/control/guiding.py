@@ -146,6 +146,12 @@ class GuidingController:
         s.release_drop = RELEASE_DROP
         s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
         s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
+        rc = cfg.release
+        s.brake, s.brake_drop_fraction = rc.brake, rc.drop_fraction
+        s.brake_drop, s.brake_rise, s.brake_lockout_s = rc.drop, rc.rise, rc.lockout_s
+        s.brake_bound = rc.bound
+        s.brake_alpha = cfg.dt / (rc.smoothing_s + cfg.dt)
+        s.brake_forget = math.exp(-cfg.dt / rc.window_s)
         s.max_speed = cfg.limits.max_speed
         s.max_step = cfg.limits.max_step(cfg.dt)
         s.stop_fraction = cfg.ik.stop_acceleration_fraction
@@ -207,6 +213,9 @@ class GuidingController:
         s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
         s.twist = s.release_peak = s.release_smooth = 0.0
+        s.brake_smooth = s.brake_peak = s.brake_reference = 0.0
+        s.released = False
+        s.brake_s = math.inf
         s.pose_rotation = ik.rotation_tool_to_base
         s.pose_position = p
         s.residual_fresh = s.resync = False

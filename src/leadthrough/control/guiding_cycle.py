@@ -32,7 +32,7 @@ from leadthrough.control.guiding_state import Law
 from leadthrough.control.guiding_types import GuidingStatus
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
-from leadthrough.control.release import release_step
+from leadthrough.control.release import fresh_rise, hand_release, release_step
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.se3 import (
     copy_pose,
@@ -174,11 +174,16 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
                             not at_rest)
     if released and at_rest:
         ctl.release_s = 0.0
+    if ctl.brake:
+        _brake_state(ctl, at_rest)
     settling = at_rest and (ctl.rest_s < ctl.hold_s or ctl.release_s < ctl.hold_s)
     ctl.release_s += ctl.dt
-    if ctl.law == Law.VIRTUAL_FRICTION:
+    if ctl.released and ctl.brake_s <= ctl.brake_lockout_s:
+        decelerate_twist(ctl.twist, ctl.max_step,
+                         joint_stop_cycles(ctl.qd_cmd, ik.stop_velocity_step), ctl.desired_twist)
+    elif ctl.law == Law.VIRTUAL_FRICTION:
         virtual_friction(ctl.twist, ctl.wrench,
-                         ctl.stopping_friction if settling else ctl.friction,
+                         ctl.stopping_friction if settling or ctl.released else ctl.friction,
                          ctl.stopping_friction, ctl.law_coefficients, ctl.desired_twist)
     else:
         velocity_baseline(ctl.twist, ctl.wrench, ctl.law_coefficients, ctl.velocity_alpha,
@@ -203,6 +208,36 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
     else:
         ctl.stop_plan = stop
     return joint_stop
+
+
+@njit(cache=True, nogil=True)
+def _brake_state(ctl: Record, at_rest: bool) -> None:
+    """EXPERIMENT."""
+    fell = hand_release(ctl.wrench, ctl.brake_alpha, ctl.brake_forget, ctl.brake_drop_fraction,
+                        ctl.brake_drop, ctl.brake_bound, ctl.brake_smooth, ctl.brake_peak)
+    if fell and not at_rest:
+        ctl.released = True
+        ctl.brake_s = 0.0
+        ctl.release_s = 0.0
+    if at_rest:
+        for i in range(6):
+            ctl.brake_peak[i] = ctl.brake_smooth[i]
+    rose = fresh_rise(ctl.brake_smooth, ctl.brake_forget, ctl.brake_rise, ctl.brake_reference)
+    if ctl.released and ctl.brake_s >= ctl.brake_lockout_s and (
+            rose or _held(ctl.brake_smooth, ctl.stopping_friction)):
+        ctl.released = False
+    ctl.brake_s += ctl.dt
+
+
+@njit(cache=True, nogil=True)
+def _held(w: Array, stopping: Array) -> bool:
+    """EXPERIMENT: some part's magnitude at or above its largest δ_s."""
+    for part in range(2):
+        i = 3 * part
+        m = math.sqrt(w[i] * w[i] + w[i + 1] * w[i + 1] + w[i + 2] * w[i + 2])
+        if m >= max(stopping[i], stopping[i + 1], stopping[i + 2]):
+            return True
+    return False
 
 
 @njit(cache=True, nogil=True)

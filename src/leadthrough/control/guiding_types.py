@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from leadthrough.control.auto_friction import AutoFrictionConfig
 from leadthrough.control.ik import IKConfig
 from leadthrough.control.limits import CartesianLimits
+from leadthrough.control.release import ReleaseConfig
 from leadthrough.control.safety import SafetyConfig
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.velocity_baseline import VelocityBaselineConfig
@@ -100,6 +101,7 @@ class GuidingConfig:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     settle_s: float = 1.5
     rezero_s: float = 0.0
+    release: ReleaseConfig = field(default_factory=ReleaseConfig)
 
     def __post_init__(self) -> None:
         check_fields("guiding", self, [

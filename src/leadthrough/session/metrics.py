@@ -11,7 +11,8 @@ from leadthrough.control.safety import State
 from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
-__all__ = ["CycleTime", "SessionSummary", "release_overruns", "rest_drift", "summarize"]
+__all__ = ["CycleTime", "SessionSummary", "faults_without_hand", "release_motion_times",
+           "release_overruns", "rest_drift", "summarize"]
 
 Array = NDArray[np.float64]
 
@@ -128,6 +129,64 @@ def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
     ends = [(start - 1, stop - 1) for start, stop in intervals if start > 0]
     return np.array([max(0.0, travel[end] - travel[r] - speed[r] ** 2 / (2.0 * deceleration))
                      for r, end in ends])
+
+
+def release_motion_times(log: SessionLog, deceleration: float) -> Array | None:
+    """How long the robot kept moving after each release, beyond the shortest stop.
+
+    For each release (as in :func:`release_overruns`), the time from the release to the last
+    sample of the hands-off interval with a nonzero commanded twist, minus v/a, the length of
+    a stop at ``deceleration`` from the commanded speed v at the release: a robot that brakes
+    at the limit at once scores 0; one that restarts 1.5 s after the release scores about
+    1.5 s, however briefly it moves then.
+
+    Args:
+        log: The session.
+        deceleration: a [m/s²], > 0 (the linear acceleration limit).
+
+    Returns:
+        Time per release [s], >= 0, shape (releases,); None without the truth.
+    """
+    intervals = _hands_off(log)
+    if intervals is None:
+        return None
+    speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    moving = np.any(log.twist_cmd_base != 0.0, axis=1)
+    times = []
+    for start, stop in intervals:
+        if start == 0:
+            continue
+        moved = np.flatnonzero(moving[start:stop])
+        last = log.time[start + moved[-1]] if moved.size else log.time[start - 1]
+        times.append(max(0.0, float(last - log.time[start - 1])
+                         - speed[start - 1] / deceleration))
+    return np.array(times)
+
+
+def faults_without_hand(log: SessionLog, window_s: float) -> list[str] | None:
+    """The faults that no hand caused: those latched when no hand had touched the tool for
+    ``window_s`` (the simulator's truth; e.g. the length of a stop from the speed limit at the
+    acceleration limit, so that a push toward a joint limit that the stop cannot avoid counts
+    as the hand's).
+
+    Args:
+        log: The session.
+        window_s: Time without any applied wrench before the fault [s], >= 0.
+
+    Returns:
+        The faults' names in order; None without the truth.
+    """
+    if log.wrench_applied_base is None:
+        return None
+    touched = np.any(log.wrench_applied_base != 0.0, axis=1)
+    last_touch = np.maximum.accumulate(np.where(touched, log.time, -np.inf))
+    names = []
+    for e in log.events:
+        if e.kind == "transition" and ":" in e.cause:
+            k = min(int(np.searchsorted(log.time, e.t, side="right")) - 1, log.time.size - 1)
+            if e.t - last_touch[max(k, 0)] > window_s:
+                names.append(e.cause.split(":", 1)[1])
+    return names
 
 
 def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> SessionSummary:
