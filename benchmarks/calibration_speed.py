@@ -17,6 +17,7 @@ from leadthrough.identification.api import METHODS, identify
 from leadthrough.identification.observations import build_observations
 from leadthrough.robot import load_robot
 from leadthrough.sim.calibration_set import record_excitation
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.robot import SimConfig
 
 
@@ -24,10 +25,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
     args = parser.parse_args()
     robot = load_robot("er20")
     exc = design_excitation(robot, ExcitationConfig(starts=1, seed=0))
-    rec = record_excitation(robot, exc, args.seconds, SimConfig(seed=1)).measured
+    rec = record_excitation(robot, exc, args.seconds, SimConfig(seed=1, plant=args.plant)).measured
     print(f"data: {args.seconds:g} s at 1 kHz, {robot.n} joints ({rec.samples} samples)")
     t0 = time.perf_counter()
     data = preprocess(rec, robot)

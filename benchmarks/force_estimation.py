@@ -39,6 +39,7 @@ from leadthrough.sim.calibration_set import (
     record_friction_sweep,
     record_presliding_test,
 )
+from leadthrough.sim.plant import PLANT_NAMES
 
 DIRECTIONS = np.vstack([np.eye(3), -np.eye(3)])
 
@@ -47,15 +48,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--poses", type=int, default=10)
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
     args = parser.parse_args()
     robot = load_robot("er20")
+    plant = args.plant
     cal = record_calibration_set(robot, seed=1, duration=60.0,
-                                 excitation_config=ExcitationConfig(starts=4))
+                                 excitation_config=ExcitationConfig(starts=4), plant=plant)
     res = identify(cal.identification.measured, robot, "consistent")
-    sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
+    sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot),
+                                  plant=plant)
     res_sweep = identify_with_sweep(cal.identification.measured, sweep.measured, robot).result
     pre = fit_presliding(record_presliding_test(robot, seed=1, run=3,
-                                                q_start=guide_start_pose(robot)).measured, robot)
+                                                q_start=guide_start_pose(robot),
+                                                plant=plant).measured, robot)
     print("presliding test: z0 [1e-4 rad] " + " ".join(f"{z:.2f}" for z in 1e4 * pre.presliding)
           + "; level [N·m] " + " ".join(f"{g:.2f}" for g in pre.level))
     rng = np.random.default_rng(0)
@@ -90,7 +97,7 @@ def main() -> None:
             magnitude = 20.0 + 80.0 * (k % 5) / 4.0
             k += 1
             force = magnitude * d
-            sim = SimRobot(robot, SimConfig(seed=1, run=100 + k), q0=q0,
+            sim = SimRobot(robot, SimConfig(seed=1, run=100 + k, plant=plant), q0=q0,
                            operator=ConstantWrench((*force, 0.0, 0.0, 0.0), 1.0, 3.0))
             log = hold(sim, 3.5)
             slip.append(1e3 * float(np.abs(log.truth.q - q0).max()))

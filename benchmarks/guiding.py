@@ -46,6 +46,7 @@ from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import release_overruns
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
 from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import (
     PUSH_MASS_KG,
     SimSessionConfig,
@@ -91,6 +92,9 @@ def main() -> None:
                         help="use these parameters instead of calibrating (e.g. the "
                              "guiding_params.toml an earlier run wrote into --out)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/out"))
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     robot = load_robot("er20")
@@ -99,8 +103,10 @@ def main() -> None:
         print(f"Parameters: {args.params}")
     else:
         cal = record_calibration_set(robot, seed=1, duration=60.0,
-                                     excitation_config=ExcitationConfig(starts=4))
-        sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot))
+                                     excitation_config=ExcitationConfig(starts=4),
+                                     plant=args.plant)
+        sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot),
+                                      plant=args.plant)
         sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
         r = sc.result
         path = save_params(args.out / "guiding_params.toml", robot, r.method, r.params,
@@ -109,18 +115,19 @@ def main() -> None:
         print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
               + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + f" N·m -> {path}")
     if "1" in args.sections:
-        section_rest(robot, pf, args.poses, args.rest_seconds)
+        section_rest(robot, pf, args.poses, args.rest_seconds, args.plant)
     if "2" in args.sections:
-        section_push(robot, pf, args.out)
+        section_push(robot, pf, args.out, args.plant)
     if "3" in args.sections or "5" in args.sections:
-        timed = section_paths(robot, pf, args.out)
+        timed = section_paths(robot, pf, args.out, args.plant)
     if "4" in args.sections:
-        section_random(robot, pf, args.random)
+        section_random(robot, pf, args.random, args.plant)
     if "5" in args.sections:
         section_cycle_time(robot, pf, timed, args.reference)
 
 
-def section_rest(robot: Robot, pf: ParamsFile, poses_n: int, seconds: float) -> None:
+def section_rest(robot: Robot, pf: ParamsFile, poses_n: int, seconds: float,
+                 plant: str = PLANT_NAMES[0]) -> None:
     """1. Rest, no force, random poses, both controllers."""
     print(f"\n1. Rest, no force: {poses_n} random poses × {seconds:g} s")
     rng = np.random.default_rng(0)
@@ -130,7 +137,7 @@ def section_rest(robot: Robot, pf: ParamsFile, poses_n: int, seconds: float) -> 
         vmax, drift, nonzero, faults = 0.0, 0.0, 0, 0
         for k, q0 in enumerate(poses):
             s = run_sim_session(robot, pf, SimSessionConfig(
-                operator="rest", duration_s=seconds, q0=tuple(q0), run=600 + k,
+                operator="rest", duration_s=seconds, q0=tuple(q0), run=600 + k, plant=plant,
                 loop=LoopConfig(guiding=GuidingConfig(controller=ctl))))
             vmax = max(vmax, s.summary.max_linear_speed, s.summary.max_angular_speed)
             drift = max(drift, s.summary.rest_drift_m or 0.0)
@@ -141,14 +148,15 @@ def section_rest(robot: Robot, pf: ParamsFile, poses_n: int, seconds: float) -> 
               f"{1000 * drift:.2f} mm, faults {faults}")
 
 
-def section_push(robot: Robot, pf: ParamsFile, out: Path) -> None:
+def section_push(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NAMES[0]
+                 ) -> None:
     """2. Push +x with 40 N, both controllers; Fig. 4."""
     print(f"\n2. Push +x, 40 N from 1 s to 4 s, virtual mass {PUSH_MASS_KG:g} kg "
           "(Table IV's 1000 kg would reach 0.075 m/s)")
     logs = {}
     for ctl in CONTROLLERS:
         guiding = replace(light_guiding(), controller=ctl)
-        s = run_sim_session(robot, pf, SimSessionConfig(operator="push-x",
+        s = run_sim_session(robot, pf, SimSessionConfig(operator="push-x", plant=plant,
                                                         loop=LoopConfig(guiding=guiding)))
         log = logs[ctl] = s.result.log
         v = log.twist_cmd_base[:, :3]
@@ -167,12 +175,13 @@ def section_push(robot: Robot, pf: ParamsFile, out: Path) -> None:
                                      out / "fig4_push_x.png"))
 
 
-def section_paths(robot: Robot, pf: ParamsFile, out: Path) -> list[TimedSession]:
+def section_paths(robot: Robot, pf: ParamsFile, out: Path, plant: str = PLANT_NAMES[0]
+                  ) -> list[TimedSession]:
     """3. Diagonal and seam sessions (Fig. 5), probed for section 5."""
     print("\n3. Diagonal and seam sessions (virtual friction)")
     paths, targets, timed = {}, {}, []
     for op in ("diagonal", "seam"):
-        cfg = SimSessionConfig(operator=op)
+        cfg = SimSessionConfig(operator=op, plant=plant)
         probe: list[ProbeDriver] = []
 
         def wrap(d: Driver, keep: list[ProbeDriver] = probe) -> Driver:
@@ -197,7 +206,8 @@ def section_paths(robot: Robot, pf: ParamsFile, out: Path) -> list[TimedSession]
     return timed
 
 
-def section_random(robot: Robot, pf: ParamsFile, sessions: int) -> None:
+def section_random(robot: Robot, pf: ParamsFile, sessions: int, plant: str = PLANT_NAMES[0]
+                   ) -> None:
     """4. Random pushes: travel beyond the shortest stop after each release."""
     light = light_guiding()
     a_max = light.limits.max_linear_acceleration
@@ -206,7 +216,8 @@ def section_random(robot: Robot, pf: ParamsFile, sessions: int) -> None:
     overruns, faults = [], []
     for k in range(sessions):
         s = run_sim_session(robot, pf, SimSessionConfig(operator="random", operator_seed=k,
-                                                        loop=LoopConfig(guiding=light)))
+                                                        loop=LoopConfig(guiding=light),
+                                                        plant=plant))
         over = release_overruns(s.result.log, a_max)
         if over is not None:  # the simulator always records the applied wrench
             overruns.append(over)

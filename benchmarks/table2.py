@@ -24,6 +24,7 @@ from leadthrough.identification.plots import plot_torque_fit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot import load_robot
 from leadthrough.sim.calibration_set import compare_on_calibration_set, record_calibration_set
+from leadthrough.sim.plant import PLANT_NAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 UR10E = ROOT.parent / "shared" / "data" / "ur10e"
@@ -33,20 +34,20 @@ UR10E_VAL = ["validation/ur-20_01_17-ptp_10_points.csv",
              "identification/ur-20_02_12-50sec_12harm.csv"]
 
 
-def simulated(out: Path, seed: int, quick: bool) -> dict:
+def simulated(out: Path, seed: int, quick: bool, plant: str = PLANT_NAMES[0]) -> dict:
     robot = load_robot("er20")
     duration = 20.0 if quick else 60.0
     exc = ExcitationConfig(starts=2 if quick else 4, seed=0)
     t0 = time.perf_counter()
     cal = record_calibration_set(robot, seed=seed, duration=duration, excitation_config=exc,
-                                 progress=print)
+                                 progress=print, plant=plant)
     cfg = IdentifyConfig()
     result = compare_on_calibration_set(robot, cal, METHODS, cfg,
                                         progress=lambda s: print("  " + s))
     comp, floors = result.comparison, result.floors
     table = format_table2(comp, floors)
     ratios = ratio_summary(comp, floors)
-    print(f"\nTable II, simulated er20 (seed {seed}, {duration:g} s at 1 kHz, "
+    print(f"\nTable II, simulated er20 ({plant} plant, seed {seed}, {duration:g} s at 1 kHz, "
           f"excitation cond {cal.excitation.condition_number:.1f}):\n{table}\n")
     for label, r in ratios.items():
         print(f"{label}: J ols-cv {r['ols-cv']:.2f}, ols-cbrt {r['ols-cbrt']:.2f}, proposed "
@@ -107,9 +108,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/out/table2"))
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    sim = simulated(args.out, args.seed, args.quick)
+    sim = simulated(args.out, args.seed, args.quick, args.plant)
     real = real_ur10e(args.out)
     (args.out / "table2.json").write_text(json.dumps({"er20": sim, "ur10e": real}, indent=2))
     md = ["# Table II", "", "## Simulated er20", "", sim["table"], ""]

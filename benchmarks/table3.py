@@ -21,6 +21,7 @@ from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify
 from leadthrough.robot import load_robot
 from leadthrough.sim.calibration_set import record_calibration_set
+from leadthrough.sim.plant import PLANT_NAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,17 +32,21 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=PAYLOAD_RUN_S,
                         help="payload run length [s]")
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                        help="simulated plant (default realistic; ideal: the plant before "
+                             "issue 24)")
     args = parser.parse_args()
     robot = load_robot("er20")
     cal = record_calibration_set(robot, seed=1, duration=20.0 if args.quick else 60.0,
-                                 excitation_config=ExcitationConfig(starts=1 if args.quick else 4))
+                                 excitation_config=ExcitationConfig(starts=1 if args.quick else 4),
+                                 plant=args.plant)
     models = {m: identify(cal.identification.measured, robot, m) for m in ("proposed",
                                                                             "consistent")}
-    print("\nTable III (simulated er20): weight [N] from motion, payload CoM 0.1 m along the "
-          "flange axis")
+    print(f"\nTable III (simulated er20, {args.plant} plant): weight [N] from motion, payload "
+          "CoM 0.1 m along the flange axis")
     print(f"{'true [N]':>9} | " + " | ".join(f"{m:>22}" for m in models))
     table = payload_table(robot, cal, {m: r.params for m, r in models.items()}, seed=1,
-                          seconds=args.seconds)
+                          seconds=args.seconds, plant=args.plant)
     for k, weight in enumerate(PAPER_WEIGHTS_N):
         cells = [f"{rows[k].estimated_n:8.2f} ({rows[k].error_pct:+5.2f} %)"
                  for rows in table.values()]

@@ -71,11 +71,12 @@ def test_low_pass_step_response() -> None:
 
 
 def _quiet_config() -> SimConfig:
-    """A simulator of exactly the nominal model: no sensor noise, no friction, no CAD error."""
+    """A simulator of exactly the nominal model: no sensor noise, no friction, no CAD error
+    (the ideal plant: the realistic one's dress pack, drives and timing are model errors)."""
     from leadthrough.sim.drivetrain import DriveTrainConfig
     from leadthrough.sim.sensors import SensorConfig
 
-    return SimConfig(seed=1, link_deviation=0.0,
+    return SimConfig(seed=1, link_deviation=0.0, plant="ideal",
                      sensors=SensorConfig(current_noise=0.0, current_drift=0.0,
                                           current_bias=0.0, adc_bits=32),
                      drive=DriveTrainConfig(coulomb_motor=0, coulomb_gear=0, stribeck_motor=0,

@@ -101,9 +101,12 @@ def test_too_few_passes_is_a_clear_error(er20: Robot) -> None:
 
 @pytest.fixture(scope="module")
 def sweep_calibration(er20: Robot) -> tuple[object, object, object]:
+    # the ideal plant: the bounds below are its (eq. 15 + a 1 % load part; issue 24)
     cal = record_calibration_set(er20, seed=1, duration=30.0,
-                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60))
-    sweep = record_friction_sweep(er20, seed=1, run=2, q_start=guide_start_pose(er20))
+                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60),
+                                 plant="ideal")
+    sweep = record_friction_sweep(er20, seed=1, run=2, q_start=guide_start_pose(er20),
+                                  plant="ideal")
     return cal, sweep, identify_with_sweep(cal.identification.measured, sweep.measured, er20)
 
 
@@ -117,7 +120,7 @@ def test_sweep_on_the_simulator_measures_the_plants_low_speed_friction(
     and sliding at 0.25–0.4 rad/s it reads 5–10 % above eq. 15 + the static load part on J1/J2
     (the load part also grows with the friction torque itself)."""
     _, _, sc = sweep_calibration
-    sim = SimRobot(er20, SimConfig(seed=1))
+    sim = SimRobot(er20, SimConfig(seed=1, plant="ideal"))
     drive = sim.truth.drive
     eq15 = StribeckParameters(**drive.equivalent_eq15())
     # the load-dependent part at the sweep's pose (the transmitted torque is mostly gravity)
@@ -157,7 +160,7 @@ def test_push_x_with_sweep_parameters_reaches_the_cap_and_stops(
     reaches the 0.2 m/s cap without overshoot, and the robot comes to rest after release."""
     _, _, sc = sweep_calibration
     pf = ParamsFile.from_result(sc.result)  # type: ignore[attr-defined]
-    s = run_sim_session(er20, pf, SimSessionConfig(operator="push-x",
+    s = run_sim_session(er20, pf, SimSessionConfig(operator="push-x", plant="ideal",
                                                    loop=LoopConfig(guiding=light_guiding())))
     v = s.result.log.twist_cmd_base
     main = float(np.max(v[:, 0]))

@@ -12,10 +12,22 @@ from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.fileio import require_folder
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_PAYLOAD_COM_M", "check_output", "check_trajectory_limits"]
+__all__ = ["MAX_PAYLOAD_COM_M", "check_output", "check_trajectory_limits", "warm_up_seconds"]
 
 #: Farthest payload CoM from the TCP ``record`` simulates [m].
 MAX_PAYLOAD_COM_M = 1.0
+
+
+def warm_up_seconds(minutes: float) -> float:
+    """``--warm-up`` [min] of ``record`` and ``guide`` in seconds.
+
+    Raises:
+        DataError: Not a finite duration from 0 to 24 h.
+    """
+    if not (np.isfinite(minutes) and 0.0 <= minutes <= 24 * 60):
+        raise DataError("out of range", field="--warm-up", value=minutes,
+                        expected="0 <= minutes <= 1440")
+    return 60.0 * float(minutes)
 
 
 def check_output(path: Path, suffixes: tuple[str, ...]) -> None:

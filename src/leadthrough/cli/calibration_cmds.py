@@ -15,6 +15,7 @@ from leadthrough.cli.arg_checks import (
     MAX_PAYLOAD_COM_M,
     check_output,
     check_trajectory_limits,
+    warm_up_seconds,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
 from leadthrough.data.io import load_recording, save_recording
@@ -41,6 +42,7 @@ from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.robot.urdf_export import write_urdf_with_inertias
 from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import run_trajectory
 
@@ -97,6 +99,13 @@ def _register_record(sub: Any) -> None:
     p.add_argument("--trajectory", type=Path, required=True, help="trajectory CSV")
     p.add_argument("--seed", type=int, default=0, help="robot instance (true parameters)")
     p.add_argument("--run", type=int, default=0, help="recording number (sensor noise)")
+    p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                   help="simulated plant: realistic (default; model mismatch, load- and "
+                        "temperature-dependent friction) or ideal (the plant before issue 24)")
+    p.add_argument("--warm-up", type=float, default=0.0, metavar="MINUTES",
+                   help="production-like motion the realistic robot did before the recording "
+                        "[min] (default 0: a cold robot; its friction is tens of per cent "
+                        "higher than after an hour)")
     p.add_argument("--payload-mass", type=float, default=None, help="payload at the TCP [kg]")
     p.add_argument("--payload-com", type=float, nargs=3, default=None,
                    metavar=("X", "Y", "Z"),
@@ -275,7 +284,8 @@ def run_record(args: argparse.Namespace) -> int:
         raise DataError("joint count does not match the robot", source=args.trajectory,
                         field="q", value=traj.q.shape[1], expected=f"{robot.n}")
     check_trajectory_limits(args.trajectory, traj, robot)
-    config = SimConfig(seed=args.seed, run=args.run)
+    config = SimConfig(seed=args.seed, run=args.run, plant=args.plant,
+                       warm_up_s=warm_up_seconds(args.warm_up))
     t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
     q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
     qd_cmd = np.column_stack([np.interp(t, traj.time, traj.qd[:, j]) for j in range(robot.n)])
@@ -295,7 +305,8 @@ def run_record(args: argparse.Namespace) -> int:
                     robot=robot.name, sim_seed=args.seed)
     save_recording(rec, args.output)
     out = {"robot": robot.name, "samples": rec.samples, "duration_s": rec.duration,
-           "seed": args.seed, "run": args.run, "payload_mass_kg": args.payload_mass,
+           "seed": args.seed, "run": args.run, "plant": args.plant, "warm_up_min": args.warm_up,
+           "payload_mass_kg": args.payload_mass,
            "max_tracking_error_rad": float(np.max(np.abs(log.truth.q - q_cmd))),
            "output": str(args.output)}
     if args.json:

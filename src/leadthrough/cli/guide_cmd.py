@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from leadthrough.cli.arg_checks import warm_up_seconds
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
 from leadthrough.errors import DataError
 from leadthrough.fileio import require_folder
@@ -16,6 +17,7 @@ from leadthrough.robot.description import load_robot
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.record import save_session
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import (
     SimSessionConfig,
     light_guiding,
@@ -63,6 +65,12 @@ def register(sub: Any) -> None:
                    help="guide with parameters identified without a friction sweep (refused "
                         "otherwise: their friction is 15-24 %% low at guiding speeds, which "
                         "reads as a 20-50 N force against the motion)")
+    p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
+                   help="simulated plant: realistic (default) or ideal (the plant before issue "
+                        "24); the one the params were recorded on")
+    p.add_argument("--warm-up", type=float, default=0.0, metavar="MINUTES",
+                   help="production-like motion the realistic robot did before the session "
+                        "[min] (default 0: cold, as a calibration in the morning)")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -86,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
     loop = LoopConfig(guiding=replace(guiding, controller=args.controller,
                                       friction_mode=args.friction))
     cfg = SimSessionConfig(operator=args.operator, duration_s=args.duration, seed=seed,
-                           operator_seed=args.operator_seed, paced=args.realtime, loop=loop)
+                           operator_seed=args.operator_seed, paced=args.realtime, loop=loop,
+                           plant=args.plant, warm_up_s=warm_up_seconds(args.warm_up))
     require_folder(args.output)
     session = run_sim_session(robot, pf, cfg)
     save_session(session.result.log, args.output)

@@ -21,6 +21,7 @@ from leadthrough.session.plots import plot_force_velocity, plot_path_3d
 from leadthrough.session.record import SessionLog, save_session
 from leadthrough.sim.calibration_set import CalibrationSet, record_excitation
 from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.robot import SimConfig
 from leadthrough.sim.session import (
     SimSession,
@@ -62,7 +63,8 @@ class PayloadRow:
 
 def payload_table(robot: Robot, cal: CalibrationSet,
                   params: Mapping[str, DriveModelParameters], seed: int,
-                  seconds: float) -> dict[str, list[PayloadRow]]:
+                  seconds: float, plant: PlantPreset | str = PlantPreset.REALISTIC
+                  ) -> dict[str, list[PayloadRow]]:
     """Table III: each payload on its own run of the held-out trajectory, weight from motion.
 
     Each payload is recorded once and estimated with every parameter set.
@@ -73,6 +75,7 @@ def payload_table(robot: Robot, cal: CalibrationSet,
         params: Label (e.g. the method) → parameters identified on the unloaded robot.
         seed: Simulated robot instance.
         seconds: Length of each payload run [s].
+        plant: Simulated plant (the one ``cal`` was recorded on).
 
     Returns:
         Label → one row per payload of :data:`PAPER_WEIGHTS_N`.
@@ -81,7 +84,7 @@ def payload_table(robot: Robot, cal: CalibrationSet,
     rows: dict[str, list[PayloadRow]] = {label: [] for label in params}
     for k, weight in enumerate(PAPER_WEIGHTS_N):
         rec = record_excitation(robot, cal.held_out_excitation, seconds,
-                                SimConfig(seed=seed, run=10 + k),
+                                SimConfig(seed=seed, run=10 + k, plant=plant_preset(plant)),
                                 payload=Payload(weight / g, (0.0, 0.0, 0.1))).measured
         data = preprocess(rec, robot)
         for label, p in params.items():

@@ -6,6 +6,7 @@ from leadthrough.sim.drivetrain import DriveTrainConfig, DriveTrainTruth
 from leadthrough.sim.mujoco_model import Payload, build_mujoco_model
 from leadthrough.sim.operator import ConstantWrench, Mark, NoOperator, Operator, ScriptedOperator
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES, make_operator
+from leadthrough.sim.plant import PLANT_NAMES, PlantPreset
 from leadthrough.sim.robot import Feedback, SimConfig, SimRobot, SimTruth
 from leadthrough.sim.run import SimLog, SimTruthLog, hold, run_trajectory
 from leadthrough.sim.sensors import SensorConfig
@@ -13,6 +14,7 @@ from leadthrough.sim.session import SimSession, SimSessionConfig, replay_session
 
 __all__ = [
     "OPERATOR_NAMES",
+    "PLANT_NAMES",
     "ConstantWrench",
     "DriveTrainConfig",
     "DriveTrainTruth",
@@ -23,6 +25,7 @@ __all__ = [
     "NoOperator",
     "Operator",
     "Payload",
+    "PlantPreset",
     "ScriptedOperator",
     "SensorConfig",
     "SimConfig",

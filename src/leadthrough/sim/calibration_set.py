@@ -20,6 +20,7 @@ from leadthrough.identification.comparison import MethodComparison, compare_meth
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.robot.description import Robot
 from leadthrough.sim.mujoco_model import Payload
+from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.run import SimLog, run_trajectory
 
@@ -99,7 +100,7 @@ def _run(robot: Robot, samples: TrajectorySamples, config: SimConfig, payload: P
     """Play samples at the simulator's rate; the measured and the true-current recordings."""
     sim = SimRobot(robot, config, payload=payload, q0=samples.q[0])
     log = run_trajectory(sim, samples.q, samples.qd, progress=progress)
-    src = f"sim seed {config.seed} run {config.run}{what}"
+    src = f"sim {config.plant} plant seed {config.seed} run {config.run}{what}"
     measured = Recording(time=log.time, q=log.q, current=log.current, q_cmd=log.q_cmd,
                          robot=robot.name, source=src, sim_seed=config.seed)
     true = Recording(time=log.time, q=log.q, current=log.truth.current, robot=robot.name,
@@ -114,6 +115,8 @@ def record_friction_sweep(
     q_start: Array | None = None,
     sweep_config: FrictionSweepConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
+    plant: PlantPreset | str = PlantPreset.REALISTIC,
+    warm_up_s: float = 0.0,
 ) -> SimRecording:
     """Run a friction sweep (:func:`design_friction_sweep`) on simulated robot ``seed``.
 
@@ -124,11 +127,13 @@ def record_friction_sweep(
         q_start: Start configuration [rad], shape (n,); default: the neutral pose.
         sweep_config: Sweep layout.
         progress: Progress callback.
+        plant: Simulated plant (:mod:`leadthrough.sim.plant`).
+        warm_up_s: Production-like motion before the recording (realistic plant) [s].
 
     Returns:
         Measured and true recordings.
     """
-    config = SimConfig(seed=seed, run=run)
+    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant), warm_up_s=warm_up_s)
     layout = sweep_config if sweep_config is not None else FrictionSweepConfig()
     sweep = design_friction_sweep(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
     return _run(robot, sweep.samples, config, None, progress, " friction sweep")
@@ -141,6 +146,8 @@ def record_presliding_test(
     q_start: Array | None = None,
     test_config: PreslidingTestConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
+    plant: PlantPreset | str = PlantPreset.REALISTIC,
+    warm_up_s: float = 0.0,
 ) -> SimRecording:
     """Run a presliding test (:func:`design_presliding_test`) on simulated robot ``seed``.
 
@@ -151,11 +158,13 @@ def record_presliding_test(
         q_start: Test configuration [rad], shape (n,); default: the neutral pose.
         test_config: Test layout.
         progress: Progress callback.
+        plant: Simulated plant (:mod:`leadthrough.sim.plant`).
+        warm_up_s: Production-like motion before the recording (realistic plant) [s].
 
     Returns:
         Measured and true recordings.
     """
-    config = SimConfig(seed=seed, run=run)
+    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant), warm_up_s=warm_up_s)
     layout = test_config if test_config is not None else PreslidingTestConfig()
     test = design_presliding_test(robot, q_start, replace(layout, rate_hz=1.0 / config.timestep))
     return _run(robot, test.samples, config, None, progress, " presliding test")
@@ -167,6 +176,8 @@ def record_calibration_set(
     duration: float = 60.0,
     excitation_config: ExcitationConfig | None = None,
     progress: Callable[[str], None] | None = None,
+    plant: PlantPreset | str = PlantPreset.REALISTIC,
+    warm_up_s: float = 0.0,
 ) -> CalibrationSet:
     """Design two excitation trajectories and record both on robot instance ``seed``.
 
@@ -176,6 +187,8 @@ def record_calibration_set(
         duration: Length of each recording [s] (whole periods of the trajectory).
         excitation_config: Design settings (its seed is used for identification, +1 held out).
         progress: Called with a line of text after each step.
+        plant: Simulated plant (:mod:`leadthrough.sim.plant`).
+        warm_up_s: Production-like motion before each recording (realistic plant) [s].
 
     Returns:
         The data set.
@@ -187,8 +200,11 @@ def record_calibration_set(
     held_cfg = replace(cfg, seed=cfg.seed + 1)
     exc_h = design_excitation(robot, held_cfg)
     say(f"held-out trajectory designed: cond = {exc_h.condition_number:.1f}")
-    ident = record_excitation(robot, exc, duration, SimConfig(seed=seed, run=0))
-    held = record_excitation(robot, exc_h, duration, SimConfig(seed=seed, run=1))
+    preset = plant_preset(plant)
+    ident = record_excitation(robot, exc, duration, SimConfig(seed=seed, run=0, plant=preset,
+                                                              warm_up_s=warm_up_s))
+    held = record_excitation(robot, exc_h, duration, SimConfig(seed=seed, run=1, plant=preset,
+                                                               warm_up_s=warm_up_s))
     say(f"recorded 2 × {duration:g} s at 1 kHz; max tracking error "
         f"{1e3 * float(np.max(np.abs(ident.log.truth.q - ident.log.q_cmd))):.2f} mrad")
     return CalibrationSet(identification=ident, held_out=held, excitation=exc,

@@ -1,10 +1,14 @@
 """Sanity checks of the simulated robot against the drive model (issue: foundation, must-show 2).
 
 * :func:`check_hold`: commanded pose held under gravity; currents vs the gravity torque through
-  the drive model, i = τ_g / (R·Kt).
+  the drive model, i = (τ_g − τ_cog) / (R·Kt).
 * :func:`check_push`: a constant force at the TCP changes the currents by −J^T·F / (R·Kt) (the
   motors oppose the push, so the estimated external torque τ̂_d − τ̂_j of eq. 27 equals +J^T·F),
   plus the change of the gears' friction (presliding hysteresis, reported separately).
+
+R·Kt is the simulator's true torque constant and τ_cog its motors' cogging torque at the pose
+(on the realistic plant a few per cent off the drive file's, and nonzero; on the ideal plant the
+drive file's and zero): the checks test the simulator against its own drive model.
 
 "Within the noise" means: the error of the averaged current is well below the per-sample current
 noise σ. The averaging windows are seconds long because the sensor noise has a slow component
@@ -46,7 +50,8 @@ class HoldCheck:
         q0: Commanded pose [rad], shape (n,).
         max_joint_error: Max |q_true − q0| over the hold [rad], shape (n,).
         current_mean: Mean measured current [A], shape (n,).
-        current_expected: τ_g(q0) / (R·Kt) with the true links [A], shape (n,).
+        current_expected: (τ_g(q0) − τ_cog(q0)) / (R·Kt) with the true links and the true
+            torque constant [A], shape (n,).
         noise_sigma: Per-sample current noise σ [A], shape (n,).
     """
 
@@ -69,7 +74,7 @@ class PushCheck:
     Attributes:
         wrench_base: Applied wrench, base frame [N, N·m], shape (6,).
         delta_current: Mean current after minus before [A], shape (n,).
-        expected_delta: −J^T·F / (R·Kt) at the pose [A], shape (n,).
+        expected_delta: −J^T·F / (R·Kt) at the pose (the true R·Kt) [A], shape (n,).
         noise_sigma: Per-sample current noise σ [A], shape (n,).
         max_deflection: Max joint deflection during the push [rad].
         friction_delta: Change of the drive train's true friction torque, as current
@@ -122,7 +127,8 @@ def check_hold(robot: Robot, config: SimConfig, q0: Array, duration: float = 4.0
     """
     sim = SimRobot(robot, config, q0=q0)
     log = hold(sim, duration)
-    expected = robot.torque_to_current(sim.true_gravity_torque(q0))
+    expected = ((sim.true_gravity_torque(q0) - sim.true_cogging_torque(q0))
+                / sim.true_torque_per_amp)
     return HoldCheck(
         q0=np.asarray(q0, dtype=float),
         max_joint_error=np.max(np.abs(log.truth.q - q0), axis=0),
@@ -170,15 +176,15 @@ def check_push(
         deflection = max(deflection, float(np.max(np.abs(sim.true_state()[0] - q0))))
     pre = slice(int(0.5 / dt), int(before / dt))
     post = slice(int((before + settle) / dt), steps)
-    expected = -robot.torque_to_current(tcp_jacobian(robot, q0).T @ w)
+    expected = -(tcp_jacobian(robot, q0).T @ w) / sim.true_torque_per_amp
     return PushCheck(
         wrench_base=w,
         delta_current=current[post].mean(axis=0) - current[pre].mean(axis=0),
         expected_delta=expected,
         noise_sigma=sim.truth.current_noise,
         max_deflection=deflection,
-        friction_delta=robot.torque_to_current(friction[post].mean(axis=0)
-                                               - friction[pre].mean(axis=0)),
+        friction_delta=(friction[post].mean(axis=0) - friction[pre].mean(axis=0))
+        / sim.true_torque_per_amp,
     )
 
 

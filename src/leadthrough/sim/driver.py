@@ -87,10 +87,15 @@ class SimDriver:
 
     Args:
         sim: The simulated robot; the driver steps it, nobody else should.
+        sample_jitter_s: Sample-time jitter the driver asks the simulator for: each sample is
+            taken up to this long before the instant it is reported for
+            (:meth:`~leadthrough.sim.robot.SimRobot.set_sample_jitter`) [s]; 0: none.
     """
 
-    def __init__(self, sim: SimRobot) -> None:
+    def __init__(self, sim: SimRobot, sample_jitter_s: float = 0.0) -> None:
         self.sim = sim
+        if sample_jitter_s:
+            sim.set_sample_jitter(sample_jitter_s)
         self._n = sim.robot.n
         self._dt = float(sim.config.timestep)
         self._last_seq = 0

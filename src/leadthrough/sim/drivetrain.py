@@ -28,6 +28,11 @@ unconditionally stable; the bristle force is applied explicitly (its stiffness i
 
 Only f1 ≈ Coulomb_total + g_d, f2, q̇sm, f3, q̇sg and f4 ≈ viscous_total are representable by
 eq. 15; the presliding dynamics, load dependence and ripple are deliberate model mismatch.
+
+This is the ideal plant's drive train. The realistic plant (:mod:`leadthrough.sim.plant`) draws
+more mismatch into the same parameters (:mod:`leadthrough.sim.drive_mismatch`): Stribeck
+exponents δ other than 2 (exp(−|q̇/q̇ₛ|^δ)) and a nonlinear viscous part f_p·sgn(q̇)·|q̇|^α,
+applied explicitly with the bristle force (the linear part stays MuJoCo damping).
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.servo import mid_range_link_inertia
 
-__all__ = ["DriveTrain", "DriveTrainConfig", "DriveTrainTruth", "sample_drive_truth"]
+__all__ = ["DriveTrainConfig", "DriveTrainTruth", "sample_drive_truth"]
 
 Array = NDArray[np.float64]
 
@@ -122,6 +127,15 @@ class DriveTrainTruth:
         bristle_damping_velocity: q̇_d [rad/s].
         load_coefficient: μ [-]. ripple: ε [-]. ripple_frequency: k·R [periods/rad joint].
         ripple_phase: ϕ [rad].
+        stribeck_exponent_motor: δ of exp(−|R·q̇/q̇sm|^δ) [-] (2 on the ideal plant).
+        stribeck_exponent_gear: δ of exp(−|q̇/q̇sg|^δ) [-] (2 on the ideal plant).
+        viscous_power: f_p of the nonlinear viscous part f_p·sgn(q̇)·|q̇|^α
+            [N·m/(rad/s)^α] (0 on the ideal plant; :mod:`leadthrough.sim.drive_mismatch`).
+        viscous_exponent: α [-].
+        torque_constant_scale: True R·Kt over the drive file's [-] (1 on the ideal plant).
+        cogging: Amplitude of the motor's cogging torque, joint side [N·m] (0 on the ideal
+            plant). cogging_frequency: Its periods per rad of the joint [1/rad].
+        cogging_phase: [rad].
     """
 
     armature: Array
@@ -141,6 +155,14 @@ class DriveTrainTruth:
     ripple: Array
     ripple_frequency: Array
     ripple_phase: Array
+    stribeck_exponent_motor: Array
+    stribeck_exponent_gear: Array
+    viscous_power: Array
+    viscous_exponent: Array
+    torque_constant_scale: Array
+    cogging: Array
+    cogging_frequency: Array
+    cogging_phase: Array
 
     def equivalent_eq15(self) -> dict[str, Array]:
         """The closest eq. 15 parameters (for tests and noise floors): f1..f4, q̇sm, q̇sg."""
@@ -202,95 +224,12 @@ def sample_drive_truth(
         ripple=draw(config.ripple),
         ripple_frequency=config.ripple_periods_per_motor_rev * robot.gear_ratio,
         ripple_phase=rng.uniform(0.0, 2.0 * np.pi, n),
+        stribeck_exponent_motor=np.full(n, 2.0),
+        stribeck_exponent_gear=np.full(n, 2.0),
+        viscous_power=np.zeros(n),
+        viscous_exponent=np.ones(n),
+        torque_constant_scale=np.ones(n),
+        cogging=np.zeros(n),
+        cogging_frequency=np.zeros(n),
+        cogging_phase=np.zeros(n),
     )
-
-
-class DriveTrain:
-    """Per-step evaluation of the true friction, with preallocated buffers.
-
-    Args:
-        truth: Drive-train parameters.
-        gear_ratio: R per joint, shape (n,).
-    """
-
-    def __init__(self, truth: DriveTrainTruth, gear_ratio: Array) -> None:
-        self.truth = truth
-        n = gear_ratio.size
-        self._a_motor = gear_ratio / truth.stribeck_velocity_motor
-        self._a_gear = 1.0 / truth.stribeck_velocity_gear
-        self._a_damp = 1.0 / truth.bristle_damping_velocity
-        self._coulomb = truth.coulomb_motor + truth.coulomb_gear + truth.bristle
-        # no static friction at all (σ0 = 0): the bristle force is identically zero
-        self._inv_sigma0 = np.divide(1.0, truth.bristle_stiffness,
-                                     out=np.zeros(n), where=truth.bristle_stiffness > 0.0)
-        self.z = np.zeros(n)
-        self.static = np.zeros(n)
-        self.friction = np.zeros(n)
-        self._t1 = np.zeros(n)
-        self._t2 = np.zeros(n)
-        self._z_old = np.zeros(n)
-
-    def reset(self) -> None:
-        """Zero the bristle state (no friction carried at rest)."""
-        self.z[:] = 0.0
-        self.friction[:] = 0.0
-
-    def update(self, q: Array, qd: Array, transmitted: Array, dt: float) -> None:
-        """Advance one step: fills :attr:`static` (friction level g) and :attr:`friction`.
-
-        Args:
-            q: True joint positions [rad], shape (n,).
-            qd: True joint velocities [rad/s], shape (n,).
-            transmitted: Torque through the gear (motor torque) [N·m], shape (n,).
-            dt: Step [s].
-        """
-        tr = self.truth
-        t1, t2, st = self._t1, self._t2, self.static
-        # Stribeck curve (motor and gear side) + Coulomb.
-        np.multiply(qd, self._a_motor, out=t1)
-        np.square(t1, out=t1)
-        np.negative(t1, out=t1)
-        np.exp(t1, out=t1)
-        np.multiply(t1, tr.stribeck_motor, out=st)
-        np.multiply(qd, self._a_gear, out=t1)
-        np.square(t1, out=t1)
-        np.negative(t1, out=t1)
-        np.exp(t1, out=t1)
-        np.multiply(t1, tr.stribeck_gear, out=t1)
-        st += t1
-        st += self._coulomb
-        # Mesh ripple modulation.
-        np.multiply(q, tr.ripple_frequency, out=t1)
-        t1 += tr.ripple_phase
-        np.sin(t1, out=t1)
-        t1 *= tr.ripple
-        t1 += 1.0
-        st *= t1
-        # Load-dependent part.
-        np.abs(transmitted, out=t1)
-        t1 *= tr.load_coefficient
-        st += t1
-        # Bristles: dz/dt = v - |v| z / z_ss with z_ss = g / σ0, exact for constant v.
-        self._z_old[:] = self.z
-        np.multiply(st, self._inv_sigma0, out=t2)      # z_ss(v) [rad]
-        np.maximum(t2, 1e-15, out=t2)
-        np.abs(qd, out=t1)
-        t1 *= -dt
-        t1 /= t2
-        np.exp(t1, out=t1)                             # decay factor
-        np.sign(qd, out=self.friction)
-        t2 *= self.friction                            # steady state sgn(v)·z_ss
-        self.z -= t2
-        self.z *= t1
-        self.z += t2
-        # F = σ0·z + σ1·exp(-(v/v_d)²)·ż.
-        np.multiply(qd, self._a_damp, out=t1)
-        np.square(t1, out=t1)
-        np.negative(t1, out=t1)
-        np.exp(t1, out=t1)
-        t1 *= tr.bristle_damping
-        np.subtract(self.z, self._z_old, out=t2)
-        t2 *= 1.0 / dt
-        t2 *= t1
-        np.multiply(self.z, tr.bristle_stiffness, out=self.friction)
-        self.friction += t2

@@ -8,98 +8,34 @@ parameters, true state, true current and true external joint torque) lives apart
 Each step (dt = 1 ms):
 1. sensors read the state at t_k (encoder quantisation; current noise, bias, ADC);
 2. the cascaded servo turns the commanded position into a current command (saturated);
-3. the drive train turns current into torque R·Kt·i and sets the true friction
-   (see :mod:`leadthrough.sim.drivetrain`);
+3. the drive train turns current into torque R·Kt·i (the true Kt: on the realistic plant a few
+   per cent off the drive file's, plus the motors' cogging) and sets the true friction
+   (see :mod:`leadthrough.sim.drivetrain`, :mod:`leadthrough.sim.drive_friction`);
 4. the operator's wrench is applied at the TCP, and MuJoCo integrates to t_{k+1}.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.dynamics.regressor import standard_parameters
 from leadthrough.errors import SimulationError
 from leadthrough.robot.description import Robot
-from leadthrough.sim.drivetrain import (
-    DriveTrain,
-    DriveTrainConfig,
-    DriveTrainTruth,
-    sample_drive_truth,
-)
-from leadthrough.sim.link_truth import true_link_inertias
+from leadthrough.sim.drive_friction import DriveTrain
+from leadthrough.sim.instance import SimConfig, SimTruth, draw_true_parameters
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
-from leadthrough.sim.sensors import CurrentSensor, SensorConfig
+from leadthrough.sim.sensors import MAX_LAG_S, CurrentSensor, DelayLine
 from leadthrough.sim.servo import CascadedServo, design_servo_gains
+from leadthrough.sim.thermal import JointTemperatures
 
-__all__ = ["Feedback", "SimConfig", "SimRobot", "SimTruth"]
+__all__ = ["Feedback", "SimConfig", "SimRobot", "SimTruth", "draw_true_parameters"]
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Settings of the simulated robot.
-
-    Attributes:
-        seed: Seeds the robot instance: true parameters and sensor noise (same seed and run,
-            bit-identical recording).
-        run: Recording number on the same robot instance: each run gets independent sensor
-            noise while the true parameters stay those of ``seed``.
-        timestep: Physics and servo step [s].
-        link_deviation: True link parameters deviate from nominal by up to this (eq. 37 sense).
-        drive: How the true drive train is drawn.
-        sensors: Sensor noise model.
-        servo_bandwidth_hz: Velocity-loop bandwidth of the position servo [Hz].
-    """
-
-    seed: int = 0
-    run: int = 0
-    timestep: float = 1e-3
-    link_deviation: float = 0.3
-    drive: DriveTrainConfig = field(default_factory=DriveTrainConfig)
-    sensors: SensorConfig = field(default_factory=SensorConfig)
-    servo_bandwidth_hz: float = 20.0
-
-    def __post_init__(self) -> None:
-        if self.seed < 0 or self.run < 0:
-            raise SimulationError("must be >= 0", field="seed/run", value=(self.seed, self.run),
-                                  expected="non-negative integers")
-        if not (0.0 < self.timestep <= 0.01):
-            raise SimulationError("out of range", field="timestep", value=self.timestep,
-                                  expected="0 < timestep <= 0.01 s")
-        if not (0.0 <= self.link_deviation < 1.0):
-            raise SimulationError("out of range", field="link_deviation",
-                                  value=self.link_deviation, expected="0 <= deviation < 1")
-        if not (0.0 < self.servo_bandwidth_hz <= 0.1 / self.timestep):
-            raise SimulationError("out of range", field="servo_bandwidth_hz",
-                                  value=self.servo_bandwidth_hz,
-                                  expected=f"0 < bandwidth <= {0.1 / self.timestep:g} Hz")
-
-
-@dataclass(frozen=True)
-class SimTruth:
-    """What the simulator knows and a real robot would not tell.
-
-    Attributes:
-        inertias: True link inertias, joint order.
-        phi: True standard link parameters, shape (10·n,).
-        drive: True drive-train parameters.
-        current_bias: Current-sensor bias [A], shape (n,).
-        current_noise: Current-sensor noise σ in motion (white and slow parts combined) [A],
-            shape (n,).
-    """
-
-    inertias: tuple[pin.Inertia, ...]
-    phi: Array
-    drive: DriveTrainTruth
-    current_bias: Array
-    current_noise: Array
 
 
 @dataclass(frozen=True)
@@ -141,11 +77,12 @@ class SimRobot:
     ) -> None:
         self.robot = robot
         self.config = config = config if config is not None else SimConfig()
-        rng_truth = np.random.default_rng([config.seed, 1])
         rng_noise = np.random.default_rng([config.seed, 2, config.run])
-        inertias = true_link_inertias(robot.model, rng_truth, config.link_deviation)
-        drive = sample_drive_truth(robot, config.drive, rng_truth)
-        self._drive = DriveTrain(drive, robot.gear_ratio)
+        inertias, drive, thermal, lag = draw_true_parameters(robot, config)
+        self._drive = DriveTrain(drive, robot.gear_ratio, thermal=thermal is not None)
+        self._temperatures = None if thermal is None else JointTemperatures(thermal)
+        self._heat_every = max(1, round(config.thermal.update_period_s / config.timestep))
+        self._heat_steps = 0
         self._sensor = CurrentSensor(config.sensors, robot.max_current, rng_noise,
                                      config.timestep,
                                      bias_rng=np.random.default_rng([config.seed, 3]))
@@ -156,6 +93,8 @@ class SimRobot:
             inertias=tuple(inertias),
             phi=standard_parameters(model_true),
             drive=drive,
+            thermal=thermal,
+            current_lag_s=lag,
             current_bias=self._sensor.bias.copy(),
             current_noise=self._sensor.sigma.copy(),
         )
@@ -166,7 +105,10 @@ class SimRobot:
         n = robot.n
         self._res = robot.encoder_resolution
         self._inv_res = 1.0 / self._res
-        self._tpa = robot.torque_per_amp
+        # the true R·Kt (the servo converts with the drive file's)
+        self._tpa = robot.torque_per_amp * drive.torque_constant_scale
+        self._cogging = bool(np.any(drive.cogging != 0.0))
+        self._tau_cog = np.zeros(n)
         self._q_meas = np.zeros(n)
         self._q_cmd = np.zeros(n)
         self._qd_ff = np.zeros(n)
@@ -176,9 +118,18 @@ class SimRobot:
         self._i_true = np.zeros(n)
         self._i_meas = np.zeros(n)
         self._speed = np.zeros(n)
+        # sample timing: the current's lag and the jitter a driver asks for (sensors module)
+        self._lag_steps = lag / config.timestep
+        self._jitter_steps = 0.0
+        self._rng_jitter = np.random.default_rng([config.seed, 8, config.run])
+        self._delay = None if lag == 0.0 else DelayLine(n, MAX_LAG_S / config.timestep)
+        self._q_jittered = np.zeros(n)
+        self._q_read = self._q_meas
         self._seq = 0
         self._build()
         self.reset(robot.neutral() if q0 is None else q0)
+        if config.warm_up_s > 0.0:
+            self.warm_up(config.warm_up_s)
 
     # ----------------------------------------------------------------------------------- setup
     def _build(self) -> None:
@@ -189,6 +140,61 @@ class SimRobot:
         self.mj_data = mujoco.MjData(self.mj_model)
         self._tcp_site = mujoco.mj_name2id(self.mj_model, mujoco.mjtObj.mjOBJ_SITE, TCP_SITE)
         self._tcp_body = int(self.mj_model.site_bodyid[self._tcp_site])
+        self._sync_thermal()
+
+    # ---------------------------------------------------------------------------- temperature
+    def _sync_thermal(self) -> None:
+        """Give the drive train and MuJoCo's damping the friction scales of the temperatures."""
+        temps = self._temperatures
+        if temps is None:
+            return
+        self._drive.set_temperature_scales(temps.static_scale, temps.viscous_scale)
+        np.multiply(self.truth.drive.viscous, temps.viscous_scale,
+                    out=self.mj_model.dof_damping)
+
+    def _apply_heat(self) -> None:
+        """Advance the temperatures by the losses accumulated since the last update."""
+        assert self._temperatures is not None
+        dt = self.config.timestep
+        duration = self._heat_steps * dt
+        self._temperatures.advance(self._drive.take_losses(dt) / duration, duration)
+        self._heat_steps = 0
+        self._sync_thermal()
+
+    def _thermal_or_raise(self) -> JointTemperatures:
+        if self._temperatures is None:
+            raise SimulationError("the ideal plant has no thermal model", field="plant",
+                                  value=str(self.config.plant), expected="realistic")
+        return self._temperatures
+
+    @property
+    def temperature_c(self) -> Array:
+        """Joint temperatures [°C], shape (n,) (simulator truth; realistic plant).
+
+        Raises:
+            SimulationError: On the ideal plant.
+        """
+        return self._thermal_or_raise().temperature_c.copy()
+
+    def set_temperature(self, temperature_c: Array) -> None:
+        """Set the joint temperatures [°C], shape (n,) (realistic plant).
+
+        Raises:
+            SimulationError: On the ideal plant, or bad temperatures.
+        """
+        self._thermal_or_raise().set(temperature_c)
+        self._sync_thermal()
+
+    def warm_up(self, duration_s: float) -> None:
+        """Fast-forward the joint temperatures through ``duration_s`` of production-like motion
+        (:mod:`leadthrough.sim.thermal`); the robot's state and time do not change.
+
+        Raises:
+            SimulationError: On the ideal plant, or a negative duration.
+        """
+        self._thermal_or_raise().warm_up(duration_s, self.truth.drive, self.robot,
+                                         self.config.thermal)
+        self._sync_thermal()
 
     def attach_payload(self, payload: Payload | None) -> None:
         """Attach (or with None, remove) a payload, keeping the state and settling the servo."""
@@ -219,8 +225,14 @@ class SimRobot:
         d.qpos[:] = q0
         mujoco.mj_forward(self.mj_model, d)
         hold = d.qfrc_bias.copy()
+        if self._cogging:
+            hold -= self.true_cogging_torque(q0)
         self._drive.reset()
-        self._servo.reset(self._quantise(q0), hold)
+        # the servo commands nominal torque; the true torque constant delivers the hold
+        self._servo.reset(self._quantise(q0), hold / self.truth.drive.torque_constant_scale)
+        self._q_jittered[:] = self._q_meas
+        if self._delay is not None:
+            self._delay.clear()
         self._q_cmd[:] = q0
         self._qd_ff[:] = 0.0
         self._i_true[:] = self._servo.current
@@ -263,11 +275,16 @@ class SimRobot:
         current = self._servo.update(q_meas, self._q_cmd, self._qd_ff, dt)
         self._i_true[:] = current
         np.abs(d.qvel, out=self._speed)
-        self._i_meas[:] = self._sensor.read(current, self._speed)
+        if self._delay is None:
+            self._i_meas[:] = self._sensor.read(current, self._speed)
+        else:
+            self._sample_late(current)
         np.multiply(current, self._tpa, out=self._tau_motor)
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
         mujoco.mj_step1(m, d)
         np.subtract(self._tau_motor, self._drive.friction, out=d.qfrc_applied)
+        if self._cogging:
+            self._add_cogging(d.qpos, d.qfrc_applied)
         if self.operator is not None:
             self._apply_operator()
         elif self._tau_ext.any():
@@ -275,6 +292,55 @@ class SimRobot:
             self._wrench[:] = 0.0
         mujoco.mj_step2(m, d)
         self._seq += 1
+        if self._temperatures is not None:
+            self._heat_steps += 1
+            if self._heat_steps >= self._heat_every:
+                self._apply_heat()
+
+    def set_sample_jitter(self, jitter_s: float) -> None:
+        """From now on, take each sample a random time within [0, ``jitter_s``] before the
+        instant it is reported for (positions and currents; the servo's own loop keeps its
+        clock). What a driver asks for to test timing (:mod:`leadthrough.sim.sensors`).
+
+        Args:
+            jitter_s: Largest timing error [s], from 0 (none) to one timestep.
+
+        Raises:
+            SimulationError: Out of range.
+        """
+        dt = self.config.timestep
+        if not (np.isfinite(jitter_s) and 0.0 <= jitter_s <= dt):
+            raise SimulationError("out of range", field="sample_jitter_s", value=jitter_s,
+                                  expected=f"0 <= jitter <= {dt:g} s (one timestep)")
+        self._jitter_steps = jitter_s / dt
+        if self._delay is None and jitter_s > 0.0:
+            self._delay = DelayLine(self.robot.n, MAX_LAG_S / dt)
+        self._q_read = self._q_jittered if jitter_s > 0.0 else self._q_meas
+
+    def _sample_late(self, current: Array) -> None:
+        """Measured current of a lagged (and jittered) instant; jittered positions."""
+        assert self._delay is not None
+        self._delay.push(current)
+        early = self._jitter_steps * self._rng_jitter.uniform() if self._jitter_steps else 0.0
+        self._i_meas[:] = self._sensor.read(self._delay.delayed(self._lag_steps + early),
+                                            self._speed)
+        if self._jitter_steps:
+            d = self.mj_data
+            q = self._q_jittered
+            np.multiply(d.qvel, -early * self.config.timestep, out=q)
+            q += d.qpos
+            q *= self._inv_res
+            np.rint(q, out=q)
+            q *= self._res
+
+    def _add_cogging(self, q: Array, out: Array) -> None:
+        """out += A·sin(k·R·q + ϕ), the motors' cogging torque at the joints."""
+        dr, c = self.truth.drive, self._tau_cog
+        np.multiply(q, dr.cogging_frequency, out=c)
+        c += dr.cogging_phase
+        np.sin(c, out=c)
+        c *= dr.cogging
+        out += c
 
     def _apply_operator(self) -> None:
         assert self.operator is not None
@@ -288,13 +354,15 @@ class SimRobot:
             d.qfrc_applied += self._tau_ext
 
     def read(self) -> Feedback:
-        """The last sample as a real controller reports it (positions and currents at t_k).
+        """The last sample as a real controller reports it (positions and currents at t_k; on
+        the realistic plant the currents of an instant the fixed lag earlier, and with a
+        sample jitter both of a random instant up to the jitter earlier).
 
         Returns:
             Time, encoder positions, measured currents and sequence number of the last step.
         """
         dt = self.config.timestep
-        return Feedback(t=(self._seq - 1) * dt if self._seq else 0.0, q=self._q_meas.copy(),
+        return Feedback(t=(self._seq - 1) * dt if self._seq else 0.0, q=self._q_read.copy(),
                         current=self._i_meas.copy(), sequence=self._seq)
 
     # ---------------------------------------------------------------------------------- truth
@@ -309,7 +377,8 @@ class SimRobot:
 
     @property
     def true_friction_torque(self) -> Array:
-        """Drive-train friction torque (all but viscous) of the last step [N·m] (truth)."""
+        """Drive-train friction torque (all but the linear viscous part) of the last step [N·m]
+        (truth)."""
         return self._drive.friction.copy()
 
     @property
@@ -321,6 +390,17 @@ class SimRobot:
     def applied_wrench(self) -> Array:
         """Wrench the operator applied in the last step, base frame [N, N·m] (truth)."""
         return self._wrench.copy()
+
+    @property
+    def true_torque_per_amp(self) -> Array:
+        """True R·Kt per joint [N·m/A], shape (n,) (simulator truth)."""
+        return self._tpa.copy()
+
+    def true_cogging_torque(self, q: Array) -> Array:
+        """The motors' cogging torque at ``q``, joint side [N·m], shape (n,) (truth)."""
+        out = np.zeros(self.robot.n)
+        self._add_cogging(np.asarray(q, dtype=float), out)
+        return out
 
     def true_gravity_torque(self, q: Array) -> Array:
         """Gravity torque of the true links (and payload) at ``q`` [N·m] (simulator truth)."""

@@ -11,6 +11,15 @@ Defaults (fractions of each joint's max current): white noise σ = 0.2 %, slow e
 with a 50 ms correlation time at joint speeds ≥ 0.05 rad/s, fading linearly to zero at rest,
 bias uniform within ±0.2 %, 12-bit ADC over ±1.25 × max current (LSB ≈ 0.06 %).
 
+Timing (the realistic plant, :mod:`leadthrough.sim.plant`): a drive controller samples its
+current loop and its encoder at different instants and hands them to the interface with
+different delays. The realistic plant's current samples are those of a fixed lag behind the
+positions, drawn per robot instance within ``current_lag_s`` (0–2 ms); a driver may also ask
+for sample-time jitter (:meth:`leadthrough.sim.robot.SimRobot.set_sample_jitter`): each sample
+is then taken a random time up to the jitter before the instant it is reported for. Both read
+the true current at fractional delays from a short ring buffer (:class:`DelayLine`, linear
+interpolation between 1 ms samples).
+
 Why this shape: real logs show far less current noise at rest than model residuals in motion.
 The UR5 of ``../shared/data/ur5-ft`` at standstill has current-derived torque σ 0.08–0.19 N·m
 unfiltered at 125 Hz (≈ 0.1 % of max torque), while calibration residuals in motion are
@@ -30,7 +39,7 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import SimulationError
 
-__all__ = ["CurrentSensor", "SensorConfig"]
+__all__ = ["CurrentSensor", "DelayLine", "SensorConfig"]
 
 Array = NDArray[np.float64]
 
@@ -48,6 +57,8 @@ class SensorConfig:
         current_bias: Bias drawn uniformly within ± this [-].
         adc_bits: ADC resolution [bits].
         adc_range: ADC full scale as a multiple of max current [-].
+        current_lag_s: Range of the realistic plant's lag of the current samples behind the
+            positions [s] (drawn once per robot instance; the ideal plant has none).
     """
 
     current_noise: float = 0.002
@@ -57,10 +68,18 @@ class SensorConfig:
     current_bias: float = 0.002
     adc_bits: int = 12
     adc_range: float = 1.25
+    current_lag_s: tuple[float, float] = (0.0, 0.002)
 
     def __post_init__(self) -> None:
+        lo, hi = self.current_lag_s
+        if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo <= hi <= MAX_LAG_S):
+            raise SimulationError("bad range", field="sensors.current_lag_s",
+                                  value=self.current_lag_s,
+                                  expected=f"0 <= low <= high <= {MAX_LAG_S:g} s")
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "current_lag_s":
+                continue
             if not (np.isfinite(v) and v >= 0):
                 raise SimulationError("must be finite and >= 0", field=f"sensors.{f.name}",
                                       value=v, expected="a finite number >= 0")
@@ -71,6 +90,50 @@ class SensorConfig:
         if not 4 <= self.adc_bits <= 32 or self.adc_range <= 0:
             raise SimulationError("bad ADC", field="sensors.adc_bits", value=self.adc_bits,
                                   expected="4..32 bits and adc_range > 0")
+
+
+#: Longest current lag plus jitter the sensor's ring buffer holds [s].
+MAX_LAG_S = 0.01
+
+
+class DelayLine:
+    """A signal a fractional number of steps ago, from a ring buffer (linear interpolation).
+
+    Args:
+        n: Signal size.
+        max_delay_steps: Longest delay asked for [steps].
+    """
+
+    def __init__(self, n: int, max_delay_steps: float) -> None:
+        self._size = int(np.ceil(max_delay_steps)) + 2
+        self._buf = np.zeros((self._size, n))
+        self._head = 0
+        self._filled = False
+        self.value = np.zeros(n)
+
+    def clear(self) -> None:
+        """Forget the past: the next sample pushed fills it."""
+        self._filled = False
+
+    def push(self, x: Array) -> None:
+        """Store the newest sample (the first one also fills the past: a signal at rest)."""
+        self._head = (self._head + 1) % self._size
+        if not self._filled:
+            self._buf[:] = x
+            self._filled = True
+        else:
+            self._buf[self._head] = x
+
+    def delayed(self, steps: float) -> Array:
+        """The signal ``steps`` (>= 0, within the buffer) before the newest sample; returns
+        :attr:`value` (an internal buffer)."""
+        whole = int(steps)
+        frac = steps - whole
+        a = self._buf[(self._head - whole) % self._size]
+        b = self._buf[(self._head - whole - 1) % self._size]
+        np.multiply(a, 1.0 - frac, out=self.value)
+        self.value += frac * b
+        return self.value
 
 
 class CurrentSensor:

@@ -28,6 +28,7 @@ from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import SessionSummary, summarize
 from leadthrough.sim.driver import InjectedFault, SimDriver
 from leadthrough.sim.operator_scripts import make_operator
+from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.robot import SimConfig, SimRobot
 
 __all__ = ["DEFAULT_SIM_SEED", "PUSH_MASS_KG", "SimSession", "SimSessionConfig",
@@ -58,6 +59,10 @@ class SimSessionConfig:
             ``loop.guiding.controller``).
         paced: Run in real time instead of as fast as possible.
         faults: Feedback faults injected by the simulated driver (safety tests).
+        plant: Simulated plant (:mod:`leadthrough.sim.plant`): the one the params were
+            identified on.
+        warm_up_s: Production-like motion the (realistic) robot did before the session [s]:
+            its friction has fallen from the cold robot's (:mod:`leadthrough.sim.thermal`).
     """
 
     operator: str = "push-x"
@@ -69,8 +74,11 @@ class SimSessionConfig:
     loop: LoopConfig = field(default_factory=LoopConfig)
     paced: bool = False
     faults: tuple[InjectedFault, ...] = ()
+    plant: PlantPreset = PlantPreset.REALISTIC
+    warm_up_s: float = 0.0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "plant", plant_preset(self.plant, "session.plant"))
         check_fields("session", self, [
             ("duration_s", self.duration_s is None or 0 < self.duration_s <= 3600,
              "0 < duration <= 3600 s"),
@@ -78,6 +86,10 @@ class SimSessionConfig:
             ("operator_seed", self.operator_seed is None
              or (isinstance(self.operator_seed, int) and self.operator_seed >= 0),
              "None or an integer >= 0"),
+            ("warm_up_s", bool(np.isfinite(self.warm_up_s)) and self.warm_up_s >= 0.0,
+             "a finite duration >= 0 s"),
+            ("warm_up_s", self.warm_up_s == 0.0 or self.plant is PlantPreset.REALISTIC,
+             "0 on the ideal plant (it has no thermal model)"),
         ], ControlError)
 
 
@@ -169,7 +181,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     op_seed = config.seed if config.operator_seed is None else config.operator_seed
     operator = make_operator(config.operator, seed=op_seed, tcp_start_base=tcp0)
     duration = operator.duration_s if config.duration_s is None else config.duration_s
-    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run), q0=q0, operator=operator)
+    sim = SimRobot(robot, SimConfig(seed=config.seed, run=config.run, plant=config.plant,
+                                    warm_up_s=config.warm_up_s), q0=q0, operator=operator)
     sim_driver = SimDriver(sim)
     for fault in config.faults:
         sim_driver.inject(fault)
@@ -182,7 +195,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
         "operator": config.operator, "controller": guiding.controller, "seed": config.seed,
-        "run": config.run, "operator_seed": op_seed, "duration_s": duration,
+        "plant": str(config.plant), "warm_up_s": config.warm_up_s, "run": config.run,
+        "operator_seed": op_seed, "duration_s": duration,
         "params_method": params.method,
         "estimator": {"method": est_cfg.method, "axes": est_cfg.axes,
                       "output_cutoff_hz": est_cfg.output_cutoff_hz, "tare_s": est_cfg.tare_s},
