@@ -29,7 +29,7 @@ import pinocchio as pin
 
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.excitation.design import ExcitationConfig
-from leadthrough.identification.api import identify, identify_with_sweep
+from leadthrough.identification.api import IdentifyConfig, identify, identify_with_sweep
 from leadthrough.identification.presliding import fit_presliding
 from leadthrough.robot import load_robot
 from leadthrough.robot.poses import guide_start_pose
@@ -56,7 +56,9 @@ def main() -> None:
     plant = args.plant
     cal = record_calibration_set(robot, seed=1, duration=60.0,
                                  excitation_config=ExcitationConfig(starts=4), plant=plant)
-    res = identify(cal.identification.measured, robot, "consistent")
+    res = identify(cal.identification.measured, robot, "consistent",
+                   # eq. 21 as the paper writes it (no load term): the README's figures
+                   IdentifyConfig(load_friction=False))
     sweep = record_friction_sweep(robot, seed=1, run=2, q_start=guide_start_pose(robot),
                                   plant=plant)
     res_sweep = identify_with_sweep(cal.identification.measured, sweep.measured, robot).result

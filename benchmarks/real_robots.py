@@ -36,7 +36,8 @@ sys.path.insert(0, str(ROOT / "examples" / "real" / "kr300"))
 from hydraulics import without_counterbalance  # noqa: E402
 
 
-def _ur10e() -> tuple[Robot, str, Recording, dict[str, Recording]]:
+def ur10e_logs() -> tuple[Robot, str, Recording, dict[str, Recording]]:
+    """The UR10e: robot, identification run's label, the run, and the held-out runs."""
     folder = ROOT / "examples" / "real" / "ur10e"
     cmap = folder / "columns.toml"
     d = DATA / "ur10e"
@@ -48,7 +49,8 @@ def _ur10e() -> tuple[Robot, str, Recording, dict[str, Recording]]:
         {Path(k).name.replace("ur-20_", ""): v for k, v in held.items()}
 
 
-def _kr300() -> tuple[Robot, str, Recording, dict[str, Recording]]:
+def kr300_logs() -> tuple[Robot, str, Recording, dict[str, Recording]]:
+    """The KR300 (A2's counterbalance removed): as :func:`ur10e_logs`."""
     folder = ROOT / "examples" / "real" / "kr300"
     d = DATA / "kr300"
 
@@ -62,7 +64,8 @@ def _kr300() -> tuple[Robot, str, Recording, dict[str, Recording]]:
 
 def run_robot(robot: Robot, id_label: str, ident: Recording, held: dict[str, Recording]
               ) -> dict:
-    cfg = IdentifyConfig()
+    # eq. 21 as the paper writes it (no load term): the README's figures
+    cfg = IdentifyConfig(load_friction=False)
     rows = {}
     for m in METHODS:
         res = identify(ident, robot, m, cfg)
@@ -103,7 +106,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     results = {}
     md = ["# Calibration on real robots", ""]
-    for name, loader in (("UR10e", _ur10e), ("KR300", _kr300)):
+    for name, loader in (("UR10e", ur10e_logs), ("KR300", kr300_logs)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DataWarning)
             robot, label, ident, held = loader()

@@ -18,7 +18,7 @@ from leadthrough.demo.guiding_steps import PAPER_WEIGHTS_N, PAYLOAD_RUN_S, paylo
 from leadthrough.errors import DataWarning
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.excitation.design import ExcitationConfig
-from leadthrough.identification.api import identify
+from leadthrough.identification.api import IdentifyConfig, identify
 from leadthrough.robot import load_robot
 from leadthrough.sim.calibration_set import record_calibration_set
 from leadthrough.sim.plant import PLANT_NAMES
@@ -40,8 +40,10 @@ def main() -> None:
     cal = record_calibration_set(robot, seed=1, duration=20.0 if args.quick else 60.0,
                                  excitation_config=ExcitationConfig(starts=1 if args.quick else 4),
                                  plant=args.plant)
-    models = {m: identify(cal.identification.measured, robot, m) for m in ("proposed",
-                                                                            "consistent")}
+    # eq. 21 as the paper writes it (no load term): the README's figures
+    cfg = IdentifyConfig(load_friction=False)
+    models = {m: identify(cal.identification.measured, robot, m, cfg)
+              for m in ("proposed", "consistent")}
     print(f"\nTable III (simulated er20, {args.plant} plant): weight [N] from motion, payload "
           "CoM 0.1 m along the flange axis")
     print(f"{'true [N]':>9} | " + " | ".join(f"{m:>22}" for m in models))
@@ -66,7 +68,7 @@ def main() -> None:
         print("\nReal UR10e: identified on the no-load run, payload from the Load run "
               "(true 2.805 kg)")
         for m in ("ols-cv", "proposed", "consistent"):
-            res = identify(unloaded, robot_ur, m)
+            res = identify(unloaded, robot_ur, m, cfg)
             est = estimate_payload(loaded, robot_ur, res.params, "motion")
             print(f"  {m:<10} {est.mass_kg:.3f} kg ({100 * (est.mass_kg - 2.805) / 2.805:+.1f} %)")
 

@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -69,10 +70,13 @@ CONTACT_N = 2.0                  # ‖F_sensor‖ above this: somebody pushes [N
 AXES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
 
 
-def identify_on(robot: Robot, recs: list[Recording], methods: tuple[str, ...]
-                ) -> dict[str, IdentificationResult]:
-    """Identify every method on the pre-processed, concatenated no-contact recordings."""
-    cfg = IdentifyConfig()
+def identify_on(robot: Robot, recs: list[Recording], methods: tuple[str, ...],
+                load_friction: bool = False) -> dict[str, IdentificationResult]:
+    """Identify every method on the pre-processed, concatenated no-contact recordings.
+
+    ``load_friction``: our methods also fit the load-dependent friction (the baseline ols-cv
+    never does: it is ref. [7] as published). The README's figures are without it."""
+    cfg = IdentifyConfig(load_friction=False)
     parts = [preprocess(r, robot, cfg.preprocess) for r in recs]
     def cat(name: str) -> Array:
         return np.concatenate([np.asarray(getattr(p, name), dtype=float) for p in parts])
@@ -81,7 +85,8 @@ def identify_on(robot: Robot, recs: list[Recording], methods: tuple[str, ...]
                          torque=cat("torque"), moving=np.concatenate([p.moving for p in parts]),
                          rate_hz=parts[0].rate_hz,
                          source=" + ".join(str(p.source) for p in parts))
-    return {m: identify(data, robot, m, cfg) for m in methods}
+    ours = replace(cfg, load_friction=load_friction)
+    return {m: identify(data, robot, m, cfg if m == "ols-cv" else ours) for m in methods}
 
 
 def estimate(robot: Robot, res: IdentificationResult, rec: Recording, method: str, axes: str,
@@ -236,6 +241,8 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--proposed", action="store_true",
                         help="also the paper's proposed method (about 1 min more per set)")
+    parser.add_argument("--load-friction", action="store_true",
+                        help="ours (consistent) with the load-dependent friction")
     args = parser.parse_args()
     if not DATA.is_dir():
         print(f"{DATA} not found: the UR5 F/T logs are not shipped with the package")
@@ -245,7 +252,7 @@ def main() -> None:
     recs = {name: load_run(DATA, name) for name in RUNS}
     ours = {"consistent": "ours consistent"} | ({"proposed": "ours proposed"}
                                                   if args.proposed else {})
-    ids = {k: identify_on(robot, [recs[r] for r in v], ("ols-cv", *ours))
+    ids = {k: identify_on(robot, [recs[r] for r in v], ("ols-cv", *ours), args.load_friction)
            for k, v in ID_SETS.items()}
     fts = align_all(robot, recs, ids["No9_NoDist"]["ols-cv"])
     for id_name, res in ids.items():

@@ -34,7 +34,7 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
     "teach": ("control", "estimation", "identification", "drivers"),
 }
 #: The simulator and the apps (the apps wire everything together).
-APPS = ("sim", "cli", "demo", "report")
+APPS = ("sim", "cli", "demo", "report", "pendant")
 #: Only these import them.
 MAY_IMPORT_APPS = (*APPS, "__main__")
 

@@ -38,7 +38,9 @@ def test_demo_quick_writes_summary(tmp_path: Path, capsys: pytest.CaptureFixture
     assert saved["guiding"]["rest/velocity"]["rest_drift_m"] > 0.0  # the baseline drifts
     for name in ("report.html", "report.md", "path.json", "path.csv", "fig3.png", "fig4.png",
                  "fig5.png", "fig6.png", "params_consistent.toml",
-                 "session_seam_virtual-friction.parquet"):
+                 "session_seam_virtual-friction.parquet",
+                 # the taught seam as robot programs, each solved back before it was written
+                 "seam.script", "seam.src", "seam.dat", "seam.ls", "seam.mod"):
         assert (tmp_path / name).is_file(), name
     assert saved["teach"]["waypoints"] >= 2
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp files left

@@ -457,11 +457,12 @@ def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
     assert est.mass_kg == pytest.approx(-1.0, abs=0.05) and est.com_tcp is None
 
 
-@pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt"])
+@pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt", "stribeck-load",
+                                   "cbrt-load"])
 def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: str) -> None:
     """The estimator's per-sample model (its identified links in Pinocchio, its compiled
     friction with the smoothed sign, rotor inertia and offset) equals the offline eq. 21 for
-    |q̇| > v_ε."""
+    |q̇| > v_ε; with a load-dependent Coulomb level, given the same τ_load (the link torque)."""
     from dataclasses import replace
 
     from leadthrough.dynamics import FrictionModel, model_torque
@@ -480,7 +481,9 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
         "coulomb-viscous": replace(base, coulomb=12 * ones, viscous=3 * ones),
         "cbrt": replace(base, friction_model=FrictionModel.CBRT,
                         coulomb=12 * ones, viscous=3 * ones, cbrt=4 * ones),
-    }[model]
+    }[model.removesuffix("-load")]
+    if model.endswith("-load"):
+        params = replace(params, load_friction=np.linspace(0.01, 0.1, n))
     rt = IdentifiedModel(er20, params)
     rng = np.random.default_rng(3)
     out, sign, friction = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -488,8 +491,9 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
         q = rng.uniform(er20.lower_limits, er20.upper_limits)
         qd = rng.choice([-1.0, 1.0], n) * rng.uniform(0.03, 2.0, n)
         qdd = rng.normal(size=n)
-        smoothed_friction(qd, np.full(n, 1 / 0.02), rt.friction[0], sign, friction)
-        out[:] = pin.rnea(rt.model, rt.data, q, qd, qdd) + friction + rt.rotor * qdd + rt.offset
+        links = pin.rnea(rt.model, rt.data, q, qd, qdd)
+        smoothed_friction(qd, np.full(n, 1 / 0.02), rt.friction[0], links, sign, friction)
+        out[:] = links + friction + rt.rotor * qdd + rt.offset
         expected = model_torque(er20, params, q[None], qd[None], qdd[None])[0]
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-9)
 

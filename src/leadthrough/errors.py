@@ -15,6 +15,7 @@ __all__ = [
     "ControlError",
     "DataError",
     "DataWarning",
+    "DriverError",
     "LeadthroughError",
     "RobotFileError",
     "SimulationError",
@@ -90,6 +91,11 @@ class TeachError(LeadthroughError):
 class ControlError(LeadthroughError):
     """The guiding controller was configured with invalid settings or started from an invalid
     state (pose outside the joint limits or the workspace box, missing optional package)."""
+
+
+class DriverError(LeadthroughError):
+    """A robot controller cannot be reached, refused the stream or a request, does not match
+    the robot file (joint count, units, limits), or its link broke mid-session."""
 
 
 def check_fields(prefix: str, obj: Any, checks: list[tuple[str, bool, str]],

@@ -16,8 +16,11 @@ from leadthrough import __version__
 from leadthrough.cli import (
     calibration_cmds,
     demo_cmd,
+    emulate_cmd,
+    friction_refresh_cmd,
     guide_cmd,
     payload_cmd,
+    pendant_cmd,
     robots_cmd,
     teach_cmd,
 )
@@ -36,6 +39,8 @@ _EPILOG = """examples:
   leadthrough payload loaded.parquet --robot er20 --params params.toml
   leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
+  leadthrough emulate ur-rtde --robot ur5 --seed 1   an emulated controller on its real protocol
+  leadthrough pendant                   the live browser pendant on the simulated robot
 """
 
 
@@ -61,10 +66,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     robots_cmd.register(sub)
     calibration_cmds.register(sub)
+    friction_refresh_cmd.register(sub)
     payload_cmd.register(sub)
     guide_cmd.register(sub)
     teach_cmd.register(sub)
+    pendant_cmd.register(sub)
     demo_cmd.register(sub)
+    emulate_cmd.register(sub)
     return parser
 
 

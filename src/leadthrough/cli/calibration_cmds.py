@@ -18,6 +18,7 @@ from leadthrough.cli.arg_checks import (
     warm_up_seconds,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
+from leadthrough.cli.record_robot import add_driver_arguments, record_on_robot
 from leadthrough.data.io import load_recording, save_recording
 from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
@@ -77,6 +78,10 @@ def _register_excite(sub: Any) -> None:
     p.add_argument("--sweep", action="store_true",
                    help="instead, a friction sweep: constant-velocity passes out and back at "
                         "10 speeds, all joints at once (about 45 s)")
+    p.add_argument("--friction-check", action="store_true",
+                   help="instead, a friction check (4 speeds out and back, ~15 s) for "
+                        "refresh-friction: run it before guiding on a robot whose friction "
+                        "has drifted since its calibration (warm, or cold)")
     p.add_argument("--presliding", action="store_true",
                    help="instead, a presliding test: out-and-back excursions of 0.03–1.5 mrad "
                         "at rest, all joints at once (about 80 s)")
@@ -89,27 +94,35 @@ def _register_excite(sub: Any) -> None:
 
 
 def _register_record(sub: Any) -> None:
-    p = sub.add_parser("record", help="run a trajectory on the simulated robot",
+    p = sub.add_parser("record", help="run a trajectory on the simulated robot or a robot",
                        formatter_class=_RAW,
-                       description="Run a joint trajectory on the simulated robot (position "
-                                   "mode) and log q and motor current at 1 kHz.",
-                       epilog="example: leadthrough record --robot er20 --trajectory traj.csv "
-                              "-o rec.parquet")
+                       description="Run a joint trajectory (an excitation, a friction sweep or a "
+                                   "presliding test from `excite`) and log q and the motor "
+                                   "currents (or joint torques): on the simulated robot at 1 kHz, "
+                                   "or with --driver on a robot controller at its own cycle, "
+                                   "after a slow approach to the trajectory's start.",
+                       epilog="examples:\n  leadthrough record --robot er20 --trajectory traj.csv "
+                              "-o rec.parquet\n  leadthrough record --driver fanuc-j519 --host "
+                              "192.168.1.10 --robot er20 --trajectory traj.csv -o rec.parquet")
     p.add_argument("--robot", default="er20")
     p.add_argument("--trajectory", type=Path, required=True, help="trajectory CSV")
-    p.add_argument("--seed", type=int, default=0, help="robot instance (true parameters)")
-    p.add_argument("--run", type=int, default=0, help="recording number (sensor noise)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="simulated robot instance (true parameters; default 0)")
+    p.add_argument("--run", type=int, default=None,
+                   help="simulated recording number (sensor noise; default 0)")
     p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
                    help="simulated plant: realistic (default; model mismatch, load- and "
                         "temperature-dependent friction) or ideal (the plant before issue 24)")
     p.add_argument("--warm-up", type=float, default=0.0, metavar="MINUTES",
-                   help="production-like motion the realistic robot did before the recording "
-                        "[min] (default 0: a cold robot; its friction is tens of per cent "
-                        "higher than after an hour)")
-    p.add_argument("--payload-mass", type=float, default=None, help="payload at the TCP [kg]")
+                   help="simulated production-like motion the realistic robot did before the "
+                        "recording [min] (default 0: a cold robot; its friction is tens of per "
+                        "cent higher than after an hour)")
+    p.add_argument("--payload-mass", type=float, default=None,
+                   help="simulated payload at the TCP [kg]")
     p.add_argument("--payload-com", type=float, nargs=3, default=None,
                    metavar=("X", "Y", "Z"),
                    help="payload CoM in the TCP frame [m] (with --payload-mass; default 0 0 0.05)")
+    add_driver_arguments(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="recording .parquet/.csv")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_record)
@@ -134,6 +147,10 @@ def _register_identify(sub: Any) -> None:
     p.add_argument("--friction-sweep", type=Path, default=None, metavar="REC",
                    help="recording of a friction sweep (excite --sweep, then record): the "
                         "friction curve is measured from it (consistent method only)")
+    p.add_argument("--load-friction", action=argparse.BooleanOptionalAction,
+                   default=IdentifyConfig.load_friction,
+                   help="also identify the load-dependent Coulomb friction f_cL (level "
+                        "f_c0 + f_cL·|τ_load|; ols-cv, ols-cbrt and consistent without a sweep)")
     p.add_argument("--presliding-test", type=Path, default=None, metavar="REC",
                    help="recording of a presliding test (excite --presliding, then record): "
                         "each joint's presliding length z0 is measured from it and written to "
@@ -193,7 +210,9 @@ def _identify_config(args: argparse.Namespace) -> IdentifyConfig:
     proposed = ProposedConfig(seed=getattr(args, "seed", 0),
                               bound=bound if bound is not None else 0.3)
     return IdentifyConfig(preprocess=pre, proposed=proposed,
-                          consistent=ConsistentConfig(bound=bound))
+                          consistent=ConsistentConfig(bound=bound),
+                          load_friction=getattr(args, "load_friction",
+                                                IdentifyConfig.load_friction))
 
 
 def stats_json(robot: Robot, stats: ResidualStats) -> dict[str, Any]:
@@ -232,7 +251,7 @@ def run_excite(args: argparse.Namespace) -> int:
     """Execute ``leadthrough excite``."""
     check_output(args.output, (".csv",))
     robot = load_robot(args.robot)
-    if args.sweep or args.presliding:
+    if args.sweep or args.presliding or args.friction_check:
         return excite_friction_experiment(args, robot)
     if args.start is not None:
         raise DataError("a start pose is for the friction experiments only", field="--start",
@@ -284,7 +303,10 @@ def run_record(args: argparse.Namespace) -> int:
         raise DataError("joint count does not match the robot", source=args.trajectory,
                         field="q", value=traj.q.shape[1], expected=f"{robot.n}")
     check_trajectory_limits(args.trajectory, traj, robot)
-    config = SimConfig(seed=args.seed, run=args.run, plant=args.plant,
+    if args.driver is not None:
+        return record_on_robot(args, robot, traj)
+    args.seed = 0 if args.seed is None else args.seed
+    config = SimConfig(seed=args.seed, run=0 if args.run is None else args.run, plant=args.plant,
                        warm_up_s=warm_up_seconds(args.warm_up))
     t = np.arange(traj.time[0], traj.time[-1] + 0.5 * config.timestep, config.timestep)
     q_cmd = np.column_stack([np.interp(t, traj.time, traj.q[:, j]) for j in range(robot.n)])
@@ -305,7 +327,7 @@ def run_record(args: argparse.Namespace) -> int:
                     robot=robot.name, sim_seed=args.seed)
     save_recording(rec, args.output)
     out = {"robot": robot.name, "samples": rec.samples, "duration_s": rec.duration,
-           "seed": args.seed, "run": args.run, "plant": args.plant, "warm_up_min": args.warm_up,
+           "seed": args.seed, "run": config.run, "plant": args.plant, "warm_up_min": args.warm_up,
            "payload_mass_kg": args.payload_mass,
            "max_tracking_error_rad": float(np.max(np.abs(log.truth.q - q_cmd))),
            "output": str(args.output)}

@@ -1,5 +1,6 @@
-"""``leadthrough excite --sweep`` and ``excite --presliding``: the two friction experiments,
-designed around one configuration (the guiding start pose or ``--start``)."""
+"""``leadthrough excite --sweep``, ``excite --friction-check`` and ``excite --presliding``: the
+friction experiments, designed around one configuration (the guiding start pose or
+``--start``)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
-from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
+from leadthrough.excitation.friction_sweep import (
+    FRICTION_CHECK,
+    FrictionSweepConfig,
+    design_friction_sweep,
+)
 from leadthrough.excitation.presliding import PreslidingTestConfig, design_presliding_test
 from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot.description import Robot
@@ -35,19 +40,21 @@ def excite_friction_experiment(args: argparse.Namespace, robot: Robot) -> int:
     Raises:
         DataError: Both experiments asked for, or a bad ``--start``.
     """
-    if args.sweep and args.presliding:
-        raise DataError("choose one of the two friction experiments", field="--presliding",
-                        value=True, expected="--sweep or --presliding, not both")
+    if args.sweep + args.presliding + args.friction_check > 1:
+        raise DataError("choose one of the friction experiments", field="--presliding",
+                        value=True,
+                        expected="one of --sweep, --friction-check and --presliding")
     q0 = _start(args, robot)
     out: dict[str, Any] = {"robot": robot.name}
-    if args.sweep:
-        speeds = FrictionSweepConfig().speeds
-        sweep = design_friction_sweep(robot, q0)
-        samples, meta = sweep.samples, {"kind": "friction sweep",
-                                        "speeds": " ".join(f"{v:g}" for v in speeds)}
-        out |= {"kind": "friction sweep", "duration_s": sweep.duration_s,
+    if args.sweep or args.friction_check:
+        kind = "friction check" if args.friction_check else "friction sweep"
+        layout = FRICTION_CHECK if args.friction_check else FrictionSweepConfig()
+        sweep = design_friction_sweep(robot, q0, layout)
+        samples, meta = sweep.samples, {"kind": kind,
+                                        "speeds": " ".join(f"{v:g}" for v in layout.speeds)}
+        out |= {"kind": kind, "duration_s": sweep.duration_s,
                 "speeds_rad_s": sweep.speeds.tolist()}
-        text = (f"friction sweep: {sweep.speeds.shape[0]} speeds out and back, "
+        text = (f"{kind}: {sweep.speeds.shape[0]} speeds out and back, "
                 f"{sweep.duration_s:.1f} s")
     else:
         config = PreslidingTestConfig()

@@ -4,17 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import Any
 
+import pinocchio as pin
+
 from leadthrough.errors import DataError, TeachError, UnknownRobotError
-from leadthrough.fileio import require_folder
+from leadthrough.fileio import atomic_write_text, require_folder
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.session.record import SessionLog, load_session
-from leadthrough.teach.export import line_to_dict, write_program_csv, write_program_json
+from leadthrough.teach.export import line_to_dict, program_to_dict, write_program_csv
 from leadthrough.teach.program import TaughtProgram, teach_session
+from leadthrough.teach.programs import LANGUAGES, ProgramOptions, render_robot_program
+from leadthrough.teach.programs.targets import program_name, tool_from_xyzabc
 
-__all__ = ["register", "summary"]
+__all__ = ["FORMATS", "SUFFIXES", "register", "summary"]
+
+SUFFIXES = {"json": ".json", **{k: v.suffix for k, v in LANGUAGES.items()}}
+FORMATS = tuple(SUFFIXES)
 
 _DESCRIPTION = """\
 Make the taught program of a guiding session: the measured TCP path (forward kinematics of the
@@ -23,8 +31,17 @@ Ramer-Douglas-Peucker (every mark kept), the welding line fitted between two mar
 P2) with the path's max and RMS deviation from it, and a check of the waypoints against the joint
 position and speed limits at the programmed TCP speed.
 
-The session needs at least two marks. -o writes the JSON program; a CSV of the same waypoints is
-written only if --csv names it. Nothing is written if any check fails.
+The session needs at least two marks. -o writes the program: JSON (the waypoints with joints and
+poses), or a robot program with --format urscript (.script), krl (.src + .dat), tp (FANUC .ls) or
+rapid (ABB .mod); the format defaults to -o's suffix. A robot program moves to the first
+waypoint's joints, then linearly through the waypoints with the controller's configuration data
+(KUKA Status/Turn, FANUC configuration string and turn numbers, ABB confdata), the welding line
+P1 -> P2 as one linear move at the programmed speed; --joint-space writes joint moves to the
+taught joints instead (the only choice for robots whose configuration data cannot single out the
+joints, e.g. 7-axis arms). Each program is read back and solved back with our inverse kinematics
+before it is written: it must give the taught joints to 0.01 degree.
+
+A CSV of the waypoints is written only if --csv names it. Nothing is written if any check fails.
 """
 
 _EPILOG = """\
@@ -32,6 +49,10 @@ examples:
   leadthrough teach seam.parquet -o seam.json
   leadthrough teach seam.parquet --tolerance-mm 0.5 --speed 0.05 -o seam.json --csv seam.csv
   leadthrough teach path.parquet --no-line -o path.json --json
+  leadthrough teach seam.parquet -o seam.src                      # KUKA KRL: seam.src + seam.dat
+  leadthrough teach seam.parquet -o SEAM.ls --zone-mm 2 --fanuc-cnt 30
+  leadthrough teach seam.parquet -o seam.mod --tool 0,0,350,0,0,0  # ABB RAPID, torch TCP
+  leadthrough teach seam.parquet -o seam.script --joint-space      # URScript movej
 """
 
 
@@ -42,8 +63,22 @@ def register(sub: Any) -> None:
         description=_DESCRIPTION, epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("session", type=Path, help="session .parquet written by the guiding loop")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="PATH.json",
-                   help="JSON program to write")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="PATH",
+                   help="program to write: .json, .script, .src (+ .dat), .ls or .mod")
+    p.add_argument("--format", choices=FORMATS, default=None,
+                   help="program format (default: from the suffix of -o)")
+    p.add_argument("--joint-space", action="store_true",
+                   help="robot programs: joint moves to the taught joints (movej, PTP E6AXIS, "
+                        "J P[i] joint positions, MoveAbsJ) instead of linear moves to poses")
+    p.add_argument("--zone-mm", type=float, default=1.0, metavar="MM",
+                   help="blending radius at waypoints between the marks [mm] (default 1.0; "
+                        "0 stops exactly at every waypoint)")
+    p.add_argument("--fanuc-cnt", type=int, default=50, metavar="N",
+                   help="FANUC CNT value (0-100) at blended waypoints (default 50)")
+    p.add_argument("--tool", default=None, metavar="X,Y,Z,A,B,C",
+                   help="program TCP relative to the robot file's TCP frame [mm, deg; A, B, C "
+                        "about z, y, x] (default: the robot file's TCP frame; the waypoints and "
+                        "the welding line stay those of the robot file's TCP frame)")
     p.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
                    help="also write the waypoints as CSV (joint and Cartesian, units in header)")
     p.add_argument("--tolerance-mm", type=float, default=1.0, metavar="MM",
@@ -77,15 +112,56 @@ def _line_labels(text: str) -> tuple[str, str]:
     return parts[0], parts[1]
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
-    outputs = [(args.output, ".json", "-o")]
+def _format(args: argparse.Namespace) -> str:
+    """The program format: --format, else from the suffix of -o."""
+    suffix = args.output.suffix.lower()
+    by_suffix = {v: k for k, v in SUFFIXES.items()}
+    fmt = args.format if args.format is not None else by_suffix.get(suffix)
+    if fmt is None or suffix != SUFFIXES[fmt]:
+        raise DataError("unsupported output file type", source=args.output, field="-o",
+                        value=args.output.suffix,
+                        expected=SUFFIXES[fmt] if fmt is not None
+                        else ", ".join(SUFFIXES.values()))
+    return fmt
+
+
+def _check_outputs(args: argparse.Namespace, fmt: str) -> list[Path]:
+    """The files to write (checked: folders exist, no two the same, CSV suffix)."""
+    paths = [args.output] + ([args.output.with_suffix(".dat")] if fmt == "krl" else [])
     if args.csv is not None:
-        outputs.append((args.csv, ".csv", "--csv"))
-    for path, suffix, flag in outputs:
-        if path.suffix.lower() != suffix:
-            raise DataError("unsupported output file type", source=path, field=flag,
-                            value=path.suffix, expected=suffix)
+        if args.csv.suffix.lower() != ".csv":
+            raise DataError("unsupported output file type", source=args.csv, field="--csv",
+                            value=args.csv.suffix, expected=".csv")
+        if args.csv.resolve() in {p.resolve() for p in paths}:
+            raise DataError("program and CSV outputs are the same file", source=args.csv,
+                            expected="two different files")
+    for path in [*paths, *([args.csv] if args.csv is not None else [])]:
         require_folder(path)
+    return paths
+
+
+def _options(args: argparse.Namespace, fmt: str) -> ProgramOptions:
+    """Program options from the command line (bad values: TeachError naming the flag)."""
+    if not (math.isfinite(args.zone_mm) and args.zone_mm >= 0.0):
+        raise TeachError("out of range", field="--zone-mm", value=args.zone_mm,
+                         expected="a finite blending radius ≥ 0 mm")
+    if not 0 <= args.fanuc_cnt <= 100:
+        raise TeachError("out of range", field="--fanuc-cnt", value=args.fanuc_cnt,
+                         expected="an integer 0 … 100")
+    tool = pin.SE3.Identity()
+    if args.tool is not None:
+        try:
+            values = [float(v) for v in args.tool.split(",")]
+        except ValueError:
+            values = []
+        if len(values) != 6 or not all(math.isfinite(v) for v in values):
+            raise TeachError("bad tool", field="--tool", value=args.tool,
+                             expected="six numbers X,Y,Z,A,B,C [mm, deg]")
+        tool = tool_from_xyzabc(values)
+    return ProgramOptions(name=program_name(args.output.stem, fmt), speed_m_s=args.speed,
+                          orientation_speed_rad_s=args.orientation_speed,
+                          zone_mm=args.zone_mm, tool=tool, joint_space=args.joint_space,
+                          fanuc_cnt=args.fanuc_cnt)
 
 
 def _robot_for(log: SessionLog, spec: str | None, session: Path) -> Robot:
@@ -100,7 +176,8 @@ def _robot_for(log: SessionLog, spec: str | None, session: Path) -> Robot:
 
 
 def summary(program: TaughtProgram, session: Path, output: Path,
-            csv_path: Path | None) -> dict[str, Any]:
+            csv_path: Path | None, fmt: str = "json", files: list[Path] | None = None,
+            round_trip_deg: float | None = None) -> dict[str, Any]:
     """JSON-ready figures of a taught program (as printed by ``--json``)."""
     line = program.welding_line
     return {
@@ -114,33 +191,54 @@ def summary(program: TaughtProgram, session: Path, output: Path,
             k: v for k, v in line_to_dict(line).items() if k not in ("direction", "samples")},
         "transitions": [{"t_s": e.t, "label": e.label, "cause": e.cause}
                         for e in program.transitions],
-        "output": str(output), "csv": None if csv_path is None else str(csv_path),
+        "format": fmt, "output": str(output),
+        "files": [str(f) for f in (files if files is not None else [output])],
+        "round_trip_max_deg": round_trip_deg,
+        "csv": None if csv_path is None else str(csv_path),
     }
+
+
+def _write(args: argparse.Namespace, fmt: str, program: TaughtProgram,
+           robot: Robot) -> tuple[list[Path], float | None]:
+    """Write the program (and the CSV): all files or none."""
+    worst = None
+    if fmt == "json":
+        files = {args.output: json.dumps(program_to_dict(program), indent=2) + "\n"}
+    else:
+        rendered = render_robot_program(program, robot, fmt, _options(args, fmt),
+                                        str(args.session))
+        files = {args.output.with_suffix(k): v for k, v in rendered.files.items()}
+        worst = rendered.max_round_trip_deg
+    existed = {p: p.exists() for p in files}
+    written: list[Path] = []
+    try:
+        for path, text in files.items():
+            written.append(atomic_write_text(path, text))
+        if args.csv is not None:
+            write_program_csv(program, args.csv)
+    except BaseException:
+        for path in written:
+            if not existed[path]:  # no program without its CSV
+                path.unlink(missing_ok=True)
+        raise
+    return written, worst
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough teach``."""
     line = None if args.no_line else _line_labels(args.line)
-    _check_outputs(args)
-    if args.csv is not None and args.csv.resolve() == args.output.resolve():
-        raise DataError("JSON and CSV outputs are the same file", source=args.csv,
-                        expected="two different files")
+    fmt = _format(args)
+    _check_outputs(args, fmt)
+    if fmt != "json":
+        _options(args, fmt)  # bad flags fail before the session is read
     log = load_session(args.session)
     robot = _robot_for(log, args.robot, args.session)
     program = teach_session(log, robot, tolerance_mm=args.tolerance_mm, speed_m_s=args.speed,
                             line=line, window_s=args.window_ms * 1e-3,
                             orientation_speed_rad_s=args.orientation_speed,
                             source=str(args.session))
-    existed = args.output.exists()
-    write_program_json(program, args.output)
-    if args.csv is not None:
-        try:
-            write_program_csv(program, args.csv)
-        except BaseException:
-            if not existed:  # no JSON without its CSV
-                args.output.unlink(missing_ok=True)
-            raise
-    info = summary(program, args.session, args.output, args.csv)
+    files, worst = _write(args, fmt, program, robot)
+    info = summary(program, args.session, args.output, args.csv, fmt, files, worst)
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -153,7 +251,9 @@ def run(args: argparse.Namespace) -> int:
     text += (f"; program {program.limits.program_duration_s:.2f} s at "
              f"{program.limits.programmed_speed_m_s:g} m/s, max joint speed "
              f"{100 * program.limits.max_speed_ratio:.0f} % of limit")
-    outs = str(args.output) + ("" if args.csv is None else f", {args.csv}")
+    if worst is not None:
+        text += f"; {fmt} solves back to the taught joints within {worst:.4f} deg"
+    outs = ", ".join(str(f) for f in files) + ("" if args.csv is None else f", {args.csv}")
     print(f"{text}; wrote {outs}")
     if program.transitions:
         print("note: safety transitions between the marks: " + ", ".join(

@@ -54,6 +54,7 @@ transition writes one entry of the supervisor's preallocated event ring).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,6 +71,7 @@ from leadthrough.control.guiding_types import (
 )
 from leadthrough.control.ik import DifferentialIK
 from leadthrough.control.ik_step import update_manipulability_of
+from leadthrough.control.operator_limits import adjusted_config
 from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
 from leadthrough.control.safety import Event, SafetySupervisor, State
 from leadthrough.control.safety_rules import clear_fault
@@ -107,6 +109,7 @@ class GuidingController:
     def __init__(self, robot: Robot, config: GuidingConfig | None = None,
                  noise_mean: Array | None = None, noise_std: Array | None = None) -> None:
         self.config = cfg = config if config is not None else GuidingConfig()
+        self._commissioned = cfg
         self.robot = robot
         self.n = n = robot.n
         self._auto: AutoFriction | None = None
@@ -132,6 +135,14 @@ class GuidingController:
 
     def _set_up(self, cfg: GuidingConfig) -> None:
         """The record's settings, and the state before the first reset."""
+        self._write_settings(cfg)
+        s = self._s
+        s.q_measured = math.nan       # the last finite q before the first reset
+        s.rest_s = s.release_s = s.stop_plan = math.inf
+        s.ik_scale = s.speed_scale = 1.0
+
+    def _write_settings(self, cfg: GuidingConfig) -> None:
+        """The record's settings from ``cfg`` (the state untouched)."""
         s = self._s
         s.dt = cfg.dt
         s.tool_frame = cfg.frame == "tool"
@@ -157,9 +168,6 @@ class GuidingController:
         s.stop_fraction = cfg.ik.stop_acceleration_fraction
         s.friction = cfg.virtual_friction.friction
         s.stopping_friction = cfg.virtual_friction.stopping_friction
-        s.q_measured = math.nan       # the last finite q before the first reset
-        s.rest_s = s.release_s = s.stop_plan = math.inf
-        s.ik_scale = s.speed_scale = 1.0
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
@@ -239,10 +247,59 @@ class GuidingController:
             s.resync = True
         return ok
 
+    def adjust(self, *, frame: str | None = None, axes_enabled: Sequence[bool] | None = None,
+               mass: tuple[float, float] | None = None,
+               friction: tuple[float, float] | None = None) -> GuidingConfig:
+        """Change what an operator may change: the frame, the enabled axes, the virtual mass
+        and the fixed friction, the last two clamped to ``config.operator_limits``
+        (:func:`~leadthrough.control.operator_limits.adjusted_config`).
+
+        Call it between cycles, while the controller is IDLE or in FAULT: a change of frame
+        or axes while the law is running would turn the motion (its twist and the release
+        detector's state are kept in the controller's frame). With the automatic friction,
+        eq. 36 is evaluated again in the new frame at the next cycle.
+
+        Args:
+            frame: ``"base"`` or ``"tool"``; None: unchanged.
+            axes_enabled: 6 booleans (x, y, z, ωx, ωy, ωz); None: unchanged.
+            mass: (translational [kg], rotational [kg·m²]); None: unchanged.
+            friction: (translational [N], rotational [N·m]); None: unchanged.
+
+        Returns:
+            The settings now in force (``config``), with the clamped values.
+
+        Raises:
+            ControlError: GUIDING or STOPPING, or a change ``adjusted_config`` refuses
+                (nothing is changed then).
+        """
+        state = self.state
+        if state in (State.GUIDING, State.STOPPING):
+            raise ControlError("settings change only while the robot is not guided",
+                               field="state", value=state.name,
+                               expected="IDLE or FAULT (release the enabling device)")
+        cfg = adjusted_config(self.config, self._commissioned, frame=frame,
+                              axes_enabled=axes_enabled, mass=mass, friction=friction)
+        self.config = cfg
+        self._write_settings(cfg)
+        if self._auto is not None:
+            self._s.kinematics_fresh = False   # eq. 36 again, in the new frame
+        return cfg
+
     @property
     def state(self) -> State:
         """Current safety state."""
         return self._safety.state
+
+    @property
+    def last_event(self) -> Event | None:
+        """The latest logged state transition (with the fault, its value and index), or None
+        before the first."""
+        return self._safety.last_event
+
+    @property
+    def event_count(self) -> int:
+        """Number of transitions logged since the controller was made (dropped ones too)."""
+        return self._safety.event_count
 
     @property
     def events(self) -> list[Event]:

@@ -20,6 +20,7 @@ from leadthrough.control.auto_friction import AutoFrictionConfig
 from leadthrough.control.ik import IKConfig
 from leadthrough.control.limits import CartesianLimits
 from leadthrough.control.release import ReleaseConfig
+from leadthrough.control.operator_limits import OperatorLimits
 from leadthrough.control.safety import SafetyConfig
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.velocity_baseline import VelocityBaselineConfig
@@ -76,6 +77,9 @@ class GuidingConfig:
         limits: Cartesian speed and acceleration limits (Table IV).
         ik: Differential IK settings.
         safety: Safety thresholds.
+        operator_limits: Bounds of what an operator may change at the robot (virtual mass
+            and friction; :meth:`GuidingController.adjust
+            <leadthrough.control.guiding.GuidingController.adjust>` clamps to them).
         settle_s: After the commanded motion stops, the drives settle (servo lag, the friction
             they keep): for ``settle_s + rezero_s`` the rest threshold of eq. 33 is the
             stopping friction instead of the guiding friction [s]. After a stop the gears'
@@ -99,6 +103,7 @@ class GuidingConfig:
     limits: CartesianLimits = field(default_factory=CartesianLimits)
     ik: IKConfig = field(default_factory=IKConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    operator_limits: OperatorLimits = field(default_factory=OperatorLimits)
     settle_s: float = 1.5
     rezero_s: float = 0.0
     release: ReleaseConfig = field(default_factory=ReleaseConfig)

@@ -80,6 +80,12 @@ class Event:
     index: int = -1
 
 
+def _event(e: np.void) -> Event:
+    """An :class:`Event` from a row of the event ring."""
+    return Event(float(e["t"]), State(e["from_state"]), State(e["to_state"]), Cause(e["cause"]),
+                 Fault(e["fault"]), float(e["value"]), int(e["index"]))
+
+
 def _finite(values: tuple[float, ...], n: int) -> bool:
     return len(values) == n and all(not math.isnan(v) for v in values)
 
@@ -229,10 +235,20 @@ class SafetySupervisor:
         """The logged transitions, oldest first (at most ``max_events``)."""
         ring, count = self.event_ring, int(self._s.event_count)
         cap = ring.size
-        rows = (ring[k % cap] for k in range(max(0, count - cap), count))
-        return [Event(float(e["t"]), State(e["from_state"]), State(e["to_state"]),
-                      Cause(e["cause"]), Fault(e["fault"]), float(e["value"]), int(e["index"]))
-                for e in rows]
+        return [_event(ring[k % cap]) for k in range(max(0, count - cap), count)]
+
+    @property
+    def event_count(self) -> int:
+        """Number of transitions logged so far (dropped ones included)."""
+        return int(self._s.event_count)
+
+    @property
+    def last_event(self) -> Event | None:
+        """The latest transition, or None before the first."""
+        count = int(self._s.event_count)
+        if count == 0:
+            return None
+        return _event(self.event_ring[(count - 1) % self.event_ring.size])
 
     @property
     def events_dropped(self) -> int:

@@ -54,6 +54,7 @@ from leadthrough.sim.robot import SimConfig
 from leadthrough.teach import tcp_path, teach_session, write_program_csv, write_program_json
 from leadthrough.teach.plots import plot_taught_path
 from leadthrough.teach.program import TaughtProgram
+from leadthrough.teach.programs import LANGUAGES, ProgramOptions, write_robot_program
 
 __all__ = ["DemoResult", "run_demo"]
 
@@ -180,8 +181,11 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
                  ) -> tuple[dict[str, ParamsFile], ParamsFile]:
     """Step 3: Table II with all methods, Fig. 3, and the guiding parameters (with the
     sweep). Returns the params of Table III's methods and the guiding params."""
+    # Table II compares the methods on eq. 21 as the paper writes it: no load-dependent friction
+    # (``proposed`` has none), so every method fits the same model
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
-                                                 polish_iterations=150 if quick else 300))
+                                                 polish_iterations=150 if quick else 300),
+                         load_friction=False)
     comparison = compare_on_calibration_set(robot, cal, METHODS, cfg,
                                             progress=lambda s: say("      " + s))
     comp = comparison.comparison
@@ -224,6 +228,7 @@ def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None])
     res.program = program
     res.files["path (JSON)"] = write_program_json(program, out / "path.json")
     res.files["path (CSV)"] = write_program_csv(program, out / "path.csv")
+    _robot_programs(res, robot, program, out, say)
     targets = {}
     line = program.welding_line
     if seam.p1_base is not None and seam.p2_base is not None:
@@ -240,3 +245,23 @@ def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None])
             f"{res.seam_target_errors_mm[1]:.1f} mm")
         say(f"      welding line {1e3 * line.length_m:.1f} mm, max deviation "
             f"{line.max_deviation_mm:.2f} mm, {len(program.waypoints)} waypoints{errs}")
+
+
+def _robot_programs(res: DemoResult, robot: Robot, program: TaughtProgram, out: Path,
+                    say: Callable[[str], None]) -> None:
+    """The taught seam as URScript, KUKA KRL, FANUC TP and ABB RAPID (each read back and
+    solved back to the taught joints within 0.01° before it is written): ``seam.script``,
+    ``seam.src`` + ``seam.dat``, ``seam.ls``, ``seam.mod`` (KRL and TP need the file to carry
+    the program's name)."""
+    options = ProgramOptions(name="seam", speed_m_s=0.1)
+    for language in LANGUAGES:
+        try:
+            paths = write_robot_program(program, robot, language, out / "seam",
+                                        options, source="seam session")
+        except LeadthroughError as e:  # reported, like a failed teach-in
+            say(f"      no {language} program: {e}")
+            continue
+        for path in paths:
+            res.files[f"program ({language}{path.suffix})"] = path
+    say("      robot programs: " + ", ".join(
+        path.name for key, path in res.files.items() if key.startswith("program (")))

@@ -6,8 +6,14 @@ delivers and :class:`ReplayDriver` delivers it again. The simulated robot's driv
 injection) is :class:`leadthrough.sim.driver.SimDriver`: nothing here imports the simulator.
 """
 
-from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand, WrappedDriver
+from leadthrough.drivers.protocol import (
+    ControllerState,
+    Driver,
+    DriverFeedback,
+    JointCommand,
+    WrappedDriver,
+)
 from leadthrough.drivers.replay import FeedbackTrace, RecordingDriver, ReplayDriver
 
-__all__ = ["Driver", "DriverFeedback", "FeedbackTrace", "JointCommand", "RecordingDriver",
-           "ReplayDriver", "WrappedDriver"]
+__all__ = ["ControllerState", "Driver", "DriverFeedback", "FeedbackTrace", "JointCommand",
+           "RecordingDriver", "ReplayDriver", "WrappedDriver"]

@@ -19,6 +19,14 @@ The loop, for every driver::
             ...                     # stale feedback: count it, stop after a few
         ...                         # compute the next cmd from fb
 
+Controller state and digital inputs: a real controller's driver also fills
+:attr:`DriverFeedback.state` (:class:`ControllerState` flags: E-stop, protective stop, not ready
+for streamed commands, a command not taken) and :attr:`DriverFeedback.inputs` (its digital
+inputs as a bit word, ``inputs_read`` telling whether the sample carried them), and a controller
+that reports joint torque instead of motor current (KUKA RSI) fills
+:attr:`DriverFeedback.torque`. These fields have defaults (normal state, no inputs, no torque),
+so drivers and callers that do not use them are unaffected.
+
 Pacing: :meth:`Driver.step` is where the loop waits for the next servo period. A simulated
 driver (``simulated`` true) advances its physics by one period and returns at once, so a
 simulated session runs as fast as the CPU allows (pace it with the wall clock only to watch
@@ -29,14 +37,30 @@ real time.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntFlag
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Driver", "DriverFeedback", "JointCommand", "WrappedDriver"]
+__all__ = ["ControllerState", "Driver", "DriverFeedback", "JointCommand", "WrappedDriver"]
 
 Array = NDArray[np.float64]
+
+
+class ControllerState(IntFlag):
+    """What a real controller reports about itself, as flags (0: normal, or not reported).
+
+    Each driver documents how its controller's codes map onto these (e.g. UR ``safety_mode``
+    3 is ``PROTECTIVE_STOP``, FANUC J519 status bits 0 and 2 cleared is ``NOT_READY``).
+    """
+
+    NORMAL = 0
+    ESTOP = 1             # emergency stop
+    PROTECTIVE_STOP = 2   # protective / safeguard stop
+    NOT_READY = 4         # not in the mode that executes streamed commands (servo power off,
+    #                       alarm, program not running, stream not accepted)
+    COMMAND_REJECTED = 8  # the controller did not take the last command (refused or late)
 
 
 @dataclass(slots=True, eq=False)
@@ -46,21 +70,34 @@ class DriverFeedback:
     Attributes:
         t: Sample time on the controller clock [s] (NaN before the first sample).
         q: Encoder joint positions [rad], shape (n,) (NaN before the first sample).
-        current: Measured motor currents [A], shape (n,) (NaN before the first sample).
+        current: Measured motor currents [A], shape (n,) (NaN before the first sample). A
+            controller that reports joint torque instead fills the equivalent motor current
+            ``torque / (R·Kt)`` of the robot file (see its driver) and :attr:`torque`.
         sequence: Controller sample counter: +1 per servo period, a jump means missed samples
             (-1 before the first sample).
+        state: :class:`ControllerState` flags of the sample (0: normal or not reported).
+        inputs: The controller's digital inputs, bit k = input k in the driver's numbering
+            (0 when not reported).
+        inputs_read: Whether this sample carried the digital inputs.
+        torque: Joint torques reported by the controller [N·m], shape (n,), or None when the
+            controller reports currents (or the caller did not ask for torque).
     """
 
     t: float
     q: Array
     current: Array
     sequence: int
+    state: int = 0
+    inputs: int = 0
+    inputs_read: bool = False
+    torque: Array | None = None
 
     @classmethod
-    def empty(cls, n: int) -> DriverFeedback:
-        """A feedback for ``n`` joints that holds no sample yet (NaN, sequence -1)."""
+    def empty(cls, n: int, torque: bool = False) -> DriverFeedback:
+        """A feedback for ``n`` joints that holds no sample yet (NaN, sequence -1); with a
+        torque array (NaN) if ``torque``."""
         return cls(t=float("nan"), q=np.full(n, np.nan), current=np.full(n, np.nan),
-                   sequence=-1)
+                   sequence=-1, torque=np.full(n, np.nan) if torque else None)
 
 
 @dataclass(slots=True, eq=False)

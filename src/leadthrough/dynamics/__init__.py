@@ -5,7 +5,9 @@ from leadthrough.dynamics.base_parameters import BaseParameters, compute_base_pa
 from leadthrough.dynamics.friction import (
     StribeckParameters,
     cbrt_friction,
+    coulomb_level,
     coulomb_viscous_friction,
+    load_friction_column,
     rotor_inertia_torque,
     stribeck_friction,
 )
@@ -32,10 +34,12 @@ __all__ = [
     "StribeckParameters",
     "cbrt_friction",
     "compute_base_parameters",
+    "coulomb_level",
     "coulomb_viscous_friction",
     "link_regressor",
     "link_regressor_batch",
     "link_torque",
+    "load_friction_column",
     "model_torque",
     "nominal_drive_parameters",
     "rotor_inertia_torque",

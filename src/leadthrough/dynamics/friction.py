@@ -10,6 +10,19 @@
 * :func:`coulomb_viscous_friction`: baseline [7], eq. 5: Fc·sgn(q̇) + β·q̇.
 * :func:`cbrt_friction`: baseline [22], eq. 8: Fc·sgn(q̇) + β·q̇ + γ·q̇^{1/3}.
 * :func:`rotor_inertia_torque`: eq. 16, M_j·q̈ with M_j the reflected rotor inertia.
+* :func:`coulomb_level`: the load-dependent Coulomb level f_c0 + f_cL·|τ_load| that replaces the
+  Coulomb coefficient (f1 of eq. 15, Fc of eq. 5 and 8) of every model, and
+  :func:`load_friction_column`, its regressor column |τ_load|·sgn(q̇) (∂τ_f/∂f_cL).
+
+Load-dependent friction (not in the paper): gear-tooth and bearing friction grow with the torque
+the gear transmits. Bittencourt, Wernholt, Sander-Tavallaey and Brogårdh ("An extended friction
+model to capture load and temperature effects in robot joints", IROS 2010) measured it on an
+ABB arm and added the load torque to the static friction model; Bittencourt and Axelsson
+("Modeling and experiment design for identification of wear in a robot joint under load and
+temperature uncertainties based on friction data", IEEE/ASME Trans. Mechatronics 19(5), 2014)
+use the same load dependence. Here the Coulomb level becomes f_c0 + f_cL·|τ_load| with f_cL ≥ 0
+dimensionless, τ_load the joint's transmitted (link-side) torque; f_cL = 0 is the paper's model,
+bit for bit (:func:`coulomb_level` returns f_c0 itself).
 
 Eq. 15 is defined once, here, per sample and compiled (:func:`stribeck_decay`,
 :func:`stribeck_terms`, :func:`eq15_friction`: Numba, cached on disk; NumPy ufuncs that also run
@@ -33,9 +46,11 @@ from numpy.typing import NDArray
 __all__ = [
     "StribeckParameters",
     "cbrt_friction",
+    "coulomb_level",
     "coulomb_viscous_friction",
     "eq15_friction",
     "friction_dtype",
+    "load_friction_column",
     "rotor_inertia_torque",
     "stribeck_decay",
     "stribeck_friction",
@@ -74,14 +89,44 @@ def friction_dtype(n: int) -> np.dtype[Any]:
     Fields (per joint, shape (n,), except ``stribeck``): ``coulomb`` f1 [N·m], ``viscous``
     f4 [N·m·s/rad], ``motor_stribeck`` f2 [N·m], ``motor_rate`` R/q̇sm [s/rad],
     ``gear_stribeck`` f3 [N·m], ``gear_rate`` 1/q̇sg [s/rad], ``cbrt`` γ of [22]'s cube-root
-    term [N·m·(s/rad)^{1/3}]; ``stribeck``: eq. 15 (else the baselines' Coulomb + viscous
-    (+ cube root) model, with the Stribeck fields zero).
+    term [N·m·(s/rad)^{1/3}], ``load`` f_cL of the load-dependent Coulomb level [-]
+    (:func:`coulomb_level`; 0: none); ``stribeck``: eq. 15 (else the baselines' Coulomb +
+    viscous (+ cube root) model, with the Stribeck fields zero).
     """
     f8 = np.float64
     return np.dtype([("coulomb", f8, (n,)), ("viscous", f8, (n,)),
                      ("motor_stribeck", f8, (n,)), ("motor_rate", f8, (n,)),
                      ("gear_stribeck", f8, (n,)), ("gear_rate", f8, (n,)),
-                     ("cbrt", f8, (n,)), ("stribeck", np.bool_)])
+                     ("cbrt", f8, (n,)), ("load", f8, (n,)), ("stribeck", np.bool_)])
+
+
+@vectorize(["float64(float64, float64, float64)"], cache=True, nopython=True)
+def coulomb_level(f_c0: float, f_cl: float, load_torque: float) -> float:  # pragma: no cover
+    """The load-dependent Coulomb level f_c0 + f_cL·|τ_load| [N·m] (a NumPy ufunc, also
+    callable in compiled code). With f_cL = 0 it returns f_c0 itself (bit for bit, whatever
+    τ_load is), so models without the load term are unchanged.
+
+    Args:
+        f_c0: Coulomb friction at no load [N·m] (f1 of eq. 15, Fc of eq. 5 and 8).
+        f_cl: f_cL, extra Coulomb friction per N·m transmitted [-], >= 0.
+        load_torque: τ_load, the torque the joint's gear transmits to the link [N·m].
+    """
+    if f_cl == 0.0:
+        return f_c0
+    return f_c0 + f_cl * abs(load_torque)
+
+
+def load_friction_column(qd: Array, load_torque: Array) -> Array:
+    """The regressor column of f_cL, |τ_load|·sgn(q̇) (what f_cL multiplies in τ_f).
+
+    Args:
+        qd: Joint velocities [rad/s], shape (N, n) (or any shape).
+        load_torque: τ_load [N·m], same shape.
+
+    Returns:
+        |τ_load|·sgn(q̇) [N·m], same shape.
+    """
+    return np.abs(load_torque) * np.sign(qd)
 
 
 @vectorize(["float64(float64)"], cache=True, nopython=True)
@@ -146,18 +191,22 @@ def stribeck_shapes(
     return s, motor, gear
 
 
-def stribeck_friction(qd: Array, gear_ratio: Array, p: StribeckParameters) -> Array:
+def stribeck_friction(qd: Array, gear_ratio: Array, p: StribeckParameters,
+                      coulomb: Array | None = None) -> Array:
     """Joint friction of eq. 15.
 
     Args:
         qd: Joint velocities [rad/s], shape (N, n) or (n,).
         gear_ratio: R, shape (n,).
         p: Friction parameters.
+        coulomb: The Coulomb level to use instead of ``p.f1`` [N·m] (the load-dependent one of
+            :func:`coulomb_level`), broadcastable to ``qd``; None: ``p.f1``.
 
     Returns:
         Friction torque [N·m], same shape as ``qd``.
     """
-    return np.asarray(eq15_friction(qd, np.sign(qd), p.f1, p.f2, gear_ratio / p.qd_sm, p.f3,
+    f1 = p.f1 if coulomb is None else coulomb
+    return np.asarray(eq15_friction(qd, np.sign(qd), f1, p.f2, gear_ratio / p.qd_sm, p.f3,
                                     1.0 / p.qd_sg, p.f4))
 
 

@@ -1,9 +1,16 @@
 """The full identification model of eq. 21 (without the noise term).
 
-    R·τ_total = K(q, q̇, q̈)·φ + τ_f(q̇) + M_j·q̈
+    R·τ_total = K(q, q̇, q̈)·φ + τ_f(q̇, τ_load) + M_j·q̈
 
 The left side is what the drive delivers at the joint, R·Kt·i. ``model_torque`` evaluates the
 right side for any of the three friction models (paper eq. 15, baselines [7] and [22]).
+
+Beyond eq. 21, the Coulomb level of each model may depend on the load,
+f_c0 + f_cL·|τ_load| (:func:`leadthrough.dynamics.friction.coulomb_level`, Bittencourt et al.
+2010). Offline, τ_load is the link torque K·φ of the identified links at the state: the torque
+the gear passes to the link when no external force acts (what calibration records). It excludes
+the rotor inertia M_j·q̈, which the motor spends before the gear. ``load_friction`` zero (the
+default, and every params file without the field) is eq. 21 exactly.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ from numpy.typing import NDArray
 from leadthrough.dynamics.friction import (
     StribeckParameters,
     cbrt_friction,
+    coulomb_level,
     coulomb_viscous_friction,
     rotor_inertia_torque,
     stribeck_friction,
@@ -25,13 +33,18 @@ from leadthrough.dynamics.regressor import link_torque, standard_parameters
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_PRESLIDING_RAD", "DriveModelParameters", "FrictionModel", "model_torque",
-           "nominal_drive_parameters"]
+__all__ = ["MAX_LOAD_FRICTION", "MAX_PRESLIDING_RAD", "DriveModelParameters", "FrictionModel",
+           "model_torque", "nominal_drive_parameters"]
 
 Array = NDArray[np.float64]
 
 #: Largest presliding length z₀ accepted anywhere [rad] (gear presliding is ≲ 1e-3)
 MAX_PRESLIDING_RAD = 0.1
+
+#: Largest load-dependent Coulomb coefficient f_cL accepted anywhere [-] (exclusive): a gear whose
+#: friction grew by as much as the torque it transmits would lock; published values are a few
+#: percent (Bittencourt et al. 2010), and the estimator's load estimate needs f_cL < 1.
+MAX_LOAD_FRICTION = 1.0
 
 
 class FrictionModel(StrEnum):
@@ -61,6 +74,9 @@ class DriveModelParameters:
             the displacement over which the friction of a joint at rest turns over
             (:mod:`leadthrough.identification.presliding`); the estimator's friction at rest
             uses it.
+        load_friction: f_cL per joint [-], shape (n,), or empty for none (zeros): the Coulomb
+            level is f_c0 + f_cL·|τ_load| (f_c0 is ``stribeck.f1`` or ``coulomb``). Not in
+            eq. 21 (see the module docstring). 0 <= f_cL < :data:`MAX_LOAD_FRICTION`.
     """
 
     phi: Array
@@ -72,6 +88,7 @@ class DriveModelParameters:
     cbrt: Array = field(default_factory=lambda: np.zeros(0))
     offset: Array = field(default_factory=lambda: np.zeros(0))
     presliding: Array = field(default_factory=lambda: np.zeros(0))
+    load_friction: Array = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if self.friction_model is FrictionModel.STRIBECK and self.stribeck is None:
@@ -84,14 +101,40 @@ class DriveModelParameters:
             raise DataError("presliding lengths out of range", field="presliding",
                             value=z0.tolist(),
                             expected=f"{n} values in (0, {MAX_PRESLIDING_RAD:g}] rad, or none")
+        fl = np.asarray(self.load_friction, dtype=float)
+        if fl.size and (fl.shape != (n,) or not np.all((fl >= 0) & (fl < MAX_LOAD_FRICTION))):
+            raise DataError("load-dependent friction out of range", field="load_friction",
+                            value=fl.tolist(),
+                            expected=f"{n} values in [0, {MAX_LOAD_FRICTION:g}), or none")
 
-    def friction(self, qd: Array, gear_ratio: Array) -> Array:
-        """Friction torque [N·m] for joint velocities ``qd`` [rad/s], shape (N, n)."""
-        if self.stribeck is not None and self.friction_model is FrictionModel.STRIBECK:
-            return stribeck_friction(qd, gear_ratio, self.stribeck)
+    @property
+    def has_load_friction(self) -> bool:
+        """Whether some joint's Coulomb level depends on the load (f_cL > 0)."""
+        return bool(np.any(np.asarray(self.load_friction) > 0))
+
+    def friction(self, qd: Array, gear_ratio: Array, load_torque: Array | None = None) -> Array:
+        """Friction torque [N·m].
+
+        Args:
+            qd: Joint velocities [rad/s], shape (N, n).
+            gear_ratio: R, shape (n,).
+            load_torque: τ_load [N·m], shape (N, n); needed when :attr:`has_load_friction`.
+
+        Raises:
+            DataError: Load-dependent friction without ``load_torque``.
+        """
+        st = self.stribeck if self.friction_model is FrictionModel.STRIBECK else None
+        f_c0 = st.f1 if st is not None else self.coulomb
+        if self.has_load_friction:
+            if load_torque is None:
+                raise DataError("the friction depends on the load: the load torque is needed",
+                                field="load_torque", expected="τ_load, shape (N, n)")
+            f_c0 = coulomb_level(f_c0, self.load_friction, load_torque)
+        if st is not None:
+            return stribeck_friction(qd, gear_ratio, st, f_c0)
         if self.friction_model is FrictionModel.CBRT:
-            return cbrt_friction(qd, self.coulomb, self.viscous, self.cbrt)
-        return coulomb_viscous_friction(qd, self.coulomb, self.viscous)
+            return cbrt_friction(qd, f_c0, self.viscous, self.cbrt)
+        return coulomb_viscous_friction(qd, f_c0, self.viscous)
 
 
 def nominal_drive_parameters(robot: Robot) -> DriveModelParameters:
@@ -112,6 +155,8 @@ def model_torque(
 ) -> Array:
     """Model joint torque R·τ_total = K·φ + τ_f + M_j·q̈ (eq. 21 without noise), plus τ_0.
 
+    A load-dependent friction (``params.load_friction``) takes τ_load = K·φ, the link torque.
+
     Args:
         robot: The robot.
         params: Model parameters.
@@ -123,9 +168,10 @@ def model_torque(
         Joint torque the drives must deliver [N·m], shape (N, n); divide by R·Kt for current.
     """
     q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
+    links = link_torque(robot.model, params.phi, q, qd, qdd)
     tau = (
-        link_torque(robot.model, params.phi, q, qd, qdd)
-        + params.friction(qd, robot.gear_ratio)
+        links
+        + params.friction(qd, robot.gear_ratio, links)
         + rotor_inertia_torque(qdd, params.rotor_inertia)
     )
     if params.offset.size:

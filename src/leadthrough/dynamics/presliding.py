@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import stribeck_terms
+from leadthrough.dynamics.friction import coulomb_level, stribeck_terms
 
 __all__ = ["dahl_step", "play_step", "presliding_friction_step"]
 
@@ -65,13 +65,15 @@ def dahl_step(state: float, displacement: float, level: float, presliding: float
 
 
 @njit(cache=True, nogil=True)
-def presliding_friction_step(qd: Array, increment: Array, fp: Any, dt: float,
-                             command_presliding: float, rest_presliding: Array,
+def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: Array,
+                             dt: float, command_presliding: float, rest_presliding: Array,
                              state: Array, out: Array, level: Array) -> None:
     """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
 
     The Coulomb + Stribeck part F follows dF = k·(dq − |dq|·F/g(q̇)), with g(q̇) the eq. 15
-    level f1 + f2·e^{−(R q̇/q̇sm)²} + f3·e^{−(q̇/q̇sg)²} and the presliding stiffness
+    level f1 + f2·e^{−(R q̇/q̇sm)²} + f3·e^{−(q̇/q̇sg)²} (f1 the load-dependent Coulomb level
+    f_c0 + f_cL·|τ_load|, :func:`~leadthrough.dynamics.friction.coulomb_level`) and the
+    presliding stiffness
     k = g(0)/z₀: F turns over a displacement of a few z₀ toward ±g, and keeps its value at
     standstill (a stopped gear still carries the friction it had when it stopped, not the static
     peak). In steady sliding F = g·sgn(q̇), eq. 15 itself. Two drives:
@@ -93,6 +95,8 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, dt: float,
             (n,) (used where ``qd`` is 0).
         fp: The friction parameters (a record of :func:`~leadthrough.dynamics.friction.
             friction_dtype`).
+        load_torque: τ_load of the load-dependent Coulomb level [N·m], shape (n,) (not read
+            where f_cL = 0).
         dt: Step [s].
         command_presliding: z₀ of the commanded motion [rad].
         rest_presliding: z₀ per joint at rest [rad], shape (n,).
@@ -102,7 +106,7 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, dt: float,
     """
     for j in range(qd.size):
         v = qd[j]
-        g = fp.coulomb[j]
+        g = coulomb_level(fp.coulomb[j], fp.load[j], load_torque[j])
         g0 = g
         if fp.stribeck:
             g += stribeck_terms(v, fp.motor_stribeck[j], fp.motor_rate[j], fp.gear_stribeck[j],

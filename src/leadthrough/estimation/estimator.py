@@ -416,7 +416,7 @@ _MAX_WINDOW = 2**31
 #: The per-joint state the reset clears.
 _STATE_FIELDS = (
     "q_filtered", "qd_filtered", "qdd_filtered", "last_q", "gap_q", "drive_torque",
-    "friction_torque", "friction_state", "friction_level", "friction_sign",
+    "load_torque", "friction_torque", "friction_state", "friction_level", "friction_sign",
     "friction_envelope", "play", "play_increment", "joint_weight", "residual_low_pass",
     "observer_p0", "observer_integral", "observer_residual", "observer_momentum", "tare",
     "tare_sum", "rezero_sum", "last_tau_ext", "last_wrench")

@@ -3,9 +3,10 @@
 :class:`~leadthrough.estimation.estimator.ExternalForceEstimator` spends a sample in three parts:
 
 1. :func:`read_sample`: the sample's checks, the causal differentiator (q̇, q̈,
-   :mod:`~leadthrough.estimation.filters`), the drive torque τ̂_j = K·i, the friction τ_f
-   (eq. 15 with a smoothed sign, or with memory: :mod:`leadthrough.dynamics.presliding`) and the
-   force fit's joint weights;
+   :mod:`~leadthrough.estimation.filters`), the drive torque τ̂_j = K·i, the gear's load torque
+   (:func:`transmitted_torque`), the friction τ_f (eq. 15 with a smoothed sign, or with memory:
+   :mod:`leadthrough.dynamics.presliding`; its Coulomb level load-dependent,
+   :func:`leadthrough.dynamics.friction.coulomb_level`) and the force fit's joint weights;
 2. Pinocchio on the filtered state (RNEA, or CRBA + Coriolis + gravity for the observer, and the
    TCP Jacobian);
 3. :func:`finish_sample`: τ_ext (eq. 27 and 30, or the momentum observer,
@@ -27,7 +28,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import eq15_friction, friction_dtype
+from leadthrough.dynamics.friction import coulomb_level, eq15_friction, friction_dtype
 from leadthrough.dynamics.presliding import play_step, presliding_friction_step
 from leadthrough.estimation.external_torque import (
     average_into_tare,
@@ -50,6 +51,7 @@ __all__ = [
     "output_dtype",
     "read_sample",
     "smoothed_friction",
+    "transmitted_torque",
 ]
 
 Array = NDArray[np.float64]
@@ -114,6 +116,7 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("last_q", *joints), ("last_t", f8), ("gap_q", *joints),
         # state: drive torque and friction
         ("drive_torque", *joints),            # τ̂_j [N·m]
+        ("load_torque", *joints),             # τ_load, the gear's transmitted torque [N·m]
         ("friction_torque", *joints),         # τ_f [N·m]
         ("friction_state", *joints),          # F of the friction with memory [N·m]
         ("friction_level", *joints),          # the eq. 15 level g(q̇) [N·m]
@@ -175,8 +178,37 @@ def read_sample(inputs: Records, estimator: Records, outputs: Records) -> bool:
     est.last_t = t
     for j in range(q.size):
         est.drive_torque[j] = inp.current[j] * est.torque_per_amp[j]
+    transmitted_torque(est.drive_torque, est.offset, est.rotor_inertia, est.qdd_filtered,
+                       est.friction_torque, est.load_torque)
     _friction(inp, est)
     return True
+
+
+@njit(cache=True, nogil=True)
+def transmitted_torque(drive: Array, offset: Array, rotor_inertia: Array, qdd: Array,
+                       friction: Array, out: Array) -> None:
+    """The torque each gear transmits to its link, from the measured drive torque:
+    τ_load = τ̂_j − τ_0 − M_j·q̈ − τ_f (eq. 21 solved for the link side, K·φ − τ_ext).
+
+    The load-dependent Coulomb level f_c0 + f_cL·|τ_load| takes it. Measured rather than the
+    identified links' RNEA, because the gear carries the operator's push too: with the model's
+    torque the friction would miss f_cL·|τ_ext| and scale the estimated force by up to
+    1 ± f_cL. (Offline and in calibration, with no external force, both are the same torque and
+    the identification uses the link model's: :mod:`leadthrough.identification.load_friction`.)
+    τ_f is the previous sample's friction, which itself depends on τ_load: one step per sample
+    of the fixed-point iteration τ_load = D − τ_f(τ_load), which contracts by f_cL < 1 per
+    step. It touches only ``out``: with f_cL = 0 the friction does not read it.
+
+    Args:
+        drive: τ̂_j = K·i [N·m], shape (n,).
+        offset: τ_0 [N·m], shape (n,).
+        rotor_inertia: M_j [kg·m²], shape (n,).
+        qdd: q̈ (filtered) [rad/s²], shape (n,).
+        friction: τ_f of the previous sample [N·m], shape (n,).
+        out: τ_load [N·m], shape (n,) (written).
+    """
+    for j in range(drive.size):
+        out[j] = drive[j] - offset[j] - rotor_inertia[j] * qdd[j] - friction[j]
 
 
 @njit(cache=True, nogil=True)
@@ -209,7 +241,7 @@ def _friction(inp: Record, est: Record) -> None:
     fp = est.friction
     if est.friction_follows_command:
         play_step(inp.q, est.play_half_width, est.play, est.play_increment)
-        presliding_friction_step(inp.qd_cmd, est.play_increment, fp, est.dt,
+        presliding_friction_step(inp.qd_cmd, est.play_increment, fp, est.load_torque, est.dt,
                                  est.command_presliding, est.rest_presliding,
                                  est.friction_state, est.friction_torque, est.friction_level)
         if est.weigh_by_friction:
@@ -217,13 +249,13 @@ def _friction(inp: Record, est: Record) -> None:
                              est.friction_weighting, est.noise_std, est.friction_envelope,
                              est.joint_weight)
         return
-    smoothed_friction(est.qd_filtered, est.inverse_standstill_velocity, fp, est.friction_sign,
-                      est.friction_torque)
+    smoothed_friction(est.qd_filtered, est.inverse_standstill_velocity, fp, est.load_torque,
+                      est.friction_sign, est.friction_torque)
 
 
 @njit(cache=True, nogil=True)
-def smoothed_friction(qd: Array, inverse_standstill_velocity: Array, fp: Record, sign: Array,
-                      out: Array) -> None:
+def smoothed_friction(qd: Array, inverse_standstill_velocity: Array, fp: Record,
+                      load_torque: Array, sign: Array, out: Array) -> None:
     """Friction of the measured velocity with a smoothed sign: eq. 15 (or the baselines'
     Coulomb + viscous (+ cube root) model) with sgn(q̇) replaced by sat(q̇/v_ε), which fades the
     friction to zero below the calibration's standstill threshold v_ε (the sign of a noisy
@@ -233,18 +265,21 @@ def smoothed_friction(qd: Array, inverse_standstill_velocity: Array, fp: Record,
         qd: Joint velocities [rad/s], shape (n,).
         inverse_standstill_velocity: 1/v_ε per joint [s/rad], shape (n,).
         fp: The friction parameters (:func:`~leadthrough.dynamics.friction.friction_dtype`).
+        load_torque: τ_load of the load-dependent Coulomb level [N·m], shape (n,) (not read
+            where f_cL = 0).
         sign: Output: the smoothed sign in [−1, 1], shape (n,).
         out: Output: the friction torque [N·m], shape (n,).
     """
     for j in range(qd.size):
         sign[j] = min(1.0, max(-1.0, qd[j] * inverse_standstill_velocity[j]))
         v = qd[j]
+        coulomb = coulomb_level(fp.coulomb[j], fp.load[j], load_torque[j])
         if fp.stribeck:
-            out[j] = eq15_friction(v, sign[j], fp.coulomb[j], fp.motor_stribeck[j],
+            out[j] = eq15_friction(v, sign[j], coulomb, fp.motor_stribeck[j],
                                    fp.motor_rate[j], fp.gear_stribeck[j], fp.gear_rate[j],
                                    fp.viscous[j])
         else:
-            out[j] = sign[j] * fp.coulomb[j] + v * fp.viscous[j] + fp.cbrt[j] * np.cbrt(v)
+            out[j] = sign[j] * coulomb + v * fp.viscous[j] + fp.cbrt[j] * np.cbrt(v)
 
 
 @njit(cache=True, nogil=True)

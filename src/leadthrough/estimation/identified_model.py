@@ -1,7 +1,7 @@
 """The identified model in real-time form: Pinocchio model with the identified inertias plus the
 drive terms, for the estimator's per-sample evaluation.
 
-τ̂_d(q, q̇, q̈) = RNEA_φ̂(q, q̇, q̈) + M_j·q̈ + τ_f(q̇) + τ_0        (right side of eq. 21)
+τ̂_d(q, q̇, q̈) = RNEA_φ̂(q, q̇, q̈) + M_j·q̈ + τ_f(q̇, τ_load) + τ_0        (right side of eq. 21)
 
 The estimator (:mod:`leadthrough.estimation.estimator_step`) evaluates it every sample: RNEA on
 :attr:`IdentifiedModel.model`, the friction from :attr:`IdentifiedModel.friction` (eq. 15, or
@@ -52,6 +52,7 @@ class IdentifiedModel:
         self.offset = params.offset if params.offset.size else np.zeros(n)
         self.friction = new_record(friction_dtype(n))
         fp = view(self.friction)
+        fp.load = params.load_friction if params.load_friction.size else 0.0
         st = params.stribeck
         fp.stribeck = params.friction_model is FrictionModel.STRIBECK and st is not None
         if st is not None and fp.stribeck:

@@ -240,4 +240,4 @@ def _without_friction(params: DriveModelParameters) -> DriveModelParameters:
         f1=z, f2=z, qd_sm=params.stribeck.qd_sm, f3=z, qd_sg=params.stribeck.qd_sg, f4=z)
     return replace(params, stribeck=st, coulomb=np.zeros(0) if not params.coulomb.size else z,
                    viscous=np.zeros(0) if not params.viscous.size else z,
-                   cbrt=np.zeros(0) if not params.cbrt.size else z)
+                   cbrt=np.zeros(0) if not params.cbrt.size else z, load_friction=np.zeros(0))

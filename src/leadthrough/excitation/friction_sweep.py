@@ -29,7 +29,7 @@ from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.start_pose import checked_start
 from leadthrough.robot.description import Robot
 
-__all__ = ["FrictionSweep", "FrictionSweepConfig", "design_friction_sweep"]
+__all__ = ["FRICTION_CHECK", "FrictionSweep", "FrictionSweepConfig", "design_friction_sweep"]
 
 Array = NDArray[np.float64]
 
@@ -88,6 +88,13 @@ class FrictionSweepConfig:
              ">= 0 rad"),
             ("rate_hz", math.isfinite(self.rate_hz) and self.rate_hz > 0, "> 0 Hz"),
         ])
+
+
+#: A friction check (:mod:`leadthrough.identification.friction_refresh`): the sweep cut to four
+#: speeds, from the Stribeck region to guiding speed, shorter cruises (about 25 s in all). It
+#: rescales an identified friction; it does not identify one.
+FRICTION_CHECK = FrictionSweepConfig(speeds=(0.01, 0.03, 0.1, 0.3), measure_displacement=0.02,
+                                     max_cruise_s=2.0)
 
 
 @dataclass(frozen=True)

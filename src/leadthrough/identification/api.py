@@ -21,14 +21,20 @@ from numpy.typing import NDArray
 
 from leadthrough.data.preprocess import PreprocessConfig, ProcessedData, preprocess
 from leadthrough.data.recording import Recording
-from leadthrough.dynamics.model import DriveModelParameters, FrictionModel, model_torque
+from leadthrough.dynamics.model import (
+    MAX_LOAD_FRICTION,
+    DriveModelParameters,
+    FrictionModel,
+    model_torque,
+)
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES, LINK_PARAMETER_UNITS
-from leadthrough.errors import DataError
+from leadthrough.errors import DataError, check_fields
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent import ConsistentConfig, identify_consistent
 from leadthrough.identification.friction_sweep import SweepFit, fit_sweep_friction, sweep_points
+from leadthrough.identification.load_friction import LoadTerm, identify_load_friction
 from leadthrough.identification.metrics import ResidualStats, residual_stats
-from leadthrough.identification.observations import build_observations
+from leadthrough.identification.observations import Observations, build_observations
 from leadthrough.identification.ols import identify_ols_cbrt, identify_ols_cv
 from leadthrough.identification.proposed import ProposedConfig, identify_proposed
 from leadthrough.robot.description import Robot
@@ -65,12 +71,38 @@ class IdentifyConfig:
         k_omega: K_ω of J (eq. 26).
         proposed: Settings of the paper's method.
         consistent: Settings of the consistent method.
+        load_friction: Also identify the load-dependent Coulomb friction f_cL (Coulomb level
+            f_c0 + f_cL·|τ_load|, :mod:`leadthrough.identification.load_friction`), by
+            iteration: ``ols-cv``, ``ols-cbrt`` and ``consistent`` without a sweep. ``proposed``
+            keeps f_cL = 0 (its global search has no column to add), and so does ``consistent``
+            with a friction sweep (the sweep's measured curve already holds the load friction at
+            the sweep's poses, and its points carry no load torque to separate it).
+        load_friction_iterations: Most re-identifications with the load term (>= 1).
+        load_friction_tolerance: The iteration stops once τ_load changes by at most this
+            fraction (RMS) from one pass to the next [-]. A joint whose load torque is small
+            (a wrist) has a weakly excited f_cL, which a loose tolerance leaves inexact.
+        max_load_friction: Upper bound of the identified f_cL [-]. 0.5 is a gear whose
+            load-dependent losses alone bring its efficiency down to 2/3, below any robot
+            reducer's rating (harmonic drives are rated about 70–85 %, cycloidal ones higher);
+            a joint whose load torque hardly varies can otherwise drive f_cL far past that.
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     k_omega: float = 1.0
     proposed: ProposedConfig = field(default_factory=ProposedConfig)
     consistent: ConsistentConfig = field(default_factory=ConsistentConfig)
+    load_friction: bool = True
+    load_friction_iterations: int = 6
+    load_friction_tolerance: float = 1e-4
+    max_load_friction: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_fields("identify", self, [
+            ("load_friction_iterations", self.load_friction_iterations >= 1, ">= 1"),
+            ("load_friction_tolerance", 0 < self.load_friction_tolerance < 1, "in (0, 1)"),
+            ("max_load_friction", 0 < self.max_load_friction < MAX_LOAD_FRICTION,
+             f"in (0, {MAX_LOAD_FRICTION:g})"),
+        ])
 
 
 @dataclass(frozen=True)
@@ -85,6 +117,9 @@ class IdentificationResult:
         runtime_s: Wall time of the identification, pre-processing included [s].
         iterations: Iterations of the solver (1 for least squares).
         samples: Samples used after pre-processing.
+        load_passes: Identifications run to fit the load-dependent friction (the first,
+            without the load term, included; :mod:`leadthrough.identification.load_friction`);
+            0 when it was not fitted.
     """
 
     robot: str
@@ -94,6 +129,7 @@ class IdentificationResult:
     runtime_s: float
     iterations: int
     samples: int
+    load_passes: int = 0
 
     @property
     def J(self) -> float:  # noqa: N802 (the paper's symbol)
@@ -121,6 +157,9 @@ def named_parameters(robot: Robot, params: DriveModelParameters) -> list[NamedPa
                                   "kg·m²"))
         if params.offset.size:
             out.append(NamedParameter(f"{jn}.offset", float(params.offset[k]), "N·m"))
+        if params.load_friction.size:
+            out.append(NamedParameter(f"{jn}.load_friction", float(params.load_friction[k]),
+                                      "N·m/N·m"))
         if params.friction_model is FrictionModel.STRIBECK and params.stribeck is not None:
             st = params.stribeck
             for name, arr, unit in (("f1", st.f1, "N·m"), ("f2", st.f2, "N·m"),
@@ -182,29 +221,43 @@ def identify(
     t0 = time.perf_counter()
     processed = _processed(data, robot, cfg)
     obs = build_observations(robot, processed)
-    iterations = 1
-    if method == "ols-cv":
-        params = identify_ols_cv(obs)
-    elif method == "ols-cbrt":
-        params = identify_ols_cbrt(obs)
-    elif method == "consistent":
-        ccfg = cfg.consistent
-        if ccfg.k_omega != cfg.k_omega:
-            ccfg = replace(ccfg, k_omega=cfg.k_omega)
-        cons = identify_consistent(obs, ccfg, sweep)
-        params = cons.params
-        iterations = cons.iterations
+
+    def solve(load: LoadTerm | None) -> tuple[DriveModelParameters, int]:
+        return _run_method(method, obs, cfg, progress, sweep, load)
+
+    if cfg.load_friction and method != "proposed" and sweep is None:
+        fit = identify_load_friction(obs, solve, cfg.load_friction_iterations,
+                                     cfg.load_friction_tolerance, cfg.max_load_friction)
+        params, iterations, passes = fit.params, fit.iterations, fit.passes
     else:
-        pcfg = cfg.proposed
-        if pcfg.k_omega != cfg.k_omega:
-            pcfg = replace(pcfg, k_omega=cfg.k_omega)
-        outcome = identify_proposed(obs, pcfg, progress)
-        params = outcome.params
-        iterations = outcome.generations + outcome.polish_iterations
+        (params, iterations), passes = solve(None), 0
     stats = _stats(robot, params, processed, cfg.k_omega)
     return IdentificationResult(
         robot=robot.name, method=method, params=params, stats=stats,
-        runtime_s=time.perf_counter() - t0, iterations=iterations, samples=processed.samples)
+        runtime_s=time.perf_counter() - t0, iterations=iterations, samples=processed.samples,
+        load_passes=passes)
+
+
+def _run_method(method: str, obs: Observations, cfg: IdentifyConfig,
+                progress: Callable[[int, int], None] | None, sweep: SweepFit | None,
+                load: LoadTerm | None) -> tuple[DriveModelParameters, int]:
+    """One identification by ``method`` (with the load column when ``load`` is given): the
+    parameters and the method's iterations."""
+    if method == "ols-cv":
+        return identify_ols_cv(obs, load), 1
+    if method == "ols-cbrt":
+        return identify_ols_cbrt(obs, load), 1
+    if method == "consistent":
+        ccfg = cfg.consistent
+        if ccfg.k_omega != cfg.k_omega:
+            ccfg = replace(ccfg, k_omega=cfg.k_omega)
+        cons = identify_consistent(obs, ccfg, sweep, load)
+        return cons.params, cons.iterations
+    pcfg = cfg.proposed
+    if pcfg.k_omega != cfg.k_omega:
+        pcfg = replace(pcfg, k_omega=cfg.k_omega)
+    outcome = identify_proposed(obs, pcfg, progress)
+    return outcome.params, outcome.generations + outcome.polish_iterations
 
 
 def _stats(robot: Robot, params: DriveModelParameters, data: ProcessedData, k_omega: float

@@ -31,8 +31,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import StribeckParameters, stribeck_decay, stribeck_shapes
+from leadthrough.dynamics.friction import (
+    StribeckParameters,
+    load_friction_column,
+    stribeck_decay,
+    stribeck_shapes,
+)
 from leadthrough.dynamics.model import DriveModelParameters, FrictionModel
+from leadthrough.errors import DataError
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent_convex import (
     ConsistentConfig,
@@ -43,6 +49,7 @@ from leadthrough.identification.consistent_convex import (
     inner_problem,
 )
 from leadthrough.identification.friction_sweep import SweepFit
+from leadthrough.identification.load_friction import LoadTerm
 from leadthrough.identification.observations import Observations
 
 __all__ = ["ConsistentConfig", "ConsistentOutcome", "SolverError", "identify_consistent"]
@@ -68,9 +75,9 @@ class ConsistentOutcome:
 
 
 class _Joint:
-    """One joint's used equations."""
+    """One joint's used equations (and its load-friction column |τ_load|·sgn(q̇), if given)."""
 
-    def __init__(self, obs: Observations, j: int) -> None:
+    def __init__(self, obs: Observations, j: int, load: LoadTerm | None) -> None:
         used = obs.used[:, j]
         self.K = obs.K[used, j, :]
         self.qdd = obs.data.qdd[used, j]
@@ -79,6 +86,17 @@ class _Joint:
         self.b = obs.data.torque[used, j]
         self.N = int(used.sum())
         self.R = float(obs.robot.gear_ratio[j])
+        self.load = (None if load is None
+                     else load_friction_column(self.qd, load.torque[used, j])
+                     if load.upper[j] > 0 else np.zeros(self.N))
+
+    def drive_target(self, z: Array, layout: Layout, j: int) -> Array:
+        """The torque left for the drive's M_j, Stribeck and offset terms: b − K·φ (− f_cL·load
+        column), the link (and load-friction) part held at ``z``."""
+        r = self.b - self.K @ z[: 10 * layout.n]
+        if self.load is not None:
+            r = r - z[16 * layout.n + j] * self.load
+        return r
 
     def stribeck(self, qd_sm: Array, qd_sg: Array) -> tuple[Array, Array]:
         """Columns exp(−(R q̇/q̇sm)²)·sgn and exp(−(q̇/q̇sg)²)·sgn, shapes (G, N)."""
@@ -87,10 +105,12 @@ class _Joint:
         return gm * self.s, gg * self.s
 
     def columns(self, qd_sm: float, qd_sg: float) -> Array:
-        """[K, q̈, sgn, g_m, g_g, q̇, 1], shape (N, 10n + 6)."""
+        """[K, q̈, sgn, g_m, g_g, q̇, 1] (and the load column), shape (N, 10n + 6 (+ 1))."""
         gm, gg = self.stribeck(np.array([qd_sm]), np.array([qd_sg]))
-        return np.column_stack([self.K, self.qdd, self.s, gm[0], gg[0], self.qd,
-                                np.ones(self.N)])
+        cols = [self.K, self.qdd, self.s, gm[0], gg[0], self.qd, np.ones(self.N)]
+        if self.load is not None:
+            cols.append(self.load)
+        return np.column_stack(cols)
 
 
 def _best_stribeck(jt: _Joint, r0: Array, grid_m: Array, grid_g: Array) -> tuple[float, float]:
@@ -172,8 +192,29 @@ def _least_squares(joints: list[_Joint], cols: list[Array], layout: Layout, z_no
     return np.asarray(z_nom + scale * np.linalg.solve(G, g))
 
 
+def _nominal_and_scale(obs: Observations, layout: Layout) -> tuple[Array, Array]:
+    """z at nominal (CAD links, datasheet rotor inertia, no friction, no offset) and the scale
+    of each entry of z (the inner problem's variables are (z − z_nom)/scale)."""
+    robot, n = obs.robot, layout.n
+    tmax, vmax = robot.max_torque, robot.velocity_limit
+    phi_nom = obs.x_nominal[: 10 * n]
+    extra = 0 if layout.load is None else n
+    z_nom = np.concatenate([phi_nom, robot.reflected_rotor_inertia, np.zeros(5 * n + extra)])
+    phi_scale = np.concatenate([np.full(10, max(float(np.max(np.abs(phi_nom[10 * k:10 * k + 10]))),
+                                                1e-3)) for k in range(n)])
+    scale = np.concatenate([phi_scale, np.maximum(robot.reflected_rotor_inertia, 1e-3 * tmax / 10),
+                            np.tile(0.01 * tmax, 3), 0.01 * tmax / vmax, 0.01 * tmax,
+                            np.full(extra, _LOAD_FRICTION_SCALE)])
+    return z_nom, scale
+
+
+#: Scale of f_cL in the inner problem's variables [-] (published values are a few percent).
+_LOAD_FRICTION_SCALE = 0.01
+
+
 def identify_consistent(obs: Observations, config: ConsistentConfig | None = None,
-                        sweep: SweepFit | None = None) -> ConsistentOutcome:
+                        sweep: SweepFit | None = None, load: LoadTerm | None = None
+                        ) -> ConsistentOutcome:
     """Calibrate with variable projection and a physically consistent convex inner problem.
 
     Args:
@@ -186,24 +227,26 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
             within that band the excitation data decide. The excitation hardly visits low
             speeds, and where it does (reversals) the friction is not on its steady curve: the
             sweep is what hand guiding needs.
+        load: τ_load at the samples and the bound of f_cL, to fit the load-dependent Coulomb
+            friction 0 <= f_cL <= bound too (its column |τ_load|·sgn(q̇),
+            :mod:`leadthrough.identification.load_friction`); None: none. Not with a sweep.
 
     Raises:
         SolverError: The inner problem is infeasible (naming the link whose bounds cannot be met)
             or the solver fails. There is no silent fallback.
+        DataError: A load torque together with a sweep.
     """
     cfg = config if config is not None else ConsistentConfig()
     t0 = time.perf_counter()
     robot = obs.robot
     n = robot.n
-    layout = Layout(n)
-    joints = [_Joint(obs, j) for j in range(n)]
-    tmax, vmax, R = robot.max_torque, robot.velocity_limit, robot.gear_ratio
-    phi_nom = obs.x_nominal[: 10 * n]
-    z_nom = np.concatenate([phi_nom, robot.reflected_rotor_inertia, np.zeros(5 * n)])
-    phi_scale = np.concatenate([np.full(10, max(float(np.max(np.abs(phi_nom[10 * k:10 * k + 10]))),
-                                                1e-3)) for k in range(n)])
-    scale = np.concatenate([phi_scale, np.maximum(robot.reflected_rotor_inertia, 1e-3 * tmax / 10),
-                            np.tile(0.01 * tmax, 3), 0.01 * tmax / vmax, 0.01 * tmax])
+    if sweep is not None and load is not None:
+        raise DataError("the load-dependent friction is not fitted with a friction sweep",
+                        field="load", expected="None when a sweep is given")
+    layout = Layout(n, load=None if load is None else load.upper)
+    joints = [_Joint(obs, j, load) for j in range(n)]
+    vmax, R = robot.velocity_limit, robot.gear_ratio
+    z_nom, scale = _nominal_and_scale(obs, layout)
     if sweep is not None:
         return _with_measured_friction(obs, joints, layout, z_nom, scale, cfg, sweep, t0)
     grids_m = [np.geomspace(0.5, R[j] * vmax[j], cfg.grid) for j in range(n)]
@@ -215,7 +258,7 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
     for _ in range(cfg.alternations):
         cols = [jt.columns(*vel[j]) for j, jt in enumerate(joints)]
         z = _least_squares(joints, cols, layout, z_nom, scale)
-        vel = [_best_stribeck(jt, jt.b - jt.K @ z[: 10 * n], grids_m[j], grids_g[j])
+        vel = [_best_stribeck(jt, jt.drive_target(z, layout, j), grids_m[j], grids_g[j])
                for j, jt in enumerate(joints)]
     # Then alternate with the constrained inner problem: the link torque the grids see is a
     # physically consistent one, so friction does not compensate unphysical link parameters.
@@ -224,7 +267,7 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
         cols = [jt.columns(*vel[j]) for j, jt in enumerate(joints)]
         z = inner_problem(obs, [jt.b for jt in joints], cols, layout, z_nom, scale, cfg)
         solves += 1
-        new_vel = [_best_stribeck(jt, jt.b - jt.K @ z[: 10 * n], grids_m[j], grids_g[j])
+        new_vel = [_best_stribeck(jt, jt.drive_target(z, layout, j), grids_m[j], grids_g[j])
                    for j, jt in enumerate(joints)]
         if new_vel == vel:
             break
@@ -236,17 +279,22 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
     f = z[11 * n:15 * n].reshape(4, n)
     stribeck = StribeckParameters(f1=f[0], f2=f[1], qd_sm=np.array([v[0] for v in vel]),
                                   f3=f[2], qd_sg=np.array([v[1] for v in vel]), f4=f[3])
-    return _outcome(obs, z, z_nom, scale, cfg, stribeck, cfg.alternations + solves, t0)
+    return _outcome(obs, z, z_nom, scale, cfg, stribeck, cfg.alternations + solves, t0,
+                    layout)
 
 
 def _outcome(obs: Observations, z: Array, z_nom: Array, scale: Array, cfg: ConsistentConfig,
-             stribeck: StribeckParameters, iterations: int, t0: float) -> ConsistentOutcome:
-    """Standard parameters closest to nominal, packed with the friction and offsets."""
+             stribeck: StribeckParameters, iterations: int, t0: float, layout: Layout
+             ) -> ConsistentOutcome:
+    """Standard parameters closest to nominal, packed with the friction and offsets (and f_cL,
+    clipped to its bounds against the solver's tolerance)."""
     n = obs.robot.n
     phi, M = closest_to_nominal(obs, z, z_nom, scale, cfg)
+    fl = (np.clip(z[16 * n:17 * n], 0.0, layout.load) if layout.load is not None
+          else np.zeros(0))
     params = DriveModelParameters(
         phi=phi, friction_model=FrictionModel.STRIBECK, rotor_inertia=M, stribeck=stribeck,
-        offset=z[15 * n:].copy())
+        offset=z[15 * n:16 * n].copy(), load_friction=fl)
     return ConsistentOutcome(params=params, min_pseudo_inertia_eig=min_pseudo_inertia_eigenvalues(
         phi), iterations=iterations, runtime_s=time.perf_counter() - t0)
 
@@ -272,4 +320,4 @@ def _with_measured_friction(obs: Observations, joints: list[_Joint], layout: Lay
     f = z[11 * n:15 * n].reshape(4, n)
     stribeck = StribeckParameters(f1=f[0], f2=f[1], qd_sm=st.qd_sm.copy(), f3=f[2],
                                   qd_sg=st.qd_sg.copy(), f4=f[3])
-    return _outcome(obs, z, z_nom, scale, cfg, stribeck, 1, t0)
+    return _outcome(obs, z, z_nom, scale, cfg, stribeck, 1, t0, layout)

@@ -2,7 +2,7 @@
 
 * :func:`inner_problem`: for fixed Stribeck velocities, the paper's J (an SOCP) or least squares on
   QR-compressed data, under full physical consistency (pseudo-inertia LMIs), optional bounds
-  around nominal, friction ≥ 0 and M_j ≥ 0.
+  around nominal, friction ≥ 0 (the load-dependent f_cL too, when fitted) and M_j ≥ 0.
 * :func:`closest_to_nominal`: among all consistent parameter sets with the same base parameters,
   the one closest to nominal.
 
@@ -92,15 +92,26 @@ class FrictionBand:
 
 
 class Layout:
-    """Index layout of z = [φ (10n), M (n), f1 (n), f2 (n), f3 (n), f4 (n), τ_0 (n)]."""
+    """Index layout of z = [φ (10n), M (n), f1 (n), f2 (n), f3 (n), f4 (n), τ_0 (n)], and
+    f_cL (n) of the load-dependent Coulomb friction when ``load`` (its upper bound per joint,
+    shape (n,)) is given."""
 
-    def __init__(self, n: int) -> None:
+    def __init__(self, n: int, load: NDArray[np.float64] | None = None) -> None:
         self.n = n
-        self.size = 16 * n
+        self.load = load
+        self.size = (16 if load is None else 17) * n
 
     def joint(self, j: int) -> NDArray[np.intp]:
         n = self.n
-        return np.r_[np.arange(10 * n), 10 * n + j + n * np.arange(6)].astype(np.intp)
+        drive = 6 if self.load is None else 7
+        return np.r_[np.arange(10 * n), 10 * n + j + n * np.arange(drive)].astype(np.intp)
+
+    def bounds(self, z: cp.Expression) -> list[cp.Constraint]:
+        """M_j, f1..f4 >= 0 (and 0 <= f_cL <= its bound)."""
+        n = self.n
+        if self.load is None:
+            return [z[10 * n:15 * n] >= 0]
+        return [z[10 * n:15 * n] >= 0, z[16 * n:17 * n] >= 0, z[16 * n:17 * n] <= self.load]
 
 
 _SLACK = 1e-6  # relative tolerance of the closest-to-nominal step on the bounds
@@ -230,7 +241,7 @@ def inner_problem(obs: Observations, targets: list[Array], cols: list[Array], la
             Rf = np.linalg.qr(np.column_stack([As, r0]), mode="r")
             terms.append(cp.sum_squares(Rf @ cp.hstack([-u[idx], np.ones(1)])) / b.size)
     cons = [*_link_constraints(obs, z[: 10 * n], cfg, margin_factor=2.0),
-            z[10 * n:15 * n] >= 0]
+            *layout.bounds(z)]
     for j, band in enumerate(friction_bands or []):
         f = z[11 * n + j + n * np.arange(4)]
         cons += [band.G @ f <= band.friction + band.tolerance,

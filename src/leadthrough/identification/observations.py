@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.optimize
 from numpy.typing import NDArray
 
 from leadthrough.data.preprocess import ProcessedData
@@ -109,7 +110,8 @@ def build_observations(robot: Robot, data: ProcessedData) -> Observations:
 
 
 def solve_least_squares(
-    Y: Array, tau: Array, used: NDArray[np.bool_], names: list[str], source: str | None
+    Y: Array, tau: Array, used: NDArray[np.bool_], names: list[str], source: str | None,
+    bounds: tuple[Array, Array] | None = None,
 ) -> Array:
     """Ordinary least squares over the used joint equations (pseudo-inverse, paper eq. 10).
 
@@ -119,6 +121,9 @@ def solve_least_squares(
         used: Equations to use, shape (N, n).
         names: Parameter names, length p (for error messages).
         source: Data source (for error messages).
+        bounds: Lower and upper bound of each parameter, shapes (p,) (±inf: free), or None.
+            Where the unconstrained solution violates one, the bounded least-squares problem is
+            solved exactly (SciPy's ``lsq_linear``, bounded-variable least squares).
 
     Returns:
         The estimate, shape (p,).
@@ -140,4 +145,7 @@ def solve_least_squares(
                         expected="a recording that moves every joint over its range "
                                  "(leadthrough excite)")
     sol, *_ = np.linalg.lstsq(An, b, rcond=None)
+    if bounds is not None and np.any((sol / scale < bounds[0]) | (sol / scale > bounds[1])):
+        sol = scipy.optimize.lsq_linear(An, b, bounds=(bounds[0] * scale, bounds[1] * scale),
+                                        method="bvls").x
     return np.asarray(sol / scale)

@@ -19,6 +19,7 @@ Layout::
     rotor_inertia = 8.6              # M_j [kg·m²]
     offset = 0.4                     # τ_0 [N·m] (optional, consistent method)
     presliding = 2.2e-4              # z₀ [rad] (optional, from a presliding test)
+    load_friction = 0.05             # f_cL [-] (optional: Coulomb level f_c0 + f_cL·|τ_load|)
     f1 = 40.0                        # ... per friction model
 
     [links.joint_1]                  # standard link parameters (regressor order) [kg, kg·m, kg·m²]
@@ -42,7 +43,12 @@ from numpy.typing import NDArray
 from leadthrough import __version__
 from leadthrough.data.recording import is_sim_seed
 from leadthrough.dynamics.friction import StribeckParameters
-from leadthrough.dynamics.model import MAX_PRESLIDING_RAD, DriveModelParameters, FrictionModel
+from leadthrough.dynamics.model import (
+    MAX_LOAD_FRICTION,
+    MAX_PRESLIDING_RAD,
+    DriveModelParameters,
+    FrictionModel,
+)
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
 from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write_text, require_file
@@ -150,6 +156,8 @@ def save_params(
             lines.append(f"offset = {_fmt(params.offset[k])}")
         if params.presliding.size:
             lines.append(f"presliding = {_fmt(params.presliding[k])}")
+        if params.load_friction.size:
+            lines.append(f"load_friction = {_fmt(params.load_friction[k])}")
         for key in keys:
             if params.friction_model is FrictionModel.STRIBECK:
                 assert params.stribeck is not None
@@ -249,8 +257,8 @@ class _JointTables:
         self.path, self.model, n = path, model, robot.n
         self.keys = _FRICTION_KEYS[model]
         self.drive = {key: np.zeros(n) for key in (*self.keys, "rotor_inertia")}
-        self.offset, self.presliding = np.zeros(n), np.zeros(n)
-        self.has_offset, self.presliding_joints = False, 0
+        self.offset, self.presliding, self.load = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.has_offset, self.presliding_joints, self.load_joints = False, 0, 0
         self.phi = np.zeros(10 * n)
         for table, name in ((joints, "joints"), (links, "links")):
             extra = sorted(set(table) - set(robot.joint_names))
@@ -265,14 +273,16 @@ class _JointTables:
                                 expected="a table per joint of the robot")
             self._read_joint(k, jn, jt)
             self._read_link(k, jn, lt)
-        if self.presliding_joints not in (0, n):
-            raise DataError("presliding given for some joints only", source=path,
-                            field="joints.*.presliding", value=self.presliding_joints,
-                            expected=f"all {n} joints or none")
+        for key, count in (("presliding", self.presliding_joints),
+                           ("load_friction", self.load_joints)):
+            if count not in (0, n):
+                raise DataError(f"{key} given for some joints only", source=path,
+                                field=f"joints.*.{key}", value=count,
+                                expected=f"all {n} joints or none")
 
     def _read_joint(self, k: int, jn: str, jt: dict[str, Any]) -> None:
         path = self.path
-        _only(path, f"joints.{jn}", jt, {*self.drive, "offset", "presliding"})
+        _only(path, f"joints.{jn}", jt, {*self.drive, "offset", "presliding", "load_friction"})
         if "offset" in jt:
             self.offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
             self.has_offset = True
@@ -282,6 +292,13 @@ class _JointTables:
                 raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
                                 value=z0, expected=f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad")
             self.presliding_joints += 1
+        if "load_friction" in jt:
+            fl = self.load[k] = _number(path, f"joints.{jn}.load_friction", jt["load_friction"])
+            if not 0 <= fl < MAX_LOAD_FRICTION:
+                raise DataError("out of range", source=path, field=f"joints.{jn}.load_friction",
+                                value=fl, expected=f"0 <= f_cL < {MAX_LOAD_FRICTION:g} (extra "
+                                                   "Coulomb friction per N·m transmitted)")
+            self.load_joints += 1
         for key, values in self.drive.items():
             values[k] = _number(path, f"joints.{jn}.{key}", _required(path, f"joints.{jn}", jt,
                                                                        key))
@@ -305,15 +322,16 @@ class _JointTables:
         fr, n = self.drive, self.phi.size // 10
         offset = self.offset if self.has_offset else np.zeros(0)
         presliding = self.presliding if self.presliding_joints else np.zeros(0)
+        load = self.load if self.load_joints else np.zeros(0)
         if self.model is FrictionModel.STRIBECK:
             return DriveModelParameters(
                 phi=self.phi, friction_model=self.model, rotor_inertia=fr["rotor_inertia"],
                 stribeck=StribeckParameters(**{key: fr[key] for key in self.keys}),
-                offset=offset, presliding=presliding)
+                offset=offset, presliding=presliding, load_friction=load)
         return DriveModelParameters(
             phi=self.phi, friction_model=self.model, rotor_inertia=fr["rotor_inertia"],
             coulomb=fr["coulomb"], viscous=fr["viscous"], cbrt=fr.get("cbrt", np.zeros(n)),
-            offset=offset, presliding=presliding)
+            offset=offset, presliding=presliding, load_friction=load)
 
 
 def _only(path: Path, where: str, table: dict[str, Any], allowed: set[str]) -> None:

@@ -47,7 +47,7 @@ from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
 from leadthrough.session.record import Mark, SessionEvent, SessionLog
 
-__all__ = ["LoopResult", "run_session"]
+__all__ = ["LoopResult", "ServoPeriods", "SessionBuffers", "run_session", "transition_event"]
 
 Array = NDArray[np.float64]
 
@@ -309,3 +309,11 @@ class _Buffers:
                           qd_cmd=self.qd_cmd, tcp_cmd_base=self.tcp, tcp_cmd_quat=quat,
                           twist_cmd_base=self.twist, state=self.state, fault=self.fault,
                           wrench_applied_base=self.applied, events=events, settings=settings)
+
+
+#: One servo period at a time, the preallocated recording and the transition events of
+#: :func:`run_session`, for a runner that drives the periods itself (the pendant's live
+#: session, :mod:`leadthrough.pendant.backend`).
+ServoPeriods = _Loop
+SessionBuffers = _Buffers
+transition_event = _transition

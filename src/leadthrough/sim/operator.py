@@ -11,6 +11,7 @@ which the operator presses the "mark point" button; the scripts are in
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -20,7 +21,8 @@ from numpy.typing import ArrayLike, NDArray
 from leadthrough.errors import SimulationError
 from leadthrough.session.record import Mark
 
-__all__ = ["ConstantWrench", "Mark", "NoOperator", "Operator", "ScriptedOperator", "vector3"]
+__all__ = ["ConstantWrench", "HandPush", "Mark", "NoOperator", "Operator", "ScriptedOperator",
+           "vector3"]
 
 Array = NDArray[np.float64]
 
@@ -93,6 +95,84 @@ class ConstantWrench:
     def wrench(self, t: float, tcp_position_base: Array) -> Array:
         """The wrench while t_start <= t < t_end, else zero."""
         return self._w if self.t_start <= t < self.t_end else np.zeros(6)
+
+
+class HandPush:
+    """A hand on the tool that changes while the simulation runs: a person pushing with the
+    mouse on a pendant (:mod:`leadthrough.pendant`).
+
+    Either a constant force (:meth:`push`) or a grip through a spring and a damper on a
+    handle the person moves (:meth:`hold`): ``F = k·(handle − p_tcp) − c·ṗ_tcp``, its magnitude
+    capped, evaluated every physics step from the TCP the simulator passes (the velocity by
+    differences of those positions), like a hand that follows the tool.
+
+    :meth:`push`, :meth:`hold` and :meth:`release` may be called from any thread: each swaps
+    in a new immutable grip, which the simulator reads once per step (a reference assignment
+    is atomic in CPython): no step sees half a change, and the simulation never waits.
+    """
+
+    def __init__(self) -> None:
+        self._grip: tuple[Array, float, float, float] | Array | None = None
+        self._w: Array = np.zeros(6)
+        self._last: tuple[float, Array] | None = None
+
+    def push(self, force_base: ArrayLike) -> None:
+        """A constant force at the TCP from the next physics step on.
+
+        Args:
+            force_base: [Fx, Fy, Fz] in the base frame [N].
+
+        Raises:
+            SimulationError: Not 3 finite numbers.
+        """
+        self._grip = vector3(force_base, "force_base")
+
+    def hold(self, handle_base: ArrayLike, stiffness: float, damping: float,
+             max_force: float) -> None:
+        """Grip the tool through a spring and a damper on a handle at ``handle_base``.
+
+        Args:
+            handle_base: The handle's position, base frame [m], shape (3,).
+            stiffness: k [N/m], ≥ 0.
+            damping: c [N·s/m], ≥ 0.
+            max_force: Cap on ‖F‖ [N], > 0.
+
+        Raises:
+            SimulationError: A value out of range.
+        """
+        handle = vector3(handle_base, "handle_base")
+        if not (math.isfinite(stiffness) and stiffness >= 0 and math.isfinite(damping)
+                and damping >= 0 and math.isfinite(max_force) and max_force > 0):
+            raise SimulationError("bad grip", field="stiffness/damping/max_force",
+                                  value=(stiffness, damping, max_force),
+                                  expected="k >= 0 N/m, c >= 0 N·s/m, cap > 0 N, finite")
+        self._grip = (handle, float(stiffness), float(damping), float(max_force))
+
+    def release(self) -> None:
+        """Let go: no force from the next step on."""
+        self._grip = None
+
+    @property
+    def force_base(self) -> Array:
+        """The force applied at the last physics step [N], shape (3,) (a copy)."""
+        return self._w[:3].copy()
+
+    def wrench(self, t: float, tcp_position_base: Array) -> Array:
+        """The hand's wrench at the TCP, base frame [N, N·m], shape (6,)."""
+        grip, last = self._grip, self._last
+        self._last = (t, tcp_position_base.copy())
+        w = np.zeros(6)
+        if isinstance(grip, tuple):
+            handle, k, c, cap = grip
+            f = k * (handle - tcp_position_base)
+            if last is not None and t > last[0]:
+                f -= c * (tcp_position_base - last[1]) / (t - last[0])
+            norm = float(np.linalg.norm(f))
+            w[:3] = f * (cap / norm) if norm > cap else f
+        elif grip is not None:
+            w[:3] = grip
+        self._w = w
+        return w
 
 
 def vector3(value: ArrayLike, name: str) -> Array:

@@ -1,0 +1,134 @@
+"""``leadthrough pendant``: the live browser pendant on the simulated robot or on a robot."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from leadthrough.drivers.protocol import Driver
+from leadthrough.errors import ControlError, LeadthroughError
+from leadthrough.identification.params_file import load_params
+from leadthrough.pendant.backend import LiveSession
+from leadthrough.robot.description import Robot, load_robot
+from leadthrough.session.loop_config import LoopConfig, build_loop
+
+__all__ = ["DRIVERS", "register"]
+
+#: Drivers of real controllers by name: ``(robot, host) -> Driver``. This version has none
+#: (issue 25 adds them); ``--driver`` names one of these.
+DRIVERS: dict[str, Callable[[Robot, str], Driver]] = {}
+
+_DESCRIPTION = """\
+Serve the live pendant: a web page for the person at the robot (a tablet's browser) with the
+robot in 3D, its TCP path, the estimated force, the speed and the safety state in large type,
+and the operator's actions: arm guiding, mark P1 / P2 / waypoints, clear a fault, switch frame
+and axes, set the virtual mass and friction within the controller's operator limits, edit the
+taught points, and export (session.parquet, points.json, path.json / path.csv).
+
+On the simulator (the default) the page also provides the enabling device and lets you push
+the tool with the mouse: drag the handle at the tool; the force (10 N per cm, at most 80 N)
+goes into the simulated robot, the estimator sees it only through the motor currents, and the
+robot follows. The guiding loop runs in its own thread; the page never holds it up.
+
+The page is served on 127.0.0.1 only; --bind 0.0.0.0 serves it to the network (a tablet):
+anyone who reaches the port can then operate the pendant.
+"""
+
+
+def register(sub: Any) -> None:
+    """Add the subcommand."""
+    p = sub.add_parser("pendant", help="live browser pendant (simulator or robot)",
+                       description=_DESCRIPTION,
+                       epilog="examples:\n  leadthrough pendant\n"
+                              "  leadthrough pendant --bind 0.0.0.0 --port 8080 -o taught\n"
+                              "  leadthrough pendant --params params_guiding.toml",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--sim", action="store_true",
+                       help="the simulated robot (the default)")
+    where.add_argument("--driver", default=None, metavar="D",
+                       help="a real controller's driver (needs --host and --params)")
+    p.add_argument("--host", default=None, metavar="H", help="the controller's address")
+    p.add_argument("--robot", default="er20", help="robot (default: er20)")
+    p.add_argument("--params", type=Path, default=None,
+                   help="identified parameters (default on the simulator: the shipped "
+                        "identification of the simulated er20)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="simulated robot instance (default: the parameters' own)")
+    p.add_argument("--bind", default="127.0.0.1", help="address to serve the page on")
+    p.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    p.add_argument("-o", "--output", type=Path, default=Path("leadthrough-pendant"),
+                   help="folder of the exports (default: leadthrough-pendant)")
+    p.add_argument("--record-s", type=float, default=600.0, metavar="S",
+                   help="seconds of the session kept for the export (default 600)")
+    p.add_argument("--rt-priority", type=int, default=None, metavar="P",
+                   help="run the loop's thread under SCHED_FIFO at priority P (1-99; Linux, "
+                        "needs root or CAP_SYS_NICE); see the README on the loop's isolation")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S seconds (default: run until Ctrl-C)")
+    p.set_defaults(func=run)
+
+
+def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession, str]:
+    """A live session on a real controller through the same backend as the simulator's."""
+    factory = DRIVERS.get(args.driver)
+    if factory is None:
+        have = ", ".join(sorted(DRIVERS)) or "none in this version (issue 25 adds them)"
+        raise ControlError("no such driver", field="--driver", value=args.driver,
+                           expected=f"a real-controller driver: {have}; or --sim")
+    if args.host is None or args.params is None:
+        raise ControlError("a robot needs its address and its identified parameters",
+                           field="--host/--params", value=(args.host, args.params),
+                           expected="--host H --params params.toml")
+    params = load_params(args.params, robot)
+    driver = factory(robot, args.host)
+    parts = build_loop(robot, params, LoopConfig(), driver.dt)
+    return (LiveSession(driver, parts, robot, rt_priority=args.rt_priority),
+            f"{args.params} ({params.method})")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``leadthrough pendant``."""
+    try:  # the web stack is an extra: the rest of the CLI works without it
+        from leadthrough.pendant.app import Pendant
+        from leadthrough.pendant.simulated import simulated_session
+    except ImportError as e:
+        raise LeadthroughError(f"the pendant's web stack is not installed ({e.name})",
+                               field="extra", value="pendant",
+                               expected="pip install 'leadthrough[pendant]'") from e
+    robot = load_robot(args.robot)
+    hand = None
+    if args.driver is not None:
+        live, note = _robot_session(args, robot)
+    else:
+        params = None if args.params is None else load_params(args.params, robot)
+        sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
+                                rt_priority=args.rt_priority)
+        live, hand, note = sim.live, sim.hand, sim.params_note
+    print("starting the loop (loading the compiled code) ...", flush=True)
+    live.start()
+    pendant = Pendant(live, args.output, hand=hand, bind=args.bind, port=args.port,
+                      params_note=note)
+    pendant.start()
+    print(f"pendant: {pendant.url}  (exports to {args.output}; Ctrl-C stops)", flush=True)
+    done = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: done.set())
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    deadline = None if args.duration is None else time.monotonic() + args.duration
+    while not done.wait(0.2):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
+        if not live.running:
+            break
+    pendant.stop()
+    live.stop()
+    snap = live.snapshot()
+    if snap is not None and snap.error not in (None, "stopped"):
+        print(f"the loop stopped: {snap.error}")
+        return 1
+    return 0

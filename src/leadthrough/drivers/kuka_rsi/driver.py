@@ -1,0 +1,176 @@
+"""A :class:`~leadthrough.drivers.protocol.Driver` for KUKA robots over RSI (Ethernet), with the
+shipped controller configuration (:mod:`leadthrough.drivers.kuka_rsi.config`).
+
+Here the robot sends first: :meth:`KukaRsiDriver.open` binds the UDP port of the Ethernet
+configuration (49152) and waits up to ``connect_timeout`` for the first ``<Rob>`` document
+(start ``leadthrough_rsi.src`` on the robot once the driver listens; ``listen`` binds the
+port beforehand), answers it at once with
+zero motion and takes its ``ASPos`` (the axis setpoints at ``RSI_ON``) as the reference of the
+absolute corrections (``RSI_ON(#ABSOLUTE)``: target = reference + AK).
+
+Every document (4 ms) is a feedback sample:
+
+* ``AIPos`` [deg] → ``q`` [rad], ``IPOC`` [ms] → ``t`` [s] and ``sequence`` ((IPOC - first
+  IPOC) / cycle, so a lost document is a jump);
+* ``GearTorque`` [N·m] (the GEARTORQUE object: joint torque, not current) → ``torque`` (when
+  the feedback has a torque array, as :meth:`~KukaRsiDriver.make_feedback` gives) and
+  ``current`` = torque / (R·Kt) of the robot file: the motor current that torque stands for,
+  so that what takes currents (the estimator, identification) works unchanged;
+* ``DiL`` → ``inputs`` (bit k = ``$IN[k+1]``);
+* ``Delay`` grown by more than the documents we never received (the robot counted an answer
+  of ours as late) → ``COMMAND_REJECTED``. RSI reports no E-stop or protective stop: the
+  robot stops sending (after an E-stop, a stop of the KRL program, or ``Timeout`` late
+  answers in a row), which the driver sees as silence: ``read`` returns False, and the caller
+  stops on stale feedback.
+
+Answers carry the document's IPOC and AK = target - reference [deg]; targets pass a
+:class:`~leadthrough.drivers.cycle_limits.CycleLimiter` with the robot file's joint speed
+limits (the robot's speed monitoring stops a faster setpoint; its acceleration is left to the
+loop's interpolator: a limit on it here would turn every cycle the robot held for a late
+answer into a lag of millimetres that takes a fifth of a second to make up), then the
+corrections are clipped to the context's AXISCORR range and within ``margin`` of
+AXISCORRMON's maximum (a larger correction stops RSI).
+
+Message format and sources: :mod:`leadthrough.drivers.kuka_rsi.messages`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from leadthrough.drivers.cycle_limits import CycleLimits
+from leadthrough.drivers.kuka_rsi.client import DEFAULT_PORT, RsiClient
+from leadthrough.drivers.kuka_rsi.config import EthernetConfig, RsiContext
+from leadthrough.drivers.kuka_rsi.messages import RobotMessage
+from leadthrough.drivers.protocol import ControllerState, DriverFeedback
+from leadthrough.drivers.streaming import Array, StreamingDriver
+from leadthrough.errors import DriverError
+from leadthrough.robot.description import Robot
+
+__all__ = ["KukaRsiDriver"]
+
+
+class KukaRsiDriver(StreamingDriver[RobotMessage]):
+    """KUKA RSI driver (see the module doc).
+
+    Args:
+        robot: Robot file of the arm (6 axes A1-A6).
+        host: Local address to listen on.
+        port: Local UDP port (the Ethernet configuration's ``PORT``).
+        cycle: RSI cycle [s] (0.004; 0.012 on KR C2).
+        context: RSI context whose correction limits apply (default: the shipped one).
+        config: Ethernet configuration (default: the shipped one; its ``SENTYPE`` is used).
+        timeout: Longest wait for a document [s]; None: 3 cycles.
+        connect_timeout: Longest wait for the robot's first document [s].
+        margin: Fraction of the limits kept.
+    """
+
+    controller = "KUKA RSI"
+    client: RsiClient
+    reports_torque = True
+
+    def __init__(self, robot: Robot, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
+                 cycle: float = 0.004, context: RsiContext | None = None,
+                 config: EthernetConfig | None = None, timeout: float | None = None,
+                 connect_timeout: float = 30.0, margin: float = 0.95) -> None:
+        if robot.n != 6:
+            raise DriverError("the RSI configuration streams 6 axes (A1-A6)",
+                              source=robot.name, field="robot.n", value=robot.n, expected="6")
+        super().__init__(robot, cycle, timeout, connect_timeout, margin)
+        self.context = context if context is not None else RsiContext.shipped()
+        self.config = config if config is not None else EthernetConfig.shipped()
+        self.client = RsiClient(host, port, sentype=self.config.sentype,
+                                precision=self.context.precision,
+                                cycle_ms=round(cycle * 1000))
+        ctx = self.context
+        bound = np.array(ctx.max_correction) * margin
+        self._ak_lo = np.maximum(np.array(ctx.lower), -bound)
+        self._ak_hi = np.minimum(np.array(ctx.upper), bound)
+        self._ipoc0 = 0
+        self._delay: int | None = None
+        self._seen = 0  # sequence of the newest document received
+        self.corrections_clipped = 0
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """The bound (address, port), the real port when 0 was asked."""
+        return self.client.address
+
+    @property
+    def last_message(self) -> RobotMessage | None:
+        """The newest ``<Rob>`` document."""
+        return self.client.last_message
+
+    def listen(self) -> tuple[str, int]:
+        """Bind the UDP port now (``open`` then waits on it); returns the bound address, the
+        real port when 0 was asked (for a robot or emulator to be pointed at)."""
+        if not self.client.bound:
+            self.client.open()
+        return self.client.address
+
+    def _connect(self) -> None:
+        self.listen()
+        self._delay = None
+
+    def _disconnect(self) -> None:
+        self.client.close()  # the robot counts late answers, then RSI stops
+
+    def _receive(self, timeout: float) -> RobotMessage | None:
+        return self.client.receive(timeout)
+
+    def _positions(self, sample: RobotMessage) -> Array:
+        return np.radians(sample.axis_actual)
+
+    def _start_target(self, first: RobotMessage) -> Array:
+        return np.radians(self.client.reference or first.axis_actual)
+
+    def _started(self, first: RobotMessage) -> None:
+        self._ipoc0 = first.ipoc
+        self._delay, self._seen = first.delay, 0
+        if self.limiter is not None:  # answered at once: zero motion
+            self._send(self.limiter.limit(self._start_target(first)))
+            self._answered = 0
+
+    def _limits(self) -> CycleLimits:
+        # the robot's monitoring checks the joint speed of the corrected setpoints
+        return CycleLimits(self.robot.velocity_limit.copy())
+
+    def _sequence(self, sample: RobotMessage) -> int:
+        return (sample.ipoc - self._ipoc0) // self.client.cycle_ms
+
+    def _answer_late(self, sample: RobotMessage) -> bool:
+        """The robot counted more late answers than documents we never saw."""
+        counted = (sample.delay - self._delay if sample.delay is not None
+                   and self._delay is not None else 0)
+        self._delay = sample.delay if sample.delay is not None else self._delay
+        unseen = self._sequence(sample) - self._seen - 1
+        self._seen = self._sequence(sample)
+        return counted > max(unseen, 0)
+
+    def _fill(self, fb: DriverFeedback, sample: RobotMessage) -> None:
+        fb.t = sample.ipoc * 1e-3
+        fb.sequence = self._sequence(sample)
+        fb.q[:] = np.radians(sample.axis_actual)
+        if sample.gear_torque is not None:
+            torque = np.array(sample.gear_torque)
+            fb.current[:] = torque / self.robot.torque_per_amp
+            if fb.torque is not None:
+                fb.torque[:] = torque
+        else:
+            fb.current[:] = np.nan
+            if fb.torque is not None:
+                fb.torque[:] = np.nan
+        fb.state = int(ControllerState.NORMAL)
+        fb.inputs_read = sample.digital_inputs is not None
+        fb.inputs = sample.digital_inputs or 0
+
+    def _send(self, q: Array) -> None:
+        ak = np.array(self.client.correction_for(np.degrees(q).tolist()))
+        clipped = np.clip(ak, self._ak_lo, self._ak_hi)
+        if np.any(clipped != ak):
+            self.corrections_clipped += 1
+        self.client.send(clipped.tolist())
+
+    def _no_data_hint(self) -> str:
+        return ("a <Rob> document: is leadthrough_rsi.src running, and does the Ethernet "
+                "configuration's IP_NUMBER / PORT point at this computer?")

@@ -1,0 +1,208 @@
+"""A :class:`~leadthrough.drivers.protocol.Driver` for Universal Robots arms over RTDE, with
+the servo URScript program (:mod:`leadthrough.drivers.ur_rtde.script`).
+
+:meth:`UrRtdeDriver.open` connects to RTDE (:class:`~leadthrough.drivers.ur_rtde.client.
+RtdeClient`: protocol version 2, output recipe at the controller's rate, input recipe of the
+program's registers), sends the program to the secondary interface (``script_port``; None if
+the program is started another way, e.g. from the pendant) and waits until the program
+reports itself running in its state register. The program idles in hold until the first
+command, so the caller may finish its set-up after ``open``; from the first command on, its
+watchdog stops the arm when commands stop for ``watchdog_timeout``.
+
+Every data package (500 Hz e-Series, 125 Hz CB3) is a feedback sample:
+
+* ``actual_q`` [rad] → ``q``, ``actual_current`` [A] → ``current``, ``timestamp`` [s] → ``t``
+  and ``sequence`` (periods since the first package, so a lost package is a jump);
+* ``actual_digital_input_bits`` → ``inputs`` (bit k = DI k: 0-7 standard, 8-15
+  configurable, 16-17 tool);
+* ``safety_mode`` 6 or 7 (system / robot emergency stop) → ``ESTOP``; 3, 5, 12 or 13
+  (protective, safeguard, automatic-mode safeguard, three-position enabling stop) →
+  ``PROTECTIVE_STOP``; 8 or 9 (violation, fault) → ``NOT_READY``; ``robot_mode`` other than
+  7 (RUNNING), ``runtime_state`` other than 2 (PLAYING) or the program's state register
+  other than 1 (running) → ``NOT_READY``.
+
+Commands write the six targets, a watchdog counter (+1 per command) and mode 1 (servo) into
+the input registers; targets pass a :class:`~leadthrough.drivers.cycle_limits.CycleLimiter`
+with the robot file's joint speed limits (a ``servoj`` target too far from the last one makes
+the controller stop with a protective stop; ``servoj`` smooths the targets itself, so their
+acceleration is not limited here). :meth:`UrRtdeDriver.close` writes
+mode 2 (the program stops the arm with ``stopj`` and halts), then pauses and disconnects.
+
+Mode, safety and runtime codes: Universal Robots' RTDE guide (output table) and the
+``robot_mode`` / ``safety_mode`` enumerations of its client interface documentation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from leadthrough.drivers.cycle_limits import CycleLimits
+from leadthrough.drivers.protocol import ControllerState, DriverFeedback
+from leadthrough.drivers.streaming import Array, StreamingDriver
+from leadthrough.drivers.ur_rtde.client import DEFAULT_OUTPUTS, RtdeClient, RtdeState, ServoCommand
+from leadthrough.drivers.ur_rtde.protocol import DEFAULT_PORT
+from leadthrough.drivers.ur_rtde.script import (
+    SECONDARY_PORT,
+    Mode,
+    ScriptState,
+    ServoScriptParameters,
+    servo_script,
+    upload_script,
+)
+from leadthrough.errors import DriverError
+from leadthrough.robot.description import Robot
+
+__all__ = ["UrRtdeDriver", "controller_state"]
+
+ROBOT_RUNNING = 7
+RUNTIME_PLAYING = 2
+ESTOP_MODES = frozenset((6, 7))
+PROTECTIVE_MODES = frozenset((3, 5, 12, 13))
+FAULT_MODES = frozenset((8, 9))
+
+
+def controller_state(values: dict[str, object], register: str) -> ControllerState:
+    """:class:`ControllerState` flags of an output data package (see the module doc).
+
+    Args:
+        values: The package's variables by name.
+        register: Name of the program's state register (``output_int_register_R``).
+    """
+    safety = values.get("safety_mode")
+    state = ControllerState.NORMAL
+    if safety in ESTOP_MODES:
+        state |= ControllerState.ESTOP
+    elif safety in PROTECTIVE_MODES:
+        state |= ControllerState.PROTECTIVE_STOP
+    elif safety in FAULT_MODES:
+        state |= ControllerState.NOT_READY
+    if (values.get("robot_mode") != ROBOT_RUNNING
+            or values.get("runtime_state") != RUNTIME_PLAYING
+            or values.get(register) != ScriptState.RUNNING):
+        state |= ControllerState.NOT_READY
+    return state
+
+
+class UrRtdeDriver(StreamingDriver[RtdeState]):
+    """UR RTDE driver (see the module doc).
+
+    Args:
+        robot: Robot file of the arm (6 joints).
+        host: Controller address.
+        port: RTDE port (30004).
+        script_port: Secondary interface port the program is sent to (30002); None: do not
+            send it (it is started another way).
+        frequency: RTDE output frequency [Hz]; None: the controller's (500 e-Series, 125 CB3).
+        script: Program parameters (``period`` is set to the RTDE period).
+        timeout: Longest wait for a data package [s]; None: 3 periods.
+        connect_timeout: Longest wait for the handshake, the first package and the program
+            start [s].
+        margin: Fraction of the limits kept by the limiter.
+    """
+
+    controller = "UR RTDE"
+    client: RtdeClient
+
+    def __init__(self, robot: Robot, host: str, port: int = DEFAULT_PORT, *,
+                 script_port: int | None = SECONDARY_PORT, frequency: float | None = None,
+                 script: ServoScriptParameters | None = None, timeout: float | None = None,
+                 connect_timeout: float = 2.0, margin: float = 0.95) -> None:
+        if robot.n != 6:
+            raise DriverError("UR arms have 6 joints", source=robot.name, field="robot.n",
+                              value=robot.n, expected="6")
+        period = 1.0 / frequency if frequency is not None else 0.002
+        super().__init__(robot, period, timeout, connect_timeout, margin)
+        self.host, self.script_port = host, script_port
+        self.script = script if script is not None else ServoScriptParameters()
+        self._fixed_timeout = timeout is not None
+        outputs = (*DEFAULT_OUTPUTS[:-1],
+                   f"output_int_register_{self.script.register_offset}")
+        self.client = RtdeClient(host, port, outputs=outputs, frequency=frequency,
+                                 register_offset=self.script.register_offset,
+                                 timeout=connect_timeout)
+        self._register = outputs[-1]
+        self._counter = 0
+        self._last: RtdeState | None = None
+        self._t0: float | None = None
+
+    @property
+    def last_state(self) -> RtdeState | None:
+        """The newest data package, all variables of the output recipe."""
+        return self._last
+
+    def _connect(self) -> None:
+        self.client.open()
+        self._dt = 1.0 / float(self.client.frequency or 500.0)
+        if not self._fixed_timeout:
+            self.timeout = 3.0 * self._dt
+        self._counter, self._t0 = 0, None
+        if self.script_port is None:
+            return
+        try:
+            program = servo_script(dataclasses.replace(self.script, period=self._dt))
+            upload_script(self.host, program, self.script_port, self.connect_timeout)
+        except BaseException:
+            self.client.close()
+            raise
+
+    def _started(self, first: RtdeState) -> None:
+        """Wait until the program reports itself running."""
+        deadline = time.monotonic() + self.connect_timeout
+        state = first
+        while state.values.get(self._register) != ScriptState.RUNNING:
+            if time.monotonic() > deadline:
+                raise DriverError(
+                    "the servo program is not running", field=self._register,
+                    value=state.values.get(self._register),
+                    expected=f"{int(ScriptState.RUNNING)} within {self.connect_timeout} s (robot "
+                    "powered on, in remote control, no protective stop; robot_mode "
+                    f"{state.values.get('robot_mode')}, safety_mode "
+                    f"{state.values.get('safety_mode')})")
+            got = self._receive(0.1)
+            self._raise_if_broken()
+            state = got if got is not None else state
+
+    def _limits(self) -> CycleLimits:
+        # the controller checks the joint speed of servoj targets (a faster step is a
+        # protective stop) and smooths them itself (lookahead_time, gain): speed only here
+        return CycleLimits(self.robot.velocity_limit.copy())
+
+    def _disconnect(self) -> None:
+        if self.opened and self.client.error is None:
+            self.client.send(ServoCommand(tuple(self.limiter.position) if self.limiter
+                                          else (0.0,) * 6, self._counter + 1, Mode.STOP))
+        self.client.close()
+
+    def _receive(self, timeout: float) -> RtdeState | None:
+        state = self.client.receive(timeout)
+        if state is not None:
+            self._last = state
+        return state
+
+    def _positions(self, sample: RtdeState) -> Array:
+        return np.array(sample.q, dtype=float)
+
+    def _sequence(self, sample: RtdeState) -> int:
+        if self._t0 is None:  # periods since the first package (its phase is arbitrary)
+            self._t0 = sample.timestamp
+        return round((sample.timestamp - self._t0) / self._dt)
+
+    def _fill(self, fb: DriverFeedback, sample: RtdeState) -> None:
+        v = sample.values
+        fb.t = sample.timestamp
+        fb.sequence = self._sequence(sample)
+        fb.q[:] = sample.q
+        fb.current[:] = sample.current
+        fb.state = int(controller_state(v, self._register))
+        fb.inputs = int(v.get("actual_digital_input_bits", 0))
+        fb.inputs_read = "actual_digital_input_bits" in v
+
+    def _send(self, q: Array) -> None:
+        self._counter = (self._counter + 1) & 0x7FFFFFFF
+        self.client.send(ServoCommand(tuple(q.tolist()), self._counter, Mode.SERVO))
+
+    def _no_data_hint(self) -> str:
+        return "data packages: is RTDE enabled on the controller?"

@@ -1,0 +1,268 @@
+"""What every emulated controller shares: the 1 ms real-time loop around an
+:class:`~leadthrough.sim.emulators.arm.EmulatedArm`, the controller cycle, injected faults
+(lost, late and NaN packets, a closed socket, E-stop and protective stop) and the report.
+
+A protocol module subclasses :class:`EmulatedController` and implements :meth:`open` (bind its
+sockets), :meth:`poll` (handle what arrived, every millisecond), :meth:`on_cycle` (the
+controller's cycle: take the command, send the status) and :meth:`close_sockets`.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from leadthrough.robot.description import Robot
+from leadthrough.sim.emulators.arm import ArmPhase, EmulatedArm, MotionLimits, StopKind
+from leadthrough.sim.emulators.scenario import EmulatorOptions
+
+__all__ = ["EmulatedController", "EmulatorReport", "UdpController"]
+
+
+
+@dataclass(frozen=True)
+class EmulatorReport:
+    """What happened in an emulator session.
+
+    Attributes:
+        kind: Emulator name.
+        sim_time: Simulated time [s].
+        commands: Commands received; accepted / refused split.
+        violations: Executed targets that broke a limit or were not finite (always empty
+            unless the emulator is wrong).
+        stop_kind: Why the arm stopped (None: it did not).
+        stop_reason: Detail of the stop.
+        sent, dropped, delayed: Outgoing packets sent, dropped and delayed by faults.
+        max_lag: Largest lag of the loop behind the wall clock [s].
+        resyncs: Times the loop dropped a lag of more than one controller cycle instead of
+            catching it up (a real controller never sends a burst of cycles).
+    """
+
+    kind: str
+    sim_time: float
+    commands: int
+    accepted: int
+    refused: int
+    violations: tuple[str, ...]
+    stop_kind: str | None
+    stop_reason: str
+    sent: int
+    dropped: int
+    delayed: int
+    max_lag: float
+    resyncs: int
+
+
+class EmulatedController(ABC):
+    """Base of the emulated controllers (see the module doc).
+
+    Args:
+        robot: Robot description (6 joints).
+        seed: Seeds the simulated robot and the fault draws.
+        options: Shared settings.
+        port: Port to listen on (J519, RTDE; 0: any free port) or to send to (RSI).
+    """
+
+    kind: ClassVar[str] = ""
+    default_cycle_ms: ClassVar[int] = 8
+
+    def __init__(self, robot: Robot, seed: int, options: EmulatorOptions, port: int) -> None:
+        self.robot, self.options, self.requested_port = robot, options, port
+        cycle_ms = options.cycle_ms if options.cycle_ms is not None else self.default_cycle_ms
+        q0 = np.array(options.q0) if options.q0 is not None else None
+        self.arm = EmulatedArm(robot, seed, cycle_ms * 1e-3, self.motion_limits(robot), q0)
+        self.rng = np.random.default_rng([seed, 7])
+        self._outbox: list[tuple[float, socket.socket, bytes, tuple[str, int] | None]] = []
+        self.sent = self.dropped = self.delayed = 0
+        self.max_lag, self.resyncs = 0.0, 0
+        self.closed = False
+        self._ticks = 0
+        self._estopped = self._protective = False
+
+    # -------------------------------------------------------------------- protocol hooks
+    @abstractmethod
+    def motion_limits(self, robot: Robot) -> MotionLimits:
+        """The limits this controller checks on consecutive cycle targets."""
+
+    @abstractmethod
+    def open(self) -> None:
+        """Create and bind the sockets."""
+
+    @abstractmethod
+    def close_sockets(self) -> None:
+        """Close every socket."""
+
+    @abstractmethod
+    def poll(self, t: float) -> None:
+        """Handle what arrived (called every millisecond)."""
+
+    @abstractmethod
+    def on_cycle(self, t: float) -> None:
+        """One controller cycle: take the command, send the status."""
+
+    @property
+    @abstractmethod
+    def port(self) -> int:
+        """The port in use (listening, or sent to)."""
+
+    # --------------------------------------------------------------------------- helpers
+    @property
+    def t(self) -> float:
+        """Simulation time [s]."""
+        return self.arm.sim.time
+
+    def inputs(self) -> dict[str, bool]:
+        """Digital inputs now ({name: on})."""
+        return self.options.inputs.state(self.t)
+
+    def datagrams(self, sock: socket.socket | None) -> Iterator[tuple[bytes, tuple[str, int]]]:
+        """Every datagram queued on a non-blocking UDP socket (none if it is closed)."""
+        while sock is not None:
+            try:
+                yield sock.recvfrom(4096)
+            except (BlockingIOError, ConnectionRefusedError):
+                return
+
+    def transmit(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None) -> None:
+        """Send a packet through the fault plan (dropped, delayed, or sent now).
+
+        Args:
+            sock: Socket to send on.
+            data: The packet.
+            addr: Destination (UDP), or None for a connected stream socket.
+        """
+        faults, t = self.options.faults, self.t
+        if faults.drop(t, self.rng):
+            self.dropped += 1
+            return
+        delay = faults.delay(t)
+        if delay > 0:
+            self.delayed += 1
+            self._outbox.append((time.monotonic() + delay, sock, data, addr))
+            return
+        self._send_now(sock, data, addr)
+
+    def _send_now(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None) -> None:
+        try:
+            if addr is None:
+                sock.sendall(data)
+            else:
+                sock.sendto(data, addr)
+            self.sent += 1
+        except OSError:
+            self.on_send_error(sock)
+
+    def on_send_error(self, sock: socket.socket) -> None:  # noqa: B027 (optional hook)
+        """A send failed (the peer went away); protocols may drop the connection."""
+
+    def _flush(self) -> None:
+        if not self._outbox:
+            return
+        now, keep = time.monotonic(), []
+        for item in self._outbox:
+            if item[0] <= now:
+                self._send_now(*item[1:])
+            else:
+                keep.append(item)
+        self._outbox = keep
+
+    # ------------------------------------------------------------------------------ loop
+    def tick(self) -> None:
+        """One millisecond: scheduled events, input handling, the cycle, the simulator."""
+        t, faults = self.t, self.options.faults
+        if faults.close_at is not None and t >= faults.close_at and not self.closed:
+            self.close_sockets()
+            self.closed = True
+            return
+        if faults.estop_at is not None and t >= faults.estop_at and not self._estopped:
+            self._estopped = True
+            self.arm.stop(StopKind.ESTOP, "emergency stop pressed")
+        if (faults.protective_stop_at is not None and t >= faults.protective_stop_at
+                and not self._protective):
+            self._protective = True
+            self.arm.stop(StopKind.PROTECTIVE, "protective stop (safeguard)")
+        self.poll(t)
+        self.arm.step()
+        self._ticks += 1
+        if self._ticks % self.arm.steps == 1 or self.arm.steps == 1:
+            self.on_cycle(self.t)
+        self._flush()
+
+    def run(self, stop: threading.Event) -> EmulatorReport:
+        """Serve until ``stop`` is set or the sockets are closed by a fault.
+
+        Args:
+            stop: Set it to end the session.
+
+        Returns:
+            The session report.
+        """
+        dt = self.arm.dt
+        t0, k = time.monotonic(), 0
+        try:
+            while not stop.is_set() and not self.closed:
+                self.tick()
+                k += 1
+                if not self.options.realtime:
+                    continue
+                lag = time.monotonic() - (t0 + k * dt)
+                if lag < 0:
+                    time.sleep(-lag)
+                    continue
+                self.max_lag = max(self.max_lag, lag)
+                if lag > self.arm.cycle:  # late by a cycle: carry on from now, no burst
+                    self.resyncs += 1
+                    t0 += lag
+        finally:
+            if not self.closed:
+                self.close_sockets()
+        return self.report()
+
+    def report(self) -> EmulatorReport:
+        """The session so far."""
+        log = self.arm.log
+        accepted = sum(1 for r in log if r.accepted)
+        kind = self.arm.stop_kind
+        return EmulatorReport(
+            kind=self.kind, sim_time=self.t, commands=len(log), accepted=accepted,
+            refused=len(log) - accepted, violations=tuple(self.arm.violations()),
+            stop_kind=None if kind is None else kind.value, stop_reason=self.arm.stop_reason,
+            sent=self.sent, dropped=self.dropped, delayed=self.delayed,
+            max_lag=self.max_lag, resyncs=self.resyncs)
+
+    @property
+    def faulted(self) -> bool:
+        """The arm stopped on a fault (or is stopping)."""
+        return self.arm.phase in (ArmPhase.STOPPING, ArmPhase.FAULT) and (
+            self.arm.stop_kind is not StopKind.REQUEST)
+
+
+class UdpController(EmulatedController):
+    """An emulated controller with one non-blocking UDP socket bound to :attr:`bind_port`."""
+
+    _sock: socket.socket | None = None
+
+    @property
+    def bind_port(self) -> int:
+        """Local port to bind (0: an ephemeral port)."""
+        return self.requested_port
+
+    def open(self) -> None:
+        """Bind the UDP socket on ``options.host``."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind((self.options.host, self.bind_port))
+        sock.setblocking(False)
+        self._sock = sock
+
+    def close_sockets(self) -> None:
+        """Close the socket."""
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None

@@ -1,0 +1,280 @@
+"""The pendant's link to the loop (``leadthrough.pendant.backend``) on the simulated robot:
+requests at cycle boundaries, notices, marks, the live recording and its export, the taught
+point list, and the shipped parameters that the simulated sessions run with."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from leadthrough.control.safety import Fault, State
+from leadthrough.errors import TeachError
+from leadthrough.pendant.backend import (
+    Adjust,
+    ClearFault,
+    LiveSession,
+    LoopSnapshot,
+    MarkedPoint,
+    MarkPoint,
+    SetEnable,
+)
+from leadthrough.pendant.export import POINTS_FORMAT, export_taught
+from leadthrough.pendant.live_recording import LiveRecording
+from leadthrough.pendant.simulated import SimulatedPendantSession, simulated_session
+from leadthrough.pendant.taught_points import TaughtPoints
+from leadthrough.pendant.transitions import describe
+from leadthrough.robot import Robot
+from leadthrough.session.loop_config import LoopConfig
+from leadthrough.session.record import load_session
+from leadthrough.sim.driver import InjectedFault, InjectedFaultKind
+from leadthrough.sim.guiding_params import shipped_guiding_params
+from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
+from leadthrough.teach import teach_session
+
+
+def until(live: LiveSession, condition: Callable[[LoopSnapshot], bool], loop_s: float,
+          what: str) -> LoopSnapshot:
+    """The first snapshot meeting ``condition`` within ``loop_s`` of loop time."""
+    first = live.snapshot()
+    assert first is not None
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        snap = live.snapshot()
+        assert snap is not None
+        if snap.error is not None:
+            pytest.fail(f"the loop stopped: {snap.error}")
+        if condition(snap):
+            return snap
+        if snap.time - first.time > loop_s:
+            break
+        time.sleep(0.002)
+    pytest.fail(f"no {what} within {loop_s} s of loop time")
+
+
+@pytest.fixture
+def sim(er20: Robot) -> Iterator[SimulatedPendantSession]:
+    """A live session on the simulator, running as fast as the machine allows."""
+    s = simulated_session(er20, paced=False, record_s=60.0)
+    s.live.start()
+    until(s.live, lambda snap: snap.estimator.name == "OK", 5.0, "tared estimator")
+    try:
+        yield s
+    finally:
+        s.live.stop()
+
+
+def test_guiding_a_push_marking_and_stopping(sim: SimulatedPendantSession,
+                                             er20: Robot, tmp_path: Path) -> None:
+    live, hand = sim.live, sim.hand
+    live.send(SetEnable(True))
+    until(live, lambda s: s.state == State.GUIDING, 0.1, "GUIDING")
+    live.send(MarkPoint("P1"))
+    p1 = until(live, lambda s: len(s.marks) == 1, 0.05, "the mark")
+    hand.push([0.0, 40.0, 0.0])
+    moving = until(live, lambda s: s.speed > 0.05, 3.0, "motion")
+    assert moving.state == State.GUIDING
+    assert moving.twist_base[1] > 0.9 * moving.speed       # along the push
+    until(live, lambda s: s.transform_tool_to_base[1, 3] > 0.06, 3.0, "6 cm along y")
+    hand.release()
+    until(live, lambda s: s.speed == 0.0, 5.0, "rest after the release")
+    live.send(MarkPoint("P2"))
+    live.send(SetEnable(False))
+    done = until(live, lambda s: s.state == State.IDLE and len(s.marks) == 2, 2.0, "IDLE")
+    assert done.cause == "STOPPED"
+    p1_mark, p2_mark = done.marks
+    assert (p1_mark.label, p2_mark.label) == ("P1", "P2")
+    assert np.array_equal(p1_mark.q, p1.q)                # the measured q of its cycle
+    assert [n.text for n in done.notices if n.text.startswith("marked")] == [
+        f"marked P1 at {p1_mark.t:.2f} s", f"marked P2 at {p2_mark.t:.2f} s"]
+
+    points = list(done.marks)
+    exported = export_taught(live.session_log(points), points, er20, tmp_path)
+    assert exported.folder == tmp_path / "export-001" and exported.note == ""
+    log = load_session(exported.files["session"])
+    assert [(m.label, m.t) for m in log.marks] == [("P1", p1_mark.t), ("P2", p2_mark.t)]
+    program = teach_session(log, er20, tolerance_mm=1.0)
+    assert program.welding_line is not None
+    assert program.welding_line.length_m > 0.06
+    data = json.loads(exported.files["points"].read_text())
+    assert data["format"] == POINTS_FORMAT and [p["label"] for p in data["points"]] == [
+        "P1", "P2"]
+    assert json.loads(exported.files["path"].read_text())["welding_line"]["length_m"] == \
+        pytest.approx(program.welding_line.length_m, abs=1e-12)
+
+
+def test_settings_change_at_rest_only_and_are_reported(sim: SimulatedPendantSession) -> None:
+    live = sim.live
+    live.send(Adjust(frame="tool", mass=(10.0, 300.0), friction=(25.0, 5.0)))
+    snap = until(live, lambda s: s.settings.frame == "tool", 0.05, "the new frame")
+    vf = snap.settings.virtual_friction
+    assert (vf.mass[0], vf.mass[3], vf.friction[0], vf.friction[3]) == (50.0, 300.0, 25.0, 5.0)
+    assert snap.notices[-1].text == "virtual mass clamped to 50 kg, 300 kg·m²"
+    live.send(SetEnable(True))
+    until(live, lambda s: s.state == State.GUIDING, 0.1, "GUIDING")
+    live.send(Adjust(frame="base"))
+    refused = until(live, lambda s: s.notices[-1].text.startswith("not changed"), 0.05,
+                    "the refusal")
+    assert refused.settings.frame == "tool" and "IDLE or FAULT" in refused.notices[-1].text
+    live.send(ClearFault())
+    warned = until(live, lambda s: s.notices[-1].text == "no fault to clear", 0.05, "notice")
+    assert [n.number for n in warned.notices] == sorted({n.number for n in warned.notices})
+
+
+def test_a_fault_latches_until_cleared_at_rest(sim: SimulatedPendantSession) -> None:
+    live = sim.live
+    live.send(SetEnable(True))
+    guiding = until(live, lambda s: s.state == State.GUIDING, 0.1, "GUIDING")
+    live.driver.inject(InjectedFault(InjectedFaultKind.STALE, t_start=guiding.time + 0.05,  # type: ignore[attr-defined]
+                                     t_end=guiding.time + 0.2))
+    fault = until(live, lambda s: s.state == State.FAULT, 0.5, "FAULT")
+    assert fault.fault == Fault.STALE_FEEDBACK and fault.cause.startswith("STALE_FEEDBACK")
+    time.sleep(0.05)
+    assert live.snapshot().state == State.FAULT            # latched (stale feedback is over)
+    live.send(SetEnable(False))
+    live.send(ClearFault())
+    cleared = until(live, lambda s: s.state == State.IDLE, 0.5, "IDLE after the clear")
+    assert cleared.cause == "FAULT_CLEARED"
+
+
+def test_the_loop_reports_why_it_stopped(er20: Robot) -> None:
+    s = simulated_session(er20, paced=False)
+
+    def broken(_: object) -> None:
+        raise RuntimeError("link lost")
+
+    s.live.start()
+    s.live.driver.write = broken  # type: ignore[method-assign]
+    deadline = time.monotonic() + 10
+    while s.live.running and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not s.live.running
+    assert s.live.snapshot().error == "RuntimeError: link lost"
+
+
+def test_snapshots_are_copies(sim: SimulatedPendantSession) -> None:
+    snap = sim.live.snapshot()
+    q = snap.q.copy()
+    sim.hand.push([30.0, 0.0, 0.0])
+    sim.live.send(SetEnable(True))
+    until(sim.live, lambda s: s.speed > 0.0, 3.0, "motion")
+    assert np.array_equal(snap.q, q)
+    times = sim.live.period_times(50)
+    assert times.work_us.size == 50 and times.controller_cycle.sum() == 5
+    assert np.isnan(times.done_us).all()          # not paced
+
+
+# --------------------------------------------------------------------- the recording ring
+class _Rows:
+    """Stands in for the loop: each stored row holds its own time in every column."""
+
+    def store(self, rec: object, i: int, t: float) -> None:
+        for column in vars(rec).values():
+            if column is not None:
+                column[i] = t
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(2, 40), st.integers(0, 120))
+def test_the_ring_keeps_the_last_rows_in_order(capacity: int, written: int) -> None:
+    ring = LiveRecording(_Rows(), capacity, 2, True)  # type: ignore[arg-type]
+    for k in range(written):
+        ring.store(float(k))
+    rows, first = ring.rows()
+    kept = min(written, capacity - 1) if written >= capacity else written
+    assert first == written - kept
+    assert np.array_equal(rows.time, np.arange(first, written, dtype=float))
+    assert np.array_equal(rows.q[:, 1], rows.time)
+
+
+def test_the_ring_never_returns_a_row_being_written() -> None:
+    ring = LiveRecording(_Rows(), 50, 6, True)  # type: ignore[arg-type]
+    stop = threading.Event()
+
+    def writer() -> None:
+        k = 0
+        while not stop.is_set():
+            ring.store(float(k))
+            k += 1
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    try:
+        complete = 0
+        for _ in range(300):
+            rows, first = ring.rows()
+            expected = np.arange(first, first + rows.time.size, dtype=float)
+            assert np.array_equal(rows.time, expected)
+            for column in (rows.q, rows.current, rows.rot.reshape(len(rows.rot), 9)):
+                assert np.all(column == expected[:, None])
+            complete += rows.time.size > 0
+    finally:
+        stop.set()
+        thread.join()
+    assert complete > 0     # (a writer that laps the ring during a copy leaves no rows)
+
+
+# --------------------------------------------------------------------- the point list
+def _point(label: str, t: float) -> MarkedPoint:
+    return MarkedPoint(label, t, np.full(6, t))
+
+
+def test_taught_points_replace_delete_and_reorder() -> None:
+    points = TaughtPoints()
+    assert points.sync([_point("P1", 1.0), _point("W1", 2.0)])
+    assert points.next_waypoint() == "W2"
+    assert points.sync([_point("P1", 1.0), _point("W1", 2.0), _point("P1", 3.0)])
+    assert [(p.label, p.t) for p in points.points] == [("P1", 3.0), ("W1", 2.0)]
+    assert not points.sync([_point("P1", 1.0), _point("W1", 2.0), _point("P1", 3.0)])
+    points.move("W1", -1)
+    points.move("W1", -5)                    # stays first
+    assert [p.label for p in points.points] == ["W1", "P1"]
+    points.delete("W1")
+    assert [p.label for p in points.points] == ["P1"]
+    with pytest.raises(TeachError, match="W7"):
+        points.delete("W7")
+
+
+def test_export_with_one_point_says_why_there_is_no_path(sim: SimulatedPendantSession,
+                                                         er20: Robot, tmp_path: Path) -> None:
+    sim.live.send(MarkPoint("P1"))
+    snap = until(sim.live, lambda s: len(s.marks) == 1, 0.05, "the mark")
+    first = export_taught(sim.live.session_log(snap.marks), list(snap.marks), er20, tmp_path)
+    second = export_taught(sim.live.session_log(snap.marks), list(snap.marks), er20, tmp_path)
+    assert first.program is None and "only one mark" in first.note
+    assert sorted(first.files) == ["points", "session"]
+    assert second.folder.name == "export-002"
+
+
+def test_describe_names_the_fault_and_its_value() -> None:
+    from leadthrough.control.safety import Cause, Event
+    ev = Event(1.0, State.GUIDING, State.FAULT, Cause.FAULT, Fault.FOLLOWING_ERROR, 0.0512, 2)
+    assert describe(ev) == "FOLLOWING_ERROR: joint 3, 0.0512 rad"
+    ev = Event(1.0, State.GUIDING, State.FAULT, Cause.FAULT, Fault.COLLISION, 163.2, 0)
+    assert describe(ev) == "COLLISION: force 163 N"
+    assert describe(Event(1.0, State.IDLE, State.GUIDING, Cause.DEADMAN_PRESSED)) == \
+        "DEADMAN_PRESSED"
+
+
+# --------------------------------------------------------------------- shipped parameters
+def test_the_shipped_parameters_guide_the_simulated_er20(er20: Robot) -> None:
+    """The parameters shipped for the pendant still fit the simulator: a 40 N push moves the
+    arm to the speed limit, the release stops it, and at rest nothing moves."""
+    params = shipped_guiding_params(er20)
+    assert params.sim_seed == 1 and params.method == "consistent"
+    loop = LoopConfig(guiding=light_guiding())
+    push = run_sim_session(er20, params, SimSessionConfig(operator="push-x", loop=loop))
+    assert push.summary.faults == []
+    assert push.summary.max_linear_speed > 0.19
+    twist = push.result.log.twist_cmd_base
+    assert np.all(twist[-500:] == 0.0)
+    rest = run_sim_session(er20, params, SimSessionConfig(operator="rest", duration_s=4.0,
+                                                          loop=loop))
+    assert np.all(rest.result.log.twist_cmd_base == 0.0)

@@ -1,0 +1,190 @@
+"""The pendant in a real browser (Chromium driven by Playwright), on the simulated robot.
+
+An operator's session end to end: open the page, arm guiding and press the (simulated) enabling
+device, drag the push handle at the tool with the mouse and see the robot follow and the state
+change, mark P1 and P2, export, and take a screenshot.
+
+Chromium: Debian's ``/usr/bin/chromium`` (``.ci/run`` installs it), never a browser downloaded
+by Playwright. Without it (or without the ``playwright`` package) the test **fails when the
+environment variable ``CI`` is set** (CI must run it) and is skipped with the reason otherwise
+(a developer's machine without a browser). ``LEADTHROUGH_DOCS_SCREENSHOT=1`` also writes the
+screenshot to ``docs/pendant.png`` (the README's).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from leadthrough.control.safety import State
+from leadthrough.pendant.app import Pendant, wait_for_clients
+from leadthrough.pendant.simulated import SimulatedPendantSession, simulated_session
+from leadthrough.robot import Robot
+
+DOCS_SHOT = Path(__file__).resolve().parent.parent / "docs" / "pendant.png"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+
+
+def _chromium() -> str:
+    """Debian's Chromium and Playwright, or fail (CI) / skip (elsewhere) saying what is
+    missing."""
+    missing = []
+    path = shutil.which("chromium") or ("/usr/bin/chromium"
+                                        if Path("/usr/bin/chromium").exists() else None)
+    if path is None:
+        missing.append("Chromium (apt-get install chromium)")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        missing.append("playwright (pip install -e '.[pendant]')")
+    if missing:
+        message = "the browser test needs " + " and ".join(missing)
+        if os.environ.get("CI"):
+            pytest.fail(message + " (CI is set: the test must run there)")
+        pytest.skip(message)
+    assert path is not None
+    return path
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.05)
+
+
+def _screen(camera: Any, point: np.ndarray) -> tuple[float, float]:
+    """Pixel of a world point [m] in the browser's view (viser's camera: OpenCV axes, +z
+    forward, +y down; ``fov`` vertical)."""
+    w, x, y, z = camera.wxyz
+    p = Rotation.from_quat([x, y, z, w]).as_matrix().T @ (point - camera.position)
+    f = 0.5 * camera.image_height / np.tan(0.5 * camera.fov)
+    return (0.5 * camera.image_width + f * p[0] / p[2],
+            0.5 * camera.image_height + f * p[1] / p[2])
+
+
+@pytest.fixture
+def pendant(er20: Robot, tmp_path: Path) -> Iterator[tuple[Pendant, SimulatedPendantSession]]:
+    sim = simulated_session(er20)
+    sim.live.start()
+    app = Pendant(sim.live, tmp_path / "out", hand=sim.hand, port=_free_port(),
+                  params_note=sim.params_note)
+    app.start()
+    try:
+        yield app, sim
+    finally:
+        app.stop()
+        sim.live.stop()
+
+
+def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSession],
+                                      tmp_path: Path) -> None:
+    from playwright.sync_api import sync_playwright
+    chromium = _chromium()
+    app, sim = pendant
+    live = sim.live
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.goto(app.url)
+            assert wait_for_clients(app), "the page did not connect"
+            state = page.locator("#lt-state")
+            _until(lambda: state.get_attribute("data-state") == "IDLE", 30, "IDLE on the page")
+            _until(lambda: live.snapshot().estimator.name == "OK", 10, "the estimator's tare")
+            _dismiss_notifications(page)        # (a click: not while dragging)
+
+            page.get_by_role("button", name="Arm guiding").click()
+            page.get_by_role("button", name="Press enabling device").click()
+            _until(lambda: state.get_attribute("data-state") == "GUIDING", 10, "GUIDING")
+            page.get_by_role("button", name="P1", exact=True).click()
+            _until(lambda: "P1" in [p.label for p in app.points.points], 5, "P1 marked")
+
+            start = app.scene.tcp_m.copy()
+            _drag_handle(page, app, start, np.array([0.0, 1.0, 0.0]), 0.25)
+            moved = float(np.linalg.norm(app.scene.tcp_m - start))
+            assert moved > 0.05, f"the robot moved {moved * 1e3:.0f} mm under the mouse's push"
+            assert not app.scene.dragging and not sim.hand.force_base.any()
+
+            at_p2 = app.scene.tcp_m.copy()
+            page.get_by_role("button", name="P2", exact=True).click()
+            _until(lambda: "P2" in [p.label for p in app.points.points], 5, "P2 marked")
+            page.get_by_role("button", name="Release enabling device").click()
+            _until(lambda: state.get_attribute("data-state") == "IDLE", 10, "STOPPING -> IDLE")
+            assert live.snapshot().state == State.IDLE
+
+            page.get_by_role("button", name="Export").click()
+            _until(lambda: (tmp_path / "out" / "export-001" / "path.json").exists(), 20,
+                   "the export")
+            page.screenshot(path=str(tmp_path / "after-export.png"))
+        finally:
+            browser.close()
+    _check_export(tmp_path / "out" / "export-001", start, at_p2)
+
+
+def _drag_handle(page: Any, app: Pendant, tcp: np.ndarray, axis: np.ndarray,
+                 distance_m: float) -> None:
+    """Drag the push handle's ``axis`` arrow by ``distance_m``, hold until the robot has come
+    to rest near it, take the screenshot, let go."""
+    camera = next(iter(app.server.get_clients().values())).camera
+    grab = _screen(camera, tcp + 0.14 * axis)        # on the arrow (the gizmo is 0.2 m)
+    to = _screen(camera, tcp + (0.14 + distance_m) * axis)
+    page.mouse.move(*grab)
+    page.mouse.down()
+    page.mouse.move(*to, steps=5)
+    _until(lambda: app.scene.dragging and app.hand is not None
+           and bool(app.hand.force_base.any()), 5, "the drag to push the simulated tool")
+    _until(lambda: app.live.snapshot().speed > 0.05, 8, "the robot to follow the push")
+    page.screenshot(path=str(_shot_path(app)))        # under way
+    _until(lambda: app.live.snapshot().speed == 0.0, 15, "the robot to stop at the handle")
+    page.mouse.up()
+    _until(lambda: not app.scene.dragging, 5, "the end of the drag")
+    time.sleep(2.0 / 20)   # one page update: the hand lets go
+
+
+def _shot_path(app: Pendant) -> Path:
+    if os.environ.get("LEADTHROUGH_DOCS_SCREENSHOT"):
+        return DOCS_SHOT
+    return app.out.parent / "pendant.png"
+
+
+def _dismiss_notifications(page: Any) -> None:
+    """Close the browser's "software WebGL" notice (headless Chromium renders on the CPU)."""
+    for button in page.locator(".mantine-Notification-closeButton").all():
+        button.click()
+    time.sleep(0.5)
+
+
+def _check_export(folder: Path, at_p1: np.ndarray, at_p2: np.ndarray) -> None:
+    """The export holds the session, the two points where the robot stood when they were
+    marked (the page's TCP when the button was pressed: within 2 mm, the drives still settle
+    after the hand lets go), and the welding line between them."""
+    assert (folder / "session.parquet").is_file()
+    points = json.loads((folder / "points.json").read_text())["points"]
+    assert [p["label"] for p in points] == ["P1", "P2"]
+    p1, p2 = (np.array(p["tcp_position_m"]) for p in points)
+    assert np.linalg.norm(p1 - at_p1) < 0.002
+    assert np.linalg.norm(p2 - at_p2) < 0.002
+    line = json.loads((folder / "path.json").read_text())["welding_line"]
+    assert (line["start_label"], line["end_label"]) == ("P1", "P2")
+    assert line["length_m"] > 0.15
+    assert abs(line["length_m"] - np.linalg.norm(p2 - p1)) < 0.01

@@ -1,0 +1,236 @@
+"""``record --driver``: a trajectory run on each real-controller driver against its emulated
+controller (loopback sockets), logged like the simulator's recordings; every stop (E-stop, a
+closed link, NaN, Ctrl-C) is a commanded stop and no recording; the emulator confirms that no
+command broke its limits."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from leadthrough.data.io import load_recording
+from leadthrough.drivers.controllers import DEFAULT_PORTS, connect
+from leadthrough.drivers.streaming import StreamingDriver
+from leadthrough.errors import ControlError, DriverError
+from leadthrough.excitation.fourier import TrajectorySamples
+from leadthrough.excitation.trajectory_file import save_trajectory
+from leadthrough.robot import Robot, load_robot
+from leadthrough.session.trajectory_recording import (
+    TrajectoryAbortedError,
+    TrajectoryRunConfig,
+    approach_move,
+    record_trajectory,
+)
+from leadthrough.sim.emulators import EmulatorOptions, FaultPlan, RunningEmulator, Window, start
+from wire_helpers import DIRECTION, POSE, free_loopback_address, spawn_emulator, stop_process
+
+KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
+ROBOT = {"fanuc-j519": "er20", "ur-rtde": "ur5", "kuka-rsi": "er20"}
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, Robot]:
+    return {name: load_robot(name) for name in ("er20", "ur5")}
+
+
+def _trajectory(duration: float = 1.5, offset: float = 0.05) -> TrajectorySamples:
+    """A smooth out-and-back motion of every joint, starting ``offset`` rad from POSE."""
+    t = np.arange(0.0, duration + 1e-9, 1e-3)
+    w = 2.0 * np.pi / duration
+    s = 0.15 * (1.0 - np.cos(w * t))[:, None] * DIRECTION
+    sd = 0.15 * w * np.sin(w * t)[:, None] * DIRECTION
+    sdd = 0.15 * w * w * np.cos(w * t)[:, None] * DIRECTION
+    return TrajectorySamples(time=t, q=np.asarray(POSE) + offset * DIRECTION + s, qd=sd, qdd=sdd)
+
+
+@contextmanager
+def _robot(kind: str, robot: Robot, **faults: object
+           ) -> Iterator[tuple[StreamingDriver, RunningEmulator]]:  # type: ignore[type-arg]
+    """A driver from :func:`connect`, opened on an in-process emulator starting at POSE."""
+    opts = EmulatorOptions(q0=POSE, watchdog=0.2,
+                           faults=FaultPlan(**faults))  # type: ignore[arg-type]
+    if kind == "kuka-rsi":
+        driver = connect(kind, robot, "127.0.0.1", 0)
+        emu = start(kind, robot, seed=2, port=driver.listen()[1],  # type: ignore[attr-defined]
+                    options=opts)
+    else:
+        emu = start(kind, robot, seed=2, port=0, options=opts)
+        driver = connect(kind, robot, "127.0.0.1", emu.port)
+        if kind == "ur-rtde":
+            driver.script_port = emu.emulator.script_port  # type: ignore[attr-defined]
+    try:
+        with driver:
+            yield driver, emu
+    finally:
+        emu.stop()
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_trajectory_is_recorded_at_the_controllers_cycle(kind: str,
+                                                           robots: dict[str, Robot]) -> None:
+    robot = robots[ROBOT[kind]]
+    traj = _trajectory()
+    with _robot(kind, robot) as (driver, emu):
+        done = record_trajectory(driver, robot, traj)
+        report = emu.emulator.report()
+    rec = done.recording
+    assert report.violations == () and report.refused == 0
+    # the approach moved the robot 0.05 rad at 10 % of the limits; the recording is the
+    # trajectory only, one sample per cycle (a loaded machine may lose a few)
+    assert done.approach_s > 0.0
+    assert rec.time[0] == 0.0 and abs(rec.duration - 1.5) <= 2 * driver.dt
+    assert rec.samples >= 0.95 * (1.5 / driver.dt) and done.stale <= 0.05 * done.cycles
+    assert np.all(np.diff(rec.time) > 0)
+    # the logged target is the trajectory at the sample's controller time
+    assert rec.q_cmd is not None
+    expect = np.column_stack([np.interp(rec.time, traj.time, traj.q[:, j])
+                              for j in range(robot.n)])
+    np.testing.assert_allclose(rec.q_cmd, expect, atol=0.6 * np.max(np.abs(traj.qd)) * driver.dt)
+    # the robot followed it (within a few cycles' lag at the peak speed)
+    lag = float(np.max(np.abs(rec.q - rec.q_cmd)))
+    assert lag <= 4 * driver.dt * np.max(np.abs(traj.qd)) + 1e-3
+    assert done.max_following_error == pytest.approx(lag)
+    signal = rec.torque if kind == "kuka-rsi" else rec.current
+    assert signal is not None and np.all(np.isfinite(signal)) and np.ptp(signal, axis=0).min() > 0
+
+
+def test_a_robot_away_from_the_start_without_an_approach_is_refused(
+        robots: dict[str, Robot]) -> None:
+    robot = robots["er20"]
+    with _robot("fanuc-j519", robot) as (driver, emu):
+        with pytest.raises(ControlError) as e:
+            record_trajectory(driver, robot, _trajectory(),
+                              TrajectoryRunConfig(approach_fraction=0.0))
+        report = emu.emulator.report()
+    assert e.value.field == "q" and e.value.value == pytest.approx(0.05, abs=2e-3)
+    assert report.violations == ()
+
+
+@pytest.mark.parametrize("kind", ["fanuc-j519", "ur-rtde"])
+def test_an_estop_mid_run_is_a_commanded_stop_and_no_recording(
+        kind: str, robots: dict[str, Robot]) -> None:
+    robot = robots[ROBOT[kind]]
+    with _robot(kind, robot, estop_at=1.5) as (driver, emu):
+        with pytest.raises(TrajectoryAbortedError) as e:
+            record_trajectory(driver, robot, _trajectory(3.0))
+        report = emu.emulator.report()
+    assert e.value.field in ("approach", "settle", "trajectory")
+    assert "controller state" in str(e.value)
+    assert report.stop_kind == "estop" and report.violations == ()
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_nan_or_a_closed_link_mid_run_stops_it(kind: str, robots: dict[str, Robot]) -> None:
+    robot = robots[ROBOT[kind]]
+    with _robot(kind, robot, nan_q=(Window(1.2, 1.25),)) as (driver, emu):
+        with pytest.raises(TrajectoryAbortedError) as e:
+            record_trajectory(driver, robot, _trajectory(2.0))
+        report = emu.emulator.report()
+    assert "non-finite" in str(e.value) and report.violations == ()
+    with _robot(kind, robot, close_at=1.2) as (driver, emu):
+        with pytest.raises(DriverError) as err:  # TCP: link lost; UDP: silence
+            record_trajectory(driver, robot, _trajectory(2.0))
+        report = emu.emulator.report()
+    assert ("no fresh sample" in str(err.value)) or ("link lost" in str(err.value))
+    assert report.violations == ()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6),
+       st.floats(0.01, 0.5))
+def test_the_approach_keeps_within_its_share_of_the_limits(delta: list[float],
+                                                           fraction: float) -> None:
+    robot = load_robot("er20")
+    q0 = np.zeros(6)
+    span, move = approach_move(q0, np.asarray(delta), robot, fraction)
+    t = np.linspace(0.0, span, 2001)
+    q = np.array([move(x)[0] for x in t])
+    qd = np.array([move(x)[1] for x in t])
+    np.testing.assert_allclose(q[-1], delta, atol=1e-12)
+    np.testing.assert_allclose(move(span + 1.0)[0], delta, atol=1e-12)
+    assert np.all(np.abs(qd) <= fraction * robot.velocity_limit * (1 + 1e-9) + 1e-12)
+    qdd = np.gradient(qd, t, axis=0)
+    assert np.all(np.abs(qdd) <= fraction * robot.acceleration_limit * 1.01 + 1e-9)
+    np.testing.assert_allclose(np.gradient(q, t, axis=0), qd, atol=1e-3 * (1 + np.abs(qd).max()))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_leadthrough_record_driver_against_emulate_in_its_own_process(
+        kind: str, tmp_path: Path) -> None:
+    traj = tmp_path / "traj.csv"
+    save_trajectory(traj, _trajectory(1.0), robot=ROBOT[kind])
+    port = DEFAULT_PORTS[kind]
+    host = free_loopback_address(port)
+    out = tmp_path / "rec.parquet"
+    cmd = [sys.executable, "-m", "leadthrough", "record", "--driver", kind, "--host", host,
+           "--robot", ROBOT[kind], "--trajectory", str(traj), "-o", str(out), "--json"]
+    if kind == "kuka-rsi":  # the PC listens: start it first, then the robot that sends to it
+        rec = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        emu = spawn_emulator(kind, ROBOT[kind], host, port, "--q0", *map(str, POSE))
+    else:
+        emu = spawn_emulator(kind, ROBOT[kind], host, port, "--q0", *map(str, POSE))
+        rec = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = rec.communicate(timeout=120)
+    finally:
+        report = stop_process(emu)
+    assert rec.returncode == 0, stderr
+    info = json.loads(stdout)
+    assert info["driver"] == kind and info["signal"] == ("torque" if kind == "kuka-rsi"
+                                                         else "current")
+    loaded = load_recording(out)
+    assert loaded.samples == info["samples"] and loaded.robot == ROBOT[kind]
+    assert "violations: ()" in report and "refused: 0" in report
+
+
+def test_simulator_settings_with_a_driver_and_a_dead_controller_are_clear_errors(
+        tmp_path: Path) -> None:
+    traj = tmp_path / "traj.csv"
+    save_trajectory(traj, _trajectory(1.0), robot="er20")
+    base = [sys.executable, "-m", "leadthrough", "record", "--robot", "er20", "--trajectory",
+            str(traj), "-o", str(tmp_path / "r.parquet")]
+    seeded = subprocess.run([*base, "--driver", "fanuc-j519", "--host", "127.0.0.1",
+                             "--seed", "3"], capture_output=True, text=True, check=False)
+    assert seeded.returncode == 2 and "--seed" in seeded.stderr
+    dead = subprocess.run([*base, "--driver", "fanuc-j519", "--host", "127.0.0.1", "--port", "9"],
+                          capture_output=True, text=True, check=False)
+    assert dead.returncode == 2 and "127.0.0.1:9" in dead.stderr
+    assert "Traceback" not in dead.stderr and not (tmp_path / "r.parquet").exists()
+    no_host = subprocess.run([*base, "--driver", "ur-rtde"], capture_output=True, text=True,
+                             check=False)
+    assert no_host.returncode == 2 and "--host" in no_host.stderr
+
+
+def test_ctrl_c_mid_run_is_a_commanded_stop_and_no_recording(tmp_path: Path) -> None:
+    traj = tmp_path / "traj.csv"
+    save_trajectory(traj, _trajectory(20.0), robot="er20")
+    host = free_loopback_address(DEFAULT_PORTS["fanuc-j519"])
+    emu = spawn_emulator("fanuc-j519", "er20", host, DEFAULT_PORTS["fanuc-j519"],
+                         "--q0", *map(str, POSE))
+    out = tmp_path / "rec.parquet"
+    try:
+        rec = subprocess.Popen([sys.executable, "-m", "leadthrough", "record", "--driver",
+                                "fanuc-j519", "--host", host, "--robot", "er20", "--trajectory",
+                                str(traj), "-o", str(out)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(6.0)  # the interpreter's start, the approach and the settle: mid-trajectory
+        rec.send_signal(signal.SIGINT)
+        _, stderr = rec.communicate(timeout=30)
+    finally:
+        report = stop_process(emu)
+    assert rec.returncode == 2 and "interrupted by the user" in stderr, stderr
+    assert "Traceback" not in stderr and not out.exists()
+    # the stop went out as commands within the limits, then the stream's own end
+    assert "violations: ()" in report and "refused: 0" in report
+    assert "stop_reason: stop packet" in report
