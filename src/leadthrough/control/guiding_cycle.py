@@ -30,9 +30,10 @@ from numpy.typing import NDArray
 from leadthrough.control import safety_rules as rules
 from leadthrough.control.guiding_state import Law
 from leadthrough.control.guiding_types import GuidingStatus
+from leadthrough.control.hand_release import breaks_away, fresh_rise, let_go_step
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
-from leadthrough.control.release import fresh_rise, hand_release, release_step
+from leadthrough.control.release import release_step
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.se3 import (
     copy_pose,
@@ -174,16 +175,17 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
                             not at_rest)
     if released and at_rest:
         ctl.release_s = 0.0
-    if ctl.brake:
-        _brake_state(ctl, at_rest)
+    if ctl.hand_release:
+        _hand_release(ctl, at_rest, released and at_rest)
     settling = at_rest and (ctl.rest_s < ctl.hold_s or ctl.release_s < ctl.hold_s)
     ctl.release_s += ctl.dt
-    if ctl.released and ctl.brake_s <= ctl.brake_lockout_s:
+    if ctl.hand_released:
+        # the hand let go: to rest at the acceleration limit, whatever the estimate says
         decelerate_twist(ctl.twist, ctl.max_step,
                          joint_stop_cycles(ctl.qd_cmd, ik.stop_velocity_step), ctl.desired_twist)
     elif ctl.law == Law.VIRTUAL_FRICTION:
         virtual_friction(ctl.twist, ctl.wrench,
-                         ctl.stopping_friction if settling or ctl.released else ctl.friction,
+                         ctl.stopping_friction if settling else ctl.friction,
                          ctl.stopping_friction, ctl.law_coefficients, ctl.desired_twist)
     else:
         velocity_baseline(ctl.twist, ctl.wrench, ctl.law_coefficients, ctl.velocity_alpha,
@@ -211,33 +213,29 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
 
 
 @njit(cache=True, nogil=True)
-def _brake_state(ctl: Record, at_rest: bool) -> None:
-    """EXPERIMENT."""
-    fell = hand_release(ctl.wrench, ctl.brake_alpha, ctl.brake_forget, ctl.brake_drop_fraction,
-                        ctl.brake_drop, ctl.brake_bound, ctl.brake_smooth, ctl.brake_peak)
-    if fell and not at_rest:
-        ctl.released = True
-        ctl.brake_s = 0.0
-        ctl.release_s = 0.0
+def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
+    """The hand's state (:mod:`leadthrough.control.hand_release`): a letting go, in motion or
+    at rest (``release.py``'s), starts the stop (``hand_released``, ``hand_release_s`` = 0;
+    ``release_s`` = 0: the settling after a release). It ends on a fresh rise after the
+    lockout, or on a force that breaks away (δ_s) once the drives have settled (``hold_s``)."""
+    let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
+                         ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
+                         ctl.hand_peak, ctl.hand_peak_age)
     if at_rest:
-        for i in range(6):
-            ctl.brake_peak[i] = ctl.brake_smooth[i]
-    rose = fresh_rise(ctl.brake_smooth, ctl.brake_forget, ctl.brake_rise, ctl.brake_reference)
-    if ctl.released and ctl.brake_s >= ctl.brake_lockout_s and (
-            rose or _held(ctl.brake_smooth, ctl.stopping_friction)):
-        ctl.released = False
-    ctl.brake_s += ctl.dt
-
-
-@njit(cache=True, nogil=True)
-def _held(w: Array, stopping: Array) -> bool:
-    """EXPERIMENT: some part's magnitude at or above its largest δ_s."""
-    for part in range(2):
-        i = 3 * part
-        m = math.sqrt(w[i] * w[i] + w[i + 1] * w[i + 1] + w[i + 2] * w[i + 2])
-        if m >= max(stopping[i], stopping[i + 1], stopping[i + 2]):
-            return True
-    return False
+        # a fall in motion counts from the motion's peak; at rest release.py tells
+        ctl.hand_peak[:] = ctl.hand_smooth
+        ctl.hand_peak_age[:] = 0.0
+    if (let_go and not at_rest) or released_at_rest:
+        ctl.hand_released = True
+        ctl.hand_release_s = 0.0
+        ctl.release_s = 0.0
+    rose = fresh_rise(ctl.hand_smooth, ctl.friction, ctl.hand_rise_forget, ctl.hand_reference)
+    if ctl.hand_released and (
+            (ctl.hand_release_s >= ctl.hand_lockout_s and rose)
+            or (ctl.hand_release_s >= ctl.hold_s
+                and breaks_away(ctl.hand_smooth, ctl.stopping_friction))):
+        ctl.hand_released = False
+    ctl.hand_release_s += ctl.dt
 
 
 @njit(cache=True, nogil=True)

@@ -14,8 +14,6 @@ forgets slow drifts, so the estimate's slow drift under a steady hand is not a r
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -78,69 +76,3 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, forg
         if moving:
             peak[i] = w
     return released
-
-
-@njit(cache=True, nogil=True)
-def hand_release(wrench: Array, alpha: float, forget: float, drop_fraction: float,
-                 drop: Array, bound: Array, smooth: Array, peak: Array) -> bool:
-    """EXPERIMENT: a release per part (force, torque): the smoothed magnitude falls from its
-    forgetting peak by max(drop[p], drop_fraction * peak)."""
-    released = False
-    for part in range(2):
-        i = 3 * part
-        m2 = 0.0
-        p2 = 0.0
-        for k in range(i, i + 3):
-            smooth[k] += alpha * (wrench[k] - smooth[k])
-            pr = smooth[k] + (peak[k] - smooth[k]) * forget
-            m2 += smooth[k] * smooth[k]
-            p2 += pr * pr
-        m, mp = math.sqrt(m2), math.sqrt(p2)
-        fell = mp - m >= max(drop[part], drop_fraction * max(mp - bound[part], 0.0))
-        for k in range(i, i + 3):
-            if fell or m > mp:
-                peak[k] = smooth[k]
-            else:
-                peak[k] = smooth[k] + (peak[k] - smooth[k]) * forget
-        released = released or fell
-    return released
-
-
-@njit(cache=True, nogil=True)
-def fresh_rise(smooth: Array, forget: float, rise: Array, reference: Array) -> bool:
-    """EXPERIMENT: per part, |s - ref| >= rise[p]; ref follows falls of |s| at once and rises
-    with forgetting."""
-    rose = False
-    for part in range(2):
-        i = 3 * part
-        m2 = r2 = d2 = 0.0
-        for k in range(i, i + 3):
-            r = smooth[k] + (reference[k] - smooth[k]) * forget
-            m2 += smooth[k] * smooth[k]
-            r2 += reference[k] * reference[k]
-            d2 += (smooth[k] - r) * (smooth[k] - r)
-        fell = m2 < r2
-        rose = rose or (not fell and math.sqrt(d2) >= rise[part])
-        for k in range(i, i + 3):
-            if fell:
-                reference[k] = smooth[k]
-            else:
-                reference[k] = smooth[k] + (reference[k] - smooth[k]) * forget
-    return rose
-
-
-from dataclasses import dataclass  # noqa: E402
-
-
-@dataclass(frozen=True)
-class ReleaseConfig:
-    """EXPERIMENT."""
-
-    brake: bool = True
-    drop_fraction: float = 0.5
-    drop: tuple[float, float] = (15.0, 15.0)
-    rise: tuple[float, float] = (15.0, 15.0)
-    lockout_s: float = 1.0
-    bound: tuple[float, float] = (0.0, 0.0)
-    smoothing_s: float = 0.05
-    window_s: float = 0.3
