@@ -17,6 +17,7 @@ from leadthrough.control import (
     VirtualFrictionConfig,
 )
 from leadthrough.errors import ControlError
+from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot import Robot
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.metrics import release_motion_times, release_overruns
@@ -102,9 +103,9 @@ def test_a_push_that_goes_on_is_not_braked(er20: Robot) -> None:
 
 
 def test_a_fresh_grip_resumes_a_slow_drift_does_not(er20: Robot) -> None:
-    """After a letting go and the stop, a grip (a step of 40 N) moves the tool again once the
-    drives have settled; an estimate that drifts up as slowly as the drives unload (20 N/s to
-    40 N, below δ_s) does not, where the paper's law moves as soon as the settling ends."""
+    """After a letting go and the stop, a grip (a step of 40 N) moves the tool again; an
+    estimate that drifts up as slowly as the drives unload (20 N/s to 40 N) does not, where
+    the paper's law moves as soon as the settling after the stop ends."""
     k_n, grip = 500, 250
     w = np.zeros((k_n, 6))
     w[:50, 0] = 40.0
@@ -136,7 +137,7 @@ def test_a_hold_at_rest_let_go_stays_put_while_the_estimate_swings(er20: Robot) 
     assert paper.twist_base[-1, 0] < 0.0
 
 
-def _friction_scaled(er20: Robot, scale: float):  # type: ignore[no-untyped-def]
+def _friction_scaled(er20: Robot, scale: float) -> ParamsFile:
     pf = shipped_guiding_params(er20)
     st = pf.params.stribeck
     assert st is not None

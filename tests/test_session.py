@@ -22,8 +22,8 @@ from leadthrough.identification.params_file import ParamsFile, load_params, save
 from leadthrough.robot import Robot
 from leadthrough.session.loop import run_session
 from leadthrough.session.loop_config import LoopConfig, build_loop
-from leadthrough.session.metrics import release_overruns
-from leadthrough.session.record import SessionLog, load_session, save_session
+from leadthrough.session.metrics import faults_without_hand, release_motion_times, release_overruns
+from leadthrough.session.record import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.sim.driver import InjectedFault as Fault
 from leadthrough.sim.driver import InjectedFaultKind as FaultKind
 from leadthrough.sim.session import (
@@ -225,6 +225,21 @@ def test_release_overruns_measure_travel_beyond_the_shortest_stop() -> None:
     assert over is not None and over[0] == pytest.approx(0.1, abs=5e-4)
     bare = replace(log_with(stop), wrench_applied_base=None)
     assert release_overruns(bare, a) is None
+    # moving beyond the stop's v/a = 0.5 s: 0 for the stop, the 0.5 s coast for the other
+    late = release_motion_times(log_with(stop), a)
+    assert late is not None and late[0] == pytest.approx(0.0, abs=2 * dt)
+    late = release_motion_times(log_with(coast), a)
+    assert late is not None and late[0] == pytest.approx(0.5, abs=2 * dt)
+    assert release_motion_times(bare, a) is None
+    # a fault 1 s after the hand let go is no hand's; one while it pushes is
+    events = [SessionEvent(t=0.5, kind="transition", label="GUIDING->FAULT",
+                           cause="FAULT:COLLISION"),
+              SessionEvent(t=2.0, kind="transition", label="GUIDING->FAULT",
+                           cause="FAULT:JOINT_LIMIT"),
+              SessionEvent(t=2.5, kind="transition", label="FAULT->IDLE", cause="RESET")]
+    assert faults_without_hand(replace(log_with(stop), events=events), 0.5) == ["JOINT_LIMIT"]
+    assert faults_without_hand(replace(log_with(stop), events=events), 1.5) == []
+    assert faults_without_hand(bare, 0.5) is None
 
 
 def test_corrupt_or_foreign_session_files_are_clear_errors(tmp_path: Path) -> None:

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from leadthrough.control import safety_rules as rules
 from leadthrough.control.guiding_state import Law
 from leadthrough.control.guiding_types import GuidingStatus
-from leadthrough.control.hand_release import breaks_away, fresh_rise, let_go_step
+from leadthrough.control.hand_release import fresh_rise, let_go_step
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
 from leadthrough.control.release import release_step
@@ -216,8 +216,8 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
 def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     """The hand's state (:mod:`leadthrough.control.hand_release`): a letting go, in motion or
     at rest (``release.py``'s), starts the stop (``hand_released``, ``hand_release_s`` = 0;
-    ``release_s`` = 0: the settling after a release). It ends on a fresh rise after the
-    lockout, or on a force that breaks away (δ_s) once the drives have settled (``hold_s``)."""
+    ``release_s`` = 0: the settling after a release). Only a fresh rise after the lockout
+    ends it."""
     let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
                          ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
                          ctl.hand_peak, ctl.hand_peak_age)
@@ -230,10 +230,7 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.hand_release_s = 0.0
         ctl.release_s = 0.0
     rose = fresh_rise(ctl.hand_smooth, ctl.friction, ctl.hand_rise_forget, ctl.hand_reference)
-    if ctl.hand_released and (
-            (ctl.hand_release_s >= ctl.hand_lockout_s and rose)
-            or (ctl.hand_release_s >= ctl.hold_s
-                and breaks_away(ctl.hand_smooth, ctl.stopping_friction))):
+    if ctl.hand_released and ctl.hand_release_s >= ctl.hand_lockout_s and rose:
         ctl.hand_released = False
     ctl.hand_release_s += ctl.dt
 

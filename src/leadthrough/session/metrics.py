@@ -102,6 +102,17 @@ def _hands_off(log: SessionLog) -> list[tuple[int, int]] | None:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
+def _releases(log: SessionLog) -> tuple[list[tuple[int, int]], Array] | None:
+    """The hands-off intervals that follow a push (:func:`_hands_off`, not one from the
+    session's start) and the commanded linear speed per sample [m/s]; None without the
+    truth."""
+    intervals = _hands_off(log)
+    if intervals is None:
+        return None
+    return ([(a, b) for a, b in intervals if a > 0],
+            np.linalg.norm(log.twist_cmd_base[:, :3], axis=1))
+
+
 def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
     """Travel after each release beyond a stop at ``deceleration``, one value per release.
 
@@ -119,14 +130,14 @@ def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
     Returns:
         Overrun per release [m], >= 0, shape (releases,); None without the truth.
     """
-    intervals = _hands_off(log)
-    if intervals is None:
+    releases = _releases(log)
+    if releases is None:
         return None
-    speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    intervals, speed = releases
     step = np.diff(log.tcp_cmd_base, axis=0)
     travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])
     # a release: the last pushed sample r before a hands-off interval, which ends at stop - 1
-    ends = [(start - 1, stop - 1) for start, stop in intervals if start > 0]
+    ends = [(start - 1, stop - 1) for start, stop in intervals]
     return np.array([max(0.0, travel[end] - travel[r] - speed[r] ** 2 / (2.0 * deceleration))
                      for r, end in ends])
 
@@ -147,15 +158,13 @@ def release_motion_times(log: SessionLog, deceleration: float) -> Array | None:
     Returns:
         Time per release [s], >= 0, shape (releases,); None without the truth.
     """
-    intervals = _hands_off(log)
-    if intervals is None:
+    releases = _releases(log)
+    if releases is None:
         return None
-    speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    intervals, speed = releases
     moving = np.any(log.twist_cmd_base != 0.0, axis=1)
     times = []
     for start, stop in intervals:
-        if start == 0:
-            continue
         moved = np.flatnonzero(moving[start:stop])
         last = log.time[start + moved[-1]] if moved.size else log.time[start - 1]
         times.append(max(0.0, float(last - log.time[start - 1])
