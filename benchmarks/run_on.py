@@ -27,6 +27,7 @@ than 0.5 s after a release, no fault the hand did not cause.
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
 import time
 from dataclasses import replace
@@ -35,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from leadthrough.control.hand_release import HandReleaseConfig
+from leadthrough.errors import TeachError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
 from leadthrough.identification.api import IdentifyConfig, identify_with_sweep
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
@@ -122,7 +124,13 @@ def seam_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
         s = session(robot, params, SimSessionConfig(operator="seam", seed=seed, run=run,
                                                             plant=plant))
         assert s.p1_base is not None and s.p2_base is not None
-        line = teach_session(s.result.log, robot, tolerance_mm=1.0, speed_m_s=0.1).welding_line
+        try:
+            line = teach_session(s.result.log, robot, tolerance_mm=1.0,
+                                 speed_m_s=0.1).welding_line
+        except TeachError as e:         # e.g. the tool never left P1: counted as a miss
+            print(f"  instance {seed} seam run {run}: not taught ({e})", flush=True)
+            errors += [math.inf, math.inf]
+            continue
         e = (float(np.linalg.norm(line.p1_base - s.p1_base)),
              float(np.linalg.norm(line.p2_base - s.p2_base)))
         errors += e

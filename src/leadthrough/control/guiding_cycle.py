@@ -217,7 +217,7 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     """The hand's state (:mod:`leadthrough.control.hand_release`): a letting go, in motion or
     at rest (``release.py``'s), starts the stop (``hand_released``, ``hand_release_s`` = 0;
     ``release_s`` = 0: the settling after a release). Only a fresh rise after the lockout
-    ends it."""
+    ends it: a quick one while the drives settle (``hold_s``), any rise of δ after."""
     let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
                          ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
                          ctl.hand_peak, ctl.hand_peak_age)
@@ -229,7 +229,11 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.hand_released = True
         ctl.hand_release_s = 0.0
         ctl.release_s = 0.0
-    rose = fresh_rise(ctl.hand_smooth, ctl.friction, ctl.hand_rise_forget, ctl.hand_reference)
+    # while the drives settle only a quick rise is a grip; after, any rise of δ over the
+    # settled level is (the reference then follows falls only)
+    settled = ctl.hand_release_s >= ctl.hold_s
+    rose = fresh_rise(ctl.hand_smooth, ctl.friction, 1.0 if settled else ctl.hand_rise_forget,
+                      ctl.hand_reference)
     if ctl.hand_released and ctl.hand_release_s >= ctl.hand_lockout_s and rose:
         ctl.hand_released = False
     ctl.hand_release_s += ctl.dt
