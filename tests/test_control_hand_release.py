@@ -104,8 +104,9 @@ def test_a_push_that_goes_on_is_not_braked(er20: Robot) -> None:
 
 def test_a_fresh_grip_resumes_a_slow_drift_does_not(er20: Robot) -> None:
     """After a letting go and the stop, a grip (a step of 40 N) moves the tool again; an
-    estimate that drifts up as slowly as the drives unload (20 N/s to 40 N) does not, where
-    the paper's law moves as soon as the settling after the stop ends."""
+    estimate that drifts up while the drives settle, as slowly as they unload (20 N/s to
+    40 N), does not, where the paper's law moves as soon as the settling ends; once they have
+    settled, leaning in by more than δ over the settled level (10 N/s) does."""
     k_n, grip = 500, 250
     w = np.zeros((k_n, 6))
     w[:50, 0] = 40.0
@@ -116,12 +117,24 @@ def test_a_fresh_grip_resumes_a_slow_drift_does_not(er20: Robot) -> None:
     assert np.all(vx[grip - 50:grip] == 0.0) and vx[-1] > 0.0
     # the settling after the stop is over by the grip: it moves within the smoothing's time
     assert int(np.argmax(vx[grip:] > 0.0)) * DT <= 2 * TAU + 0.05
-    drift = w.copy()
-    drift[grip:, 0] = np.minimum(20.0 * np.arange(k_n - grip) * DT, 40.0)
-    tr = run(GuidingController(er20, _config()), _q0(er20), drift, interpolate=False)
-    assert np.all(tr.twist_base[grip - 50:] == 0.0)
-    paper = run(GuidingController(er20, _config(False)), _q0(er20), drift, interpolate=False)
-    assert paper.twist_base[-1, 0] > 0.0
+    k_n, settle = 800, 3.0
+    drift = np.zeros((k_n, 6))
+    drift[:50, 0] = 40.0
+    _let_go(drift, 50, 40.0, 0.0)
+    t = np.arange(k_n) * DT
+    drift[100:, 0] = np.minimum(20.0 * (t[100:] - 1.0), 40.0)
+    lean = 600                                       # 5.5 s after the letting go
+    drift[lean:, 0] += 10.0 * (t[lean:] - t[lean])
+    cfg = _config(settle_s=settle)
+    tr = run(GuidingController(er20, cfg), _q0(er20), drift, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    assert np.all(vx[100:lean] == 0.0)
+    starts = lean + int(np.argmax(vx[lean:] > 0.0))
+    # the lean is seen once it passes δ = 15 N over the settled 40 N (after the smoothing)
+    assert lean + 150 <= starts <= lean + 170
+    paper = run(GuidingController(er20, _config(False, settle)), _q0(er20), drift,
+                interpolate=False)
+    assert np.any(paper.twist_base[100:lean, 0] > 0.0)
 
 
 def test_a_hold_at_rest_let_go_stays_put_while_the_estimate_swings(er20: Robot) -> None:
