@@ -114,7 +114,7 @@ def main() -> None:
         sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
         r = sc.result
         path = save_params(args.out / "guiding_params.toml", robot, r.method, r.params,
-                           r.stats, sim_seed=args.seed)
+                           r.stats, sim_seed=args.seed, friction_sweep=True)
         pf = load_params(path, robot)
         print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
               + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + f" N·m -> {path}")

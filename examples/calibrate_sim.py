@@ -42,7 +42,8 @@ def main() -> None:
     print(f"consistent + friction sweep ({sweep.measured.duration:.0f} s): J identification "
           f"{guided.result.J:6.2f}, held out {held.J:6.2f} N·m; sweep fit RMS "
           + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m")
-    save_params(args.out, robot, "consistent", guided.result.params, guided.result.stats)
+    save_params(args.out, robot, "consistent", guided.result.params, guided.result.stats,
+                friction_sweep=True)
     print(f"-> {args.out} (guiding parameters)")
 
 

@@ -254,12 +254,12 @@ def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
     assert load_params(params, load_robot("er20")).sim_seed == 1
     session = tmp_path / "s.parquet"
     assert main(["guide", "--params", str(params), "--operator", "rest", "--duration", "1",
-                 "-o", str(session)]) == 0
+                 "--allow-no-sweep", "-o", str(session)]) == 0
     assert load_session(session).settings["seed"] == 1
     capsys.readouterr()
     other = tmp_path / "t.parquet"
     assert main(["guide", "--params", str(params), "--operator", "rest", "--duration", "1",
-                 "--seed", "2", "-o", str(other)]) == 2
+                 "--seed", "2", "--allow-no-sweep", "-o", str(other)]) == 2
     err = capsys.readouterr().err
     assert "--seed" in err and "2" in err and "sim_seed" in err
     assert not other.exists()

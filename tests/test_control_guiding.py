@@ -20,6 +20,7 @@ from leadthrough.control import (
     GuidingConfig,
     GuidingController,
     GuidingInput,
+    HandReleaseConfig,
     HermiteInterpolator,
     SafetyConfig,
     State,
@@ -36,6 +37,8 @@ SUB = 10
 Q_WORK = np.array([0.0, -0.6, 0.9, 0.0, 0.8, 0.0])       # TCP at (0.72, 0, 0.31) m, μ = 0.26
 #: Rounding allowance of norms compared with a limit (the limits are exact up to rounding).
 ROUND = 1e-12
+#: The paper's law alone (eq. 31–33), without the stop after letting go.
+PAPER_LAW = HandReleaseConfig(enabled=False)
 
 
 def pose_ik(robot: Robot, q_guess: np.ndarray, position: np.ndarray) -> np.ndarray:
@@ -188,14 +191,16 @@ def test_velocity_baseline_drifts_where_virtual_friction_holds(er20: Robot) -> N
 def test_push_x_40n_moves_along_x_capped_then_stops_on_stopping_friction(er20: Robot) -> None:
     """Table IV defaults. 40 N along +x for 8.6 s (with off-axis estimator noise below δ), then
     released: a = (40 − 15)/1000, speed capped at 0.2 m/s without overshoot, off-axis motion 0
-    in the command and ≤ 2 % in the joint commands' TCP path, then a stop at δ_s/M."""
+    in the command and ≤ 2 % in the joint commands' TCP path, then a stop at δ_s/M (the
+    paper's law alone: without the stop after letting go, which test_control_hand_release
+    covers)."""
     q0 = pose_ik(er20, np.array([-np.pi / 2, -0.6, 0.9, 0.0, 0.8, 0.0]), [-0.65, -0.85, 0.31])
     k_n, release = 1500, 860
     rng = np.random.default_rng(9)
     w = np.zeros((k_n, 6))
     w[:, 1:] = rng.uniform(-10.0, 10.0, size=(k_n, 5))         # estimator noise, below δ
     w[:release, 0] = 40.0
-    tr = run(GuidingController(er20), q0, w)
+    tr = run(GuidingController(er20, GuidingConfig(hand_release=PAPER_LAW)), q0, w)
     vx = tr.twist_base[:, 0]
     assert np.all(tr.fault == Fault.NONE)
     # along x only: the other five commanded components are exactly zero
@@ -378,10 +383,11 @@ def test_setup_errors(er20: Robot) -> None:
 
 def test_after_a_stop_breaking_away_takes_the_stopping_friction(er20: Robot) -> None:
     """For settle_s + rezero_s after the motion stops, a push between δ and δ_s moves nothing
-    (the drives are settling); afterwards the same push starts motion again."""
+    (the drives are settling); afterwards the same push starts motion again (the paper's law
+    with the settling; the stop after letting go would wait for a fresh grip)."""
     q0 = pose_ik(er20, np.array([-np.pi / 2, -0.6, 0.9, 0.0, 0.8, 0.0]), [-0.65, -0.85, 0.31])
     cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6),
-                        settle_s=0.3, rezero_s=0.2)
+                        settle_s=0.3, rezero_s=0.2, hand_release=PAPER_LAW)
     w = np.zeros((300, 6))
     w[:50, 0] = 40.0                  # push: moves
     w[50:, 0] = -30.0                 # then a pull above δ = 15 N but below δ_s = 50 N
@@ -398,9 +404,11 @@ def test_after_a_stop_breaking_away_takes_the_stopping_friction(er20: Robot) -> 
 def test_after_a_release_at_rest_breaking_away_takes_the_stopping_friction(er20: Robot) -> None:
     """A hold below δ at rest, then let go: the estimate swinging the other way (the gears
     unloading) moves nothing for settle_s + rezero_s; a hold that never drops does not start a
-    settle window, so the same pull then moves the tool at once."""
+    settle window, so the same pull then moves the tool at once (the paper's law with the
+    settling; with the stop after letting go the tool stays put, see
+    test_control_hand_release)."""
     cfg = GuidingConfig(virtual_friction=VirtualFrictionConfig(mass=(100.0,) * 6),
-                        settle_s=0.3, rezero_s=0.2)
+                        settle_s=0.3, rezero_s=0.2, hand_release=PAPER_LAW)
     hold = round((cfg.settle_s + cfg.rezero_s) / DT)
     w = np.zeros((200, 6))
     w[:100, 0] = 12.0                 # a hand resting on the tool, below δ = 15 N: no motion

@@ -23,8 +23,14 @@ from leadthrough.identification.params_file import ParamsFile, load_params, save
 from leadthrough.robot import Robot
 from leadthrough.session.loop import run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
-from leadthrough.session.metrics import force_error_in_motion, phantom_forces, release_overruns
-from leadthrough.session.record import SessionLog, load_session, save_session
+from leadthrough.session.metrics import (
+    faults_without_hand,
+    force_error_in_motion,
+    phantom_forces,
+    release_motion_times,
+    release_overruns,
+)
+from leadthrough.session.record import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.sim.driver import InjectedFault as Fault
 from leadthrough.sim.driver import InjectedFaultKind as FaultKind
 from leadthrough.sim.session import (
@@ -286,6 +292,21 @@ def test_release_overruns_measure_travel_beyond_the_shortest_stop() -> None:
     assert over is not None and over[0] == pytest.approx(0.1, abs=5e-4)
     bare = replace(log_with(stop), wrench_applied_base=None)
     assert release_overruns(bare, a) is None
+    # moving beyond the stop's v/a = 0.5 s: 0 for the stop, the 0.5 s coast for the other
+    late = release_motion_times(log_with(stop), a)
+    assert late is not None and late[0] == pytest.approx(0.0, abs=2 * dt)
+    late = release_motion_times(log_with(coast), a)
+    assert late is not None and late[0] == pytest.approx(0.5, abs=2 * dt)
+    assert release_motion_times(bare, a) is None
+    # a fault 1 s after the hand let go is no hand's; one while it pushes is
+    events = [SessionEvent(t=0.5, kind="transition", label="GUIDING->FAULT",
+                           cause="FAULT:COLLISION"),
+              SessionEvent(t=2.0, kind="transition", label="GUIDING->FAULT",
+                           cause="FAULT:JOINT_LIMIT"),
+              SessionEvent(t=2.5, kind="transition", label="FAULT->IDLE", cause="RESET")]
+    assert faults_without_hand(replace(log_with(stop), events=events), 0.5) == ["JOINT_LIMIT"]
+    assert faults_without_hand(replace(log_with(stop), events=events), 1.5) == []
+    assert faults_without_hand(bare, 0.5) is None
 
 
 def test_force_error_in_motion_and_phantom_forces() -> None:
@@ -338,7 +359,7 @@ def test_guide_cli(er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
     assert load_params(params, er20).method == "nominal"
     out = tmp_path / "s.parquet"
     code = main(["guide", "--params", str(params), "--operator", "rest", "--duration", "2",
-                 "--operator-seed", "3", "-o", str(out), "--json"])
+                 "--operator-seed", "3", "--allow-no-sweep", "-o", str(out), "--json"])
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert {"max_linear_speed", "max_angular_speed", "max_linear_acc", "rest_drift_m",
@@ -349,12 +370,43 @@ def test_guide_cli(er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
     assert load_session(out).settings["operator_seed"] == 3
     # bad input: one line, exit 2, nothing written
     missing = tmp_path / "nowhere" / "s.parquet"
-    assert main(["guide", "--params", str(params), "-o", str(missing)]) == 2
+    assert main(["guide", "--params", str(params), "--allow-no-sweep", "-o", str(missing)]) == 2
     assert main(["guide", "--params", str(tmp_path / "none.toml"), "-o",
                  str(tmp_path / "x.parquet")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("leadthrough: error:") for line in err)
     assert not (tmp_path / "x.parquet").exists()
+
+
+def test_guide_refuses_params_without_a_friction_sweep(
+        er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Parameters identified without a friction sweep cannot guide (their friction is low at
+    guiding speeds): ``guide`` names the params file and what is missing, exits 2 and writes
+    nothing, unless told ``--allow-no-sweep``; the same parameters with ``friction_sweep``
+    guide."""
+    n = er20.n
+    stats = ResidualStats(mean=np.zeros(n), std=np.ones(n), std_pct_max=np.ones(n),
+                          rms=np.ones(n), rel_error_pct=1.0, J=float(n), k_omega=1.0,
+                          samples=np.full(n, 100))
+    bare = save_params(tmp_path / "bare.toml", er20, "proposed", nominal_params.params, stats)
+    assert load_params(bare, er20).friction_sweep is False
+    out = tmp_path / "s.parquet"
+    args = ["guide", "--operator", "rest", "--duration", "0.5", "-o", str(out)]
+    assert main([*args, "--params", str(bare)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bare.toml" in err[0] and "meta.friction_sweep" in err[0]
+    assert "--friction-sweep" in err[0] and "--allow-no-sweep" in err[0]
+    assert not out.exists()
+    assert main([*args, "--params", str(bare), "--allow-no-sweep"]) == 0
+    out.unlink()
+    swept = save_params(tmp_path / "swept.toml", er20, "consistent", nominal_params.params,
+                        stats, friction_sweep=True)
+    assert load_params(swept, er20).friction_sweep is True
+    assert main([*args, "--params", str(swept)]) == 0 and out.is_file()
+    swept.write_text(swept.read_text().replace("friction_sweep = true", 'friction_sweep = "y"'))
+    with pytest.raises(DataError, match=r"meta\.friction_sweep"):
+        load_params(swept, er20)
 
 
 def test_guide_rejects_params_of_another_robot(er20: Robot, tmp_path: Path,

@@ -368,7 +368,8 @@ def run_identify(args: argparse.Namespace) -> int:
     bar.close(f"J = {result.J:.3f}")
     params = result.params if pre is None else replace(result.params,
                                                        presliding=pre.presliding)
-    save_params(args.output, robot, args.method, params, result.stats, sim_seed)
+    save_params(args.output, robot, args.method, params, result.stats, sim_seed,
+                friction_sweep=sweep is not None)
     if args.urdf_out is not None:
         write_urdf_with_inertias(robot, result.params.phi, args.urdf_out)
     eig = {jn: float(v) for jn, v in zip(robot.joint_names, result.min_pseudo_inertia_eig,

@@ -75,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
     check.check_joint_range(robot)
     done = refresh_friction(pf.params, check, robot)
     stats = _stats(pf, robot, _k_omega(args.params))
-    save_params(args.output, robot, pf.method, done.params, stats, sim_seed=pf.sim_seed)
+    save_params(args.output, robot, pf.method, done.params, stats, sim_seed=pf.sim_seed,
+                friction_sweep=pf.friction_sweep)
     rows = [{"joint": name, "level_scale": float(a), "viscous_scale": float(b),
              "viscous_fitted": bool(s), "error_before": float(e0), "error_after": float(e1),
              "points": int(done.points.speed[j].size)}

@@ -13,6 +13,7 @@ from leadthrough.cli.arg_checks import warm_up_seconds
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
 from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
+from leadthrough.errors import DataError
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
@@ -66,6 +67,10 @@ def register(sub: Any) -> None:
     p.add_argument("--operator-seed", type=int, default=None, metavar="N",
                    help="seed of the random operator's pushes (default: --seed); vary this "
                         "for other push sequences on the same robot")
+    p.add_argument("--allow-no-sweep", action="store_true",
+                   help="guide with parameters identified without a friction sweep (refused "
+                        "otherwise: their friction is 15-24 %% low at guiding speeds, which "
+                        "reads as a 20-50 N force against the motion)")
     p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
                    help="simulated plant: realistic (default) or ideal (the plant before issue "
                         "24); the one the params were recorded on")
@@ -83,6 +88,14 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
     pf = load_params(args.params, robot)
+    if not (pf.friction_sweep or args.allow_no_sweep):
+        raise DataError(
+            "these parameters cannot guide: their friction was not measured at guiding speeds",
+            source=pf.path, field="meta.friction_sweep", value=False,
+            expected="true: record a friction sweep (leadthrough excite --sweep, then record) "
+                     "and identify with --method consistent --friction-sweep; or pass "
+                     "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
+                     " low at guiding speeds: a 40 N push barely moves the robot)")
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     guiding = replace(guiding, controller=args.controller, friction_mode=args.friction)
     require_folder(args.output)

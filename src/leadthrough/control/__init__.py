@@ -4,6 +4,8 @@
   (eq. 31–33) with the stopping friction, Table IV defaults;
 * :mod:`~leadthrough.control.release`: a hand letting go at rest (the stopping friction while
   the drives settle);
+* :mod:`~leadthrough.control.hand_release`: a hand letting go of the moving tool: a stop at the
+  acceleration limit whatever the force estimate says, guiding again on a fresh grip;
 * :mod:`~leadthrough.control.auto_friction`: friction from the identified noise (eq. 36);
 * :mod:`~leadthrough.control.velocity_baseline`: the closed-loop velocity baseline [14] (Fig. 4);
 * :mod:`~leadthrough.control.limits`: Cartesian speed and acceleration limits, stops;
@@ -35,6 +37,7 @@ from leadthrough.control.guiding_types import (
     GuidingOutput,
     GuidingStatus,
 )
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.control.ik import DifferentialIK, IKConfig, IKResult
 from leadthrough.control.interpolation import (
     CommandBuffer,
@@ -66,6 +69,7 @@ __all__ = [
     "GuidingInput",
     "GuidingOutput",
     "GuidingStatus",
+    "HandReleaseConfig",
     "HermiteInterpolator",
     "IKConfig",
     "IKResult",

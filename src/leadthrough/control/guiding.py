@@ -153,6 +153,12 @@ class GuidingController:
         s.release_drop = RELEASE_DROP
         s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
         s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
+        hr = cfg.hand_release
+        s.hand_release = hr.enabled and cfg.controller == "virtual-friction"
+        s.hand_drop_fraction = hr.drop_fraction
+        s.hand_lockout_s, s.hand_window_s, s.hand_alpha = hr.lockout_s, hr.window_s, hr.alpha(
+            cfg.dt)
+        s.hand_forget, s.hand_rise_forget = hr.forget(cfg.dt), hr.rise_forget(cfg.dt)
         s.max_speed = cfg.limits.max_speed
         s.max_step = cfg.limits.max_step(cfg.dt)
         s.stop_fraction = cfg.ik.stop_acceleration_fraction
@@ -223,6 +229,9 @@ class GuidingController:
         s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
         s.twist = s.release_peak = s.release_smooth = 0.0
+        s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
+        s.hand_released = False
+        s.hand_release_s = math.inf
         s.pose_rotation = ik.rotation_tool_to_base
         s.pose_position = p
         s.residual_fresh = s.resync = False

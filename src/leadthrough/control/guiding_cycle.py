@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from leadthrough.control import safety_rules as rules
 from leadthrough.control.guiding_state import Law
 from leadthrough.control.guiding_types import GuidingStatus
+from leadthrough.control.hand_release import fresh_rise, let_go_step
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
 from leadthrough.control.release import release_step
@@ -174,9 +175,15 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
                             not at_rest)
     if released and at_rest:
         ctl.release_s = 0.0
+    if ctl.hand_release:
+        _hand_release(ctl, at_rest, released and at_rest)
     settling = at_rest and (ctl.rest_s < ctl.hold_s or ctl.release_s < ctl.hold_s)
     ctl.release_s += ctl.dt
-    if ctl.law == Law.VIRTUAL_FRICTION:
+    if ctl.hand_released:
+        # the hand let go: to rest at the acceleration limit, whatever the estimate says
+        decelerate_twist(ctl.twist, ctl.max_step,
+                         joint_stop_cycles(ctl.qd_cmd, ik.stop_velocity_step), ctl.desired_twist)
+    elif ctl.law == Law.VIRTUAL_FRICTION:
         virtual_friction(ctl.twist, ctl.wrench,
                          ctl.stopping_friction if settling else ctl.friction,
                          ctl.stopping_friction, ctl.law_coefficients, ctl.desired_twist)
@@ -203,6 +210,33 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
     else:
         ctl.stop_plan = stop
     return joint_stop
+
+
+@njit(cache=True, nogil=True)
+def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
+    """The hand's state (:mod:`leadthrough.control.hand_release`): a letting go, in motion or
+    at rest (``release.py``'s), starts the stop (``hand_released``, ``hand_release_s`` = 0;
+    ``release_s`` = 0: the settling after a release). Only a fresh rise after the lockout
+    ends it: a quick one while the drives settle (``hold_s``), any rise of δ after."""
+    let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
+                         ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
+                         ctl.hand_peak, ctl.hand_peak_age)
+    if at_rest:
+        # a fall in motion counts from the motion's peak; at rest release.py tells
+        ctl.hand_peak[:] = ctl.hand_smooth
+        ctl.hand_peak_age[:] = 0.0
+    if (let_go and not at_rest) or released_at_rest:
+        ctl.hand_released = True
+        ctl.hand_release_s = 0.0
+        ctl.release_s = 0.0
+    # while the drives settle only a quick rise is a grip; after, any rise of δ over the
+    # settled level is (the reference then follows falls only)
+    settled = ctl.hand_release_s >= ctl.hold_s
+    rose = fresh_rise(ctl.hand_smooth, ctl.friction, 1.0 if settled else ctl.hand_rise_forget,
+                      ctl.hand_reference)
+    if ctl.hand_released and ctl.hand_release_s >= ctl.hand_lockout_s and rose:
+        ctl.hand_released = False
+    ctl.hand_release_s += ctl.dt
 
 
 @njit(cache=True, nogil=True)

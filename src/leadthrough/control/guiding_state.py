@@ -42,6 +42,9 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("axis_mask", *six),                     # 1.0 for an enabled axis, 0.0 for a disabled
         ("hold_s", f8),                          # settle_s + rezero_s [s]
         ("release_drop", f8), ("release_alpha", f8), ("release_forget", f8),   # release.py
+        ("hand_release", b1),                    # HandReleaseConfig.enabled
+        ("hand_drop_fraction", f8), ("hand_lockout_s", f8), ("hand_window_s", f8),  # [-, s, s]
+        ("hand_alpha", f8), ("hand_forget", f8), ("hand_rise_forget", f8),  # per cycle
         ("max_speed", f8, (2,)),                 # (v_max, ω_max) [m/s, rad/s]
         ("max_step", f8, (2,)),                  # (a_max·dt, α_max·dt) [m/s, rad/s]
         ("stop_fraction", f8),                   # IKConfig.stop_acceleration_fraction
@@ -51,9 +54,11 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("kinematics_new", b1),                  # ... and were computed since the last cycle
         ("residual_fresh", b1),                  # residual is that of the commanded pose
         ("resync", b1),                          # hold the setpoint's pose as the commanded one
+        ("hand_released", b1),                   # the hand let go: stopping (hand_release.py)
         # state: scalars
         ("rest_s", f8),                          # time at rest [s] (0 while moving)
         ("release_s", f8),                       # time since the last release at rest [s]
+        ("hand_release_s", f8),                  # time since the hand let go in motion [s]
         ("stop_plan", f8),                       # cycles of the stop the last check planned
         ("residual", f8),                        # ‖log6(T(q_cmd)⁻¹·T_cmd)‖ [m, rad]
         ("speed_scale", f8), ("ik_scale", f8),
@@ -64,6 +69,8 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("wrench", *six),                        # the law's input: frame, mask
         ("friction", *six), ("stopping_friction", *six),   # δ, δ_s [N, N·m]
         ("release_smooth", *six), ("release_peak", *six),  # release.py
+        ("hand_smooth", *six), ("hand_peak", *six), ("hand_reference", *six),  # hand_release
+        ("hand_peak_age", f8, (2,)),             # time since each part's peak [s]
         # state: the commanded TCP pose and the next one
         ("pose_rotation", *pose), ("pose_position", f8, (3,)),
         ("next_rotation", *pose), ("next_position", f8, (3,)),

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.auto_friction import AutoFrictionConfig
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.control.ik import IKConfig
 from leadthrough.control.limits import CartesianLimits
 from leadthrough.control.operator_limits import OperatorLimits
@@ -89,6 +90,9 @@ class GuidingConfig:
             unload and the estimate swings the other way, by up to twice the released force).
         rezero_s: Then the guiding loop re-zeroes the estimator over this window (a
             zero-velocity update, see ``ExternalForceEstimator.rezero``); 0 disables [s].
+        hand_release: The stop after the hand lets go of the moving tool
+            (:mod:`leadthrough.control.hand_release`; virtual friction only: the velocity
+            baseline [14] runs as published).
     """
 
     dt: float = 0.01
@@ -105,6 +109,7 @@ class GuidingConfig:
     operator_limits: OperatorLimits = field(default_factory=OperatorLimits)
     settle_s: float = 1.5
     rezero_s: float = 0.0
+    hand_release: HandReleaseConfig = field(default_factory=HandReleaseConfig)
 
     def __post_init__(self) -> None:
         check_fields("guiding", self, [

@@ -202,7 +202,7 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
         params[m] = ParamsFile.from_result(r, path, seed)
     guided = identify_with_sweep(cal.identification.measured, sweep.measured, robot, cfg)
     path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
-                       guided.result.params, guided.result.stats, seed)
+                       guided.result.params, guided.result.stats, seed, friction_sweep=True)
     res.files["params (guiding: consistent + friction sweep)"] = path
     res.sweep_rms = guided.sweep.rms.tolist()
     say("      guiding parameters: consistent with the friction sweep (fit RMS "
@@ -211,7 +211,7 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},
         title=f"{robot.name} (simulated), held-out trajectory")
-    return params, ParamsFile.from_result(guided.result, path, seed)
+    return params, ParamsFile.from_result(guided.result, path, seed, friction_sweep=True)
 
 
 def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None]) -> None:

@@ -9,6 +9,7 @@ Layout::
     leadthrough_version = "0.1.0"
     J = 38.9                          # on the identification data [N·m]
     k_omega = 1.0
+    friction_sweep = true             # the friction was held to a constant-velocity sweep
 
     [noise]                          # residual τ_ω on the identification data (eq. 26, 30, 36)
     mean = [...]                     # τ̄_ω per joint [N·m]
@@ -85,6 +86,9 @@ class ParamsFile:
         path: The file.
         sim_seed: The simulated robot instance the identification data came from (``[meta]
             sim_seed``); None for a real robot.
+        friction_sweep: The friction was identified with a constant-velocity friction sweep
+            (``[meta] friction_sweep``; absent: False). Hand guiding needs it: without it the
+            identified friction is 15–24 % low at guiding speeds.
     """
 
     robot: str
@@ -95,14 +99,15 @@ class ParamsFile:
     J: float
     path: Path | None = None
     sim_seed: int | None = None
+    friction_sweep: bool = False
 
     @classmethod
     def from_result(cls, result: IdentificationResult, path: Path | None = None,
-                    sim_seed: int | None = None) -> ParamsFile:
+                    sim_seed: int | None = None, friction_sweep: bool = False) -> ParamsFile:
         """The params file an identification result would be saved as (without writing it)."""
         return cls(robot=result.robot, method=result.method, params=result.params,
                    noise_mean=result.stats.mean, noise_std=result.stats.std, J=result.J,
-                   path=path, sim_seed=sim_seed)
+                   path=path, sim_seed=sim_seed, friction_sweep=friction_sweep)
 
 
 def _fmt(v: float) -> str:
@@ -111,7 +116,7 @@ def _fmt(v: float) -> str:
 
 def save_params(
     path: str | Path, robot: Robot, method: str, params: DriveModelParameters,
-    stats: ResidualStats, sim_seed: int | None = None,
+    stats: ResidualStats, sim_seed: int | None = None, friction_sweep: bool = False,
 ) -> Path:
     """Write a params file atomically.
 
@@ -122,6 +127,8 @@ def save_params(
         params: Identified parameters.
         stats: Residual statistics on the identification data (J, τ̄_ω, σ).
         sim_seed: The simulated robot instance the data came from (None: a real robot).
+        friction_sweep: The friction was held to a friction sweep's curve (written as ``[meta]
+            friction_sweep = true``).
 
     Returns:
         The path written.
@@ -136,6 +143,7 @@ def save_params(
         f"J = {_fmt(stats.J)}",
         f"k_omega = {_fmt(stats.k_omega)}",
         *([] if sim_seed is None else [f"sim_seed = {int(sim_seed)}"]),
+        *(["friction_sweep = true"] if friction_sweep else []),
         "",
         "[noise]",
         "mean = [" + ", ".join(_fmt(v) for v in stats.mean) + "]",
@@ -198,10 +206,14 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     if seed is not None and not is_sim_seed(seed):
         raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,
                         expected="an integer >= 0 (the simulated robot instance)")
+    sweep = meta.get("friction_sweep", False)
+    if not isinstance(sweep, bool):
+        raise DataError("malformed", source=path, field="meta.friction_sweep", value=sweep,
+                        expected="true or false")
     return ParamsFile(robot=robot.name, method=str(meta.get("method", "")),
                       params=joints.parameters(), noise_mean=noise_mean, noise_std=noise_std,
                       J=_nonnegative(path, "meta.J", meta.get("J")), path=path,
-                      sim_seed=seed)
+                      sim_seed=seed, friction_sweep=sweep)
 
 
 def _read_meta(path: Path, doc: dict[str, Any], robot: Robot

@@ -14,8 +14,8 @@ from leadthrough.errors import ControlError
 from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
-__all__ = ["CycleTime", "SessionSummary", "force_error_in_motion", "phantom_forces",
-           "release_overruns", "rest_drift", "summarize"]
+__all__ = ["CycleTime", "SessionSummary", "faults_without_hand", "force_error_in_motion",
+           "phantom_forces", "release_motion_times", "release_overruns", "rest_drift", "summarize"]
 
 #: TCP speed from which the force error counts as "in motion" [m/s] (issue 24).
 MOTION_SPEED = 0.02
@@ -154,6 +154,17 @@ def phantom_forces(log: SessionLog, window_s: float = PHANTOM_WINDOW_S) -> Array
     return np.asarray(peaks)
 
 
+def _releases(log: SessionLog) -> tuple[list[tuple[int, int]], Array] | None:
+    """The hands-off intervals that follow a push (:func:`_hands_off`, not one from the
+    session's start) and the commanded linear speed per sample [m/s]; None without the
+    truth."""
+    intervals = _hands_off(log)
+    if intervals is None:
+        return None
+    return ([(a, b) for a, b in intervals if a > 0],
+            np.linalg.norm(log.twist_cmd_base[:, :3], axis=1))
+
+
 def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
     """Travel after each release beyond a stop at ``deceleration``, one value per release.
 
@@ -171,16 +182,72 @@ def release_overruns(log: SessionLog, deceleration: float) -> Array | None:
     Returns:
         Overrun per release [m], >= 0, shape (releases,); None without the truth.
     """
-    intervals = _hands_off(log)
-    if intervals is None:
+    releases = _releases(log)
+    if releases is None:
         return None
-    speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)
+    intervals, speed = releases
     step = np.diff(log.tcp_cmd_base, axis=0)
     travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])
     # a release: the last pushed sample r before a hands-off interval, which ends at stop - 1
-    ends = [(start - 1, stop - 1) for start, stop in intervals if start > 0]
+    ends = [(start - 1, stop - 1) for start, stop in intervals]
     return np.array([max(0.0, travel[end] - travel[r] - speed[r] ** 2 / (2.0 * deceleration))
                      for r, end in ends])
+
+
+def release_motion_times(log: SessionLog, deceleration: float) -> Array | None:
+    """How long the robot kept moving after each release, beyond the shortest stop.
+
+    For each release (as in :func:`release_overruns`), the time from the release to the last
+    sample of the hands-off interval with a nonzero commanded twist, minus v/a, the length of
+    a stop at ``deceleration`` from the commanded speed v at the release: a robot that brakes
+    at the limit at once scores 0; one that restarts 1.5 s after the release scores about
+    1.5 s, however briefly it moves then.
+
+    Args:
+        log: The session.
+        deceleration: a [m/s²], > 0 (the linear acceleration limit).
+
+    Returns:
+        Time per release [s], >= 0, shape (releases,); None without the truth.
+    """
+    releases = _releases(log)
+    if releases is None:
+        return None
+    intervals, speed = releases
+    moving = np.any(log.twist_cmd_base != 0.0, axis=1)
+    times = []
+    for start, stop in intervals:
+        moved = np.flatnonzero(moving[start:stop])
+        last = log.time[start + moved[-1]] if moved.size else log.time[start - 1]
+        times.append(max(0.0, float(last - log.time[start - 1])
+                         - speed[start - 1] / deceleration))
+    return np.array(times)
+
+
+def faults_without_hand(log: SessionLog, window_s: float) -> list[str] | None:
+    """The faults that no hand caused: those latched when no hand had touched the tool for
+    ``window_s`` (the simulator's truth; e.g. the length of a stop from the speed limit at the
+    acceleration limit, so that a push toward a joint limit that the stop cannot avoid counts
+    as the hand's).
+
+    Args:
+        log: The session.
+        window_s: Time without any applied wrench before the fault [s], >= 0.
+
+    Returns:
+        The faults' names in order; None without the truth.
+    """
+    if log.wrench_applied_base is None:
+        return None
+    touched = np.any(log.wrench_applied_base != 0.0, axis=1)
+    last_touch = np.maximum.accumulate(np.where(touched, log.time, -np.inf))
+    names = []
+    for e in log.events:
+        if e.kind == "transition" and ":" in e.cause:
+            k = min(int(np.searchsorted(log.time, e.t, side="right")) - 1, log.time.size - 1)
+            if e.t - last_touch[max(k, 0)] > window_s:
+                names.append(e.cause.split(":", 1)[1])
+    return names
 
 
 def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> SessionSummary:
