@@ -81,7 +81,7 @@ def main() -> None:
     t0 = time.perf_counter()
     cal = calibrate_for_guiding(robot, progress=print)
     path = save_params(shipped_params_path(robot.name), robot, "consistent", cal.result.params,
-                       cal.result.stats, DEFAULT_SIM_SEED)
+                       cal.result.stats, DEFAULT_SIM_SEED, friction_sweep=True)
     print(f"-> {path} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
 
 
