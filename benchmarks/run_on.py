@@ -81,7 +81,7 @@ def calibrated(robot: Robot, seed: int, plant: str, cache: Path) -> ParamsFile:
 
 
 #: The stop after letting go (--no-hand-release: the paper's law alone, for comparison).
-HAND_RELEASE = [HandReleaseConfig()]
+HAND_RELEASE = [HandReleaseConfig(enabled=True)]
 
 
 def session(robot: Robot, params: ParamsFile, config: SimSessionConfig) -> SimSession:

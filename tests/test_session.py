@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from leadthrough.cli import main
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.control.safety import Fault as ControlFault
 from leadthrough.control.safety import State
 from leadthrough.drivers.replay import ReplayDriver
@@ -180,8 +181,11 @@ def test_replayed_feedback_repeats_the_session_bit_for_bit(er20: Robot,
                                                            nominal_params: ParamsFile) -> None:
     """The loop is deterministic: its recorded reads (stale ones included) give the same
     estimates, states and commands without the simulator."""
-    cfg = SimSessionConfig(operator="push-x", duration_s=4.0,
-                           loop=LoopConfig(guiding=light_guiding()),
+    # the paper's law alone: with the nominal model the estimate swings by more than δ under
+    # the push, which the stop after letting go takes for a release (and then the push, held
+    # steady, never rises again); this test is about the loop's determinism
+    guiding = replace(light_guiding(), hand_release=HandReleaseConfig(enabled=False))
+    cfg = SimSessionConfig(operator="push-x", duration_s=4.0, loop=LoopConfig(guiding=guiding),
                            faults=(Fault(FaultKind.STALE, t_start=3.5, t_end=3.503),))
     s = run_sim_session(er20, nominal_params, cfg, record_feedback=True)
     assert s.feedback is not None

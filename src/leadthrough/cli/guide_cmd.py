@@ -13,6 +13,7 @@ from leadthrough.cli.arg_checks import warm_up_seconds
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
 from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.errors import DataError
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
@@ -74,6 +75,10 @@ def register(sub: Any) -> None:
     p.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0],
                    help="simulated plant: realistic (default) or ideal (the plant before issue "
                         "24); the one the params were recorded on")
+    p.add_argument("--hand-release", action="store_true",
+                   help="stop at the acceleration limit when the hand lets go of the moving "
+                        "tool, whatever the force estimate says (issue 24; off by default: it "
+                        "brakes a hand that eases off, e.g. at a seam's end points)")
     p.add_argument("--warm-up", type=float, default=0.0, metavar="MINUTES",
                    help="production-like motion the realistic robot did before the session "
                         "[min] (default 0: cold, as a calibration in the morning)")
@@ -98,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
                      " low at guiding speeds: a 40 N push barely moves the robot)")
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     guiding = replace(guiding, controller=args.controller, friction_mode=args.friction)
+    if args.hand_release:
+        guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
     require_folder(args.output)
     if args.driver is not None:
         return guide_on_robot(args, robot, pf, guiding)

@@ -62,8 +62,10 @@ class HandReleaseConfig:
     """The stop after the hand lets go of a moving tool (module docstring), validated once.
 
     Attributes:
-        enabled: Detect letting go in motion and stop at the acceleration limit (False: the
-            paper's law alone, eq. 31–33).
+        enabled: Detect letting go in motion and stop at the acceleration limit (False, the
+            default: the paper's law alone, eq. 31–33). Off by default because it brakes the
+            seam's operator where the hand eases off to stop at P1 / P2 (issue 24: seam end
+            points median 11–63 mm against 5 mm with the paper's law; README, Limitations).
         drop_fraction: Fraction of the peak's excess over δ whose fall is a letting go, in
             (0, 1] (1: all of it; smaller: more sensitive, more false stops).
         lockout_s: Time after a letting go before a rise may resume guiding [s], >= 0.
@@ -78,7 +80,7 @@ class HandReleaseConfig:
             drift after a release (the drives unloading, up to ~100 N/s) lags less than δ.
     """
 
-    enabled: bool = True
+    enabled: bool = False
     drop_fraction: float = 0.5
     lockout_s: float = 0.3
     smoothing_s: float = 0.05
