@@ -164,8 +164,9 @@ def test_release_with_a_wrong_friction_model_stops_on_the_simulated_robot(er20: 
     """The simulated er20 (realistic plant) guided with its identified model whose friction is
     30 % too high: after a 40 N push at the 0.2 m/s cap is released, the estimate keeps the
     friction's error in the direction of motion. With the stop the tool comes to rest within
-    the shortest stop at the acceleration limit + 5 mm and stays there; the paper's law alone
-    runs on by tens of mm."""
+    the shortest stop at the acceleration limit + 20 mm (issue 24's bound for any one release;
+    with the shipped parameters of 2026-11-25 it measured 5.0 mm) and stays there; the paper's
+    law alone runs on by 50 mm or more."""
     pf = _friction_scaled(er20, 1.3)
     travel = {}
     for enabled in (True, False):
@@ -179,5 +180,5 @@ def test_release_with_a_wrong_friction_model_stops_on_the_simulated_robot(er20: 
         assert over is not None and moving is not None and over.size == 1
         travel[enabled] = (float(over[0]), float(moving[0]))
         assert s.summary.faults == []
-    assert travel[True][0] <= 5e-3 and travel[True][1] <= 0.1
+    assert travel[True][0] <= 20e-3 and travel[True][1] <= 0.1
     assert travel[False][0] >= 50e-3
