@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import select
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-PORTS = {"fanuc-j519": 60015, "ur-rtde": 30004, "kuka-rsi": 49152}
+from leadthrough.drivers.controllers import DEFAULT_PORTS
+from leadthrough.sim.emulators.process import spawn_emulator, stop_emulator
 
 
 def _lt(*args: str) -> list[str]:
@@ -41,21 +41,14 @@ def _emulator(kind: str, port: int, minutes: float) -> subprocess.Popen[str]:
     for k in range(int(minutes * 2) + 2):
         a = 5.0 + 30.0 * k
         presses += ["--enable", f"{a}:{a + 20}", "--mark", f"{a + 2}:{a + 2.2}"]
-    proc = subprocess.Popen(_lt("emulate", kind, "--robot", "er20", "--seed", "3", "--host",
-                                "127.0.0.1", "--port", str(port), *presses),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    ready, _, _ = select.select([proc.stdout], [], [], 120.0)
-    if not ready or not proc.stdout.readline().startswith("leadthrough: emulating"):
-        proc.kill()
-        raise SystemExit(f"the emulator did not start: {proc.communicate()}")
-    return proc
+    return spawn_emulator(kind, "er20", "127.0.0.1", port, "--seed", "3", *presses,
+                          timeout=120.0)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=60.0)
-    ap.add_argument("--kind", default="kuka-rsi", choices=sorted(PORTS))
+    ap.add_argument("--kind", default="kuka-rsi", choices=sorted(DEFAULT_PORTS))
     ap.add_argument("--params", type=Path, default=None,
                     help="params file (default: the shipped er20 parameters)")
     ap.add_argument("--out", type=Path, default=None)
@@ -66,7 +59,7 @@ def main() -> None:
     out = args.out or Path(tempfile.mkdtemp(prefix="lt-long-"))
     out.mkdir(parents=True, exist_ok=True)
     session = out / "long.parquet"
-    port = PORTS[args.kind] + 200
+    port = DEFAULT_PORTS[args.kind] + 200
     guide_cmd = _lt("guide", "--driver", args.kind, "--host", "127.0.0.1", "--port", str(port),
                     "--robot", "er20", "--params", str(params), "--enable-input", "0",
                     "--mark-input", "1", "--watchdog", "0.5", "--duration",
@@ -88,8 +81,7 @@ def main() -> None:
             break
         time.sleep(10.0)
     stdout, stderr = guide.communicate()
-    emu.terminate()
-    report, _ = emu.communicate(timeout=30)
+    report = stop_emulator(emu, timeout=30.0)
     result = json.loads(stdout) if stdout.strip().startswith("{") else {"stderr": stderr}
     after = [m for s, m in samples if s >= 60.0]
     first = after[0] if after else float("nan")

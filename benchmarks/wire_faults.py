@@ -27,10 +27,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import select
-import socket
 import subprocess
-import sys
 import time
 from dataclasses import dataclass, replace
 
@@ -46,6 +43,12 @@ from leadthrough.identification.params_file import load_params
 from leadthrough.robot import load_robot
 from leadthrough.session.loop import LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
+from leadthrough.sim.emulators.process import (
+    emulator_report,
+    free_loopback_address,
+    spawn_emulator,
+    stop_emulator,
+)
 from leadthrough.sim.guiding_params import shipped_params_path
 
 FAULT_AT = 3.0
@@ -98,47 +101,19 @@ class Case:
     arm_stop: str
 
 
-def _free_host(port: int) -> str:
-    rng = np.random.default_rng()
-    for _ in range(50):
-        host = "127.{}.{}.{}".format(*rng.integers(1, 255, size=3))
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-            try:
-                s.bind((host, port))
-                return host
-            except OSError:
-                continue
-    raise RuntimeError(f"no free loopback address for port {port}")
-
-
 def _emulator(protocol: str, host: str, port: int, extra: list[str],
               wait: bool) -> subprocess.Popen[str]:
-    cmd = [sys.executable, "-m", "leadthrough", "emulate", protocol, "--robot", "er20",
-           "--seed", "1", "--host", host, "--port", str(port), "--enable", "1.5:inf", *extra]
+    args = ["--seed", "1", "--enable", "1.5:inf", *extra]
     if protocol == "kuka-rsi":
-        cmd += ["--cycle-ms", "12"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    if not wait:
-        return proc
-    ready, _, _ = select.select([proc.stdout], [], [], 60.0)
-    if not ready or not proc.stdout.readline().startswith("leadthrough: emulating"):
-        proc.kill()
-        raise RuntimeError(f"emulator {protocol} did not start: {proc.communicate()}")
-    return proc
-
-
-def _report(proc: subprocess.Popen[str]) -> dict[str, str]:
-    proc.terminate()
-    out, _ = proc.communicate(timeout=20)
-    return dict(line.split(": ", 1) for line in out.splitlines() if ": " in line)
+        args += ["--cycle-ms", "12"]
+    return spawn_emulator(protocol, "er20", host, port, *args, wait=wait)
 
 
 def run_case(protocol: str, fault: str) -> Case:
     robot = load_robot("er20")
     pf = load_params(shipped_params_path("er20"), robot)
     port = DEFAULT_PORTS[protocol]
-    host = _free_host(port)
+    host = free_loopback_address(port)
     driver = (KukaRsiDriver(robot, host, port, cycle=0.012) if protocol == "kuka-rsi"
               else connect(protocol, robot, host, port))
     dt = driver.dt
@@ -155,7 +130,7 @@ def run_case(protocol: str, fault: str) -> Case:
             link: Driver = Raising(driver) if fault == "driver exception" else driver
             result = run_session(link, *parts, END_AT, options=options)
     finally:
-        report = _report(emu) if emu is not None else {}
+        report = emulator_report(stop_emulator(emu)) if emu is not None else {}
     return _case(protocol, fault, result, report, parts.controller.config)
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import select
 import subprocess
 import sys
 import tempfile
@@ -35,8 +34,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from leadthrough.drivers.controllers import DEFAULT_PORTS
+from leadthrough.errors import SimulationError
+from leadthrough.sim.emulators.process import emulator_report, spawn_emulator, stop_emulator
+
 KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
-PORTS = {"fanuc-j519": 60015, "ur-rtde": 30004, "kuka-rsi": 49152}
 HOST = "127.0.0.1"
 
 
@@ -53,43 +55,28 @@ def _run(*args: str) -> dict[str, Any]:
     return out
 
 
-def _emulator(kind: str, robot: str, seed: int, port: int) -> subprocess.Popen[str]:
-    """The emulated controller (its robot at its own start pose: record approaches)."""
-    proc = subprocess.Popen(_lt("emulate", kind, "--robot", robot, "--seed", str(seed),
-                                "--host", HOST, "--port", str(port)),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    ready, _, _ = select.select([proc.stdout], [], [], 60.0)
-    if not ready or not proc.stdout.readline().startswith("leadthrough: emulating"):
-        proc.kill()
-        raise SystemExit(f"emulate {kind} did not start: {proc.communicate()}")
-    return proc
-
-
 def _record_wire(kind: str, robot: str, seed: int, traj: Path, out: Path) -> dict[str, Any]:
-    port = PORTS[kind] + 100  # beside the interface's own port (a real one may be in use)
+    port = DEFAULT_PORTS[kind] + 100  # beside the interface's own port (a real one may be in use)
     args = ["record", "--driver", kind, "--host", HOST, "--port", str(port), "--robot", robot,
             "--trajectory", str(traj), "-o", str(out), "--json"]
     if kind == "kuka-rsi":  # the PC listens, then the robot sends
         rec = subprocess.Popen(_lt(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True)
         time.sleep(3.0)
-        emu = _emulator(kind, robot, seed, port)
-    else:
-        emu = _emulator(kind, robot, seed, port)
+        emu = spawn_emulator(kind, robot, HOST, port, "--seed", str(seed))
+    else:  # the robot at the emulator's own start pose: record approaches
+        emu = spawn_emulator(kind, robot, HOST, port, "--seed", str(seed))
         rec = subprocess.Popen(_lt(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True)
     try:
         stdout, stderr = rec.communicate(timeout=600)
     finally:
-        emu.terminate()
-        report, _ = emu.communicate(timeout=20)
+        report = stop_emulator(emu)
     if rec.returncode != 0:
         raise RuntimeError(f"record --driver {kind} failed: {stderr.strip()}; emulator: "
                            f"{' '.join(report.split())}")
     info: dict[str, Any] = json.loads(stdout)
-    info["emulator"] = {k.strip(): v.strip() for k, _, v in
-                        (line.partition(":") for line in report.splitlines() if ":" in line)}
+    info["emulator"] = emulator_report(report)
     return info
 
 
@@ -129,42 +116,30 @@ def _teach(path: Path, work: Path) -> str:
 def _guide_wire(kind: str, script: str, seed: int, params: Path, q0: list[float],
                 out: Path) -> str:
     """One guided session over the wire; returns the emulator's report line."""
-    port = PORTS[kind] + 300
+    port = DEFAULT_PORTS[kind] + 300
     duration = OPERATOR_DELAY_S + SCRIPT_S[script] + 1.0
     guide = _lt("guide", "--driver", kind, "--host", HOST, "--port", str(port), "--robot",
                 "er20", "--params", str(params), "--enable-input", "0", "--mark-input", "1",
                 "--mass", "100", "--watchdog", "0.5", "--duration", str(duration), "-o",
                 str(out), "--json")
-    emu_args = _lt("emulate", kind, "--robot", "er20", "--seed", str(seed), "--host", HOST,
-                   "--port", str(port), "--q0", *map(str, q0), "--operator", script,
-                   "--operator-delay", str(OPERATOR_DELAY_S))
+    emu_args = ("--seed", str(seed), "--q0", *map(str, q0), "--operator", script,
+                "--operator-delay", str(OPERATOR_DELAY_S))
 
-    def emulator() -> subprocess.Popen[str]:
-        proc = subprocess.Popen(emu_args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True)
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], 60.0)
-        if not ready or not proc.stdout.readline().startswith("leadthrough: emulating"):
-            proc.kill()
-            raise RuntimeError(f"emulate {kind} did not start: {proc.communicate()}")
-        return proc
-
-    emu = None if kind == "kuka-rsi" else emulator()
+    emu = None if kind == "kuka-rsi" else spawn_emulator(kind, "er20", HOST, port, *emu_args)
     g = subprocess.Popen(guide, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     if emu is None:  # RSI: the PC listens first (after its set-up), then the robot sends
         assert g.stderr is not None
         while not g.stderr.readline().startswith("leadthrough: guiding"):
             if g.poll() is not None:
                 raise RuntimeError(f"guide --driver {kind} ended: {g.communicate()}")
-        emu = emulator()
+        emu = spawn_emulator(kind, "er20", HOST, port, *emu_args)
     try:
         _, err = g.communicate(timeout=600)
     finally:
-        emu.terminate()
-        report, _ = emu.communicate(timeout=20)
+        report = stop_emulator(emu)
     if not out.exists():
         raise RuntimeError(f"guide --driver {kind} wrote nothing: {err.strip()[-300:]}")
-    fields = dict(line.split(": ", 1) for line in report.splitlines() if ": " in line)
+    fields = emulator_report(report)
     return f"refused {fields.get('refused')}, violations {fields.get('violations')}"
 
 
@@ -192,7 +167,7 @@ def guide_section(kinds: list[str], seed: int, work: Path) -> None:
             out = work / f"guide_{script}_{kind}.parquet"
             try:
                 runs.append((kind, out, _guide_wire(kind, script, seed, params, q0, out)))
-            except RuntimeError as e:
+            except (RuntimeError, SimulationError) as e:
                 print(f"{script:<7} {kind:<21} {e}")
         for name, path, note in runs:
             f = _session_figures(path)
@@ -237,7 +212,7 @@ def main() -> None:
             t0 = time.perf_counter()
             try:
                 info = _record_wire(name, robot, args.seed, traj, rec)
-            except RuntimeError as e:
+            except (RuntimeError, SimulationError) as e:
                 print(e, flush=True)
                 continue
             info["wall_s"] = time.perf_counter() - t0

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
-import select
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Callable
 from typing import TypeVar
 
 import numpy as np
+
+from leadthrough.sim.emulators.process import (  # noqa: F401 (re-exported)
+    free_loopback_address,
+    spawn_emulator,
+    stop_emulator,
+)
 
 T = TypeVar("T")
 
@@ -46,46 +48,5 @@ def hexbytes(text: str) -> bytes:
     return bytes.fromhex("".join(text.split()))
 
 
-def spawn_emulator(kind: str, robot: str, host: str, port: int,
-                   *extra: str) -> subprocess.Popen[str]:
-    """Start ``leadthrough emulate`` in its own process and wait for its ready line.
-
-    Raises:
-        RuntimeError: No ready line within 60 s (the process is killed).
-    """
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "leadthrough", "emulate", kind, "--robot", robot,
-         "--host", host, "--port", str(port), *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    ready, _, _ = select.select([proc.stdout], [], [], 60.0)
-    line = proc.stdout.readline() if ready else ""
-    if not line.startswith("leadthrough: emulating"):
-        proc.kill()
-        raise RuntimeError(f"emulator {kind} did not start: {line!r} {proc.communicate()}")
-    return proc
-
-
-def stop_process(proc: subprocess.Popen[str]) -> str:
-    """SIGTERM a spawned emulator; returns what it printed (its report)."""
-    proc.terminate()
-    try:
-        out, _ = proc.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return out
-
-
-def free_loopback_address(port: int) -> str:
-    """A 127.x.y.z address on which ``port`` is free (a fixed port without collisions)."""
-    rng = np.random.default_rng()
-    for _ in range(50):
-        host = "127.{}.{}.{}".format(*rng.integers(1, 255, size=3))
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-            try:
-                s.bind((host, port))
-                return host
-            except OSError:
-                continue
-    raise RuntimeError(f"no free loopback address for port {port}")
+# one implementation for the tests and the benchmarks (the package's)
+stop_process = stop_emulator
