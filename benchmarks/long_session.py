@@ -1,20 +1,33 @@
-"""A long guiding session over the wire: memory stays bounded and the recording loads (issue
-25, must show 6).
+"""A long guiding session over the wire: timing (issue 25, must show 5) and memory (must show
+6).
 
 ``leadthrough emulate`` (its own process; the enabling device pressed for 20 s every 30 s, the
 mark button once per press) and ``leadthrough guide --driver`` (its own process, recording
 streamed to disk) for ``--minutes``; the guide process's resident memory (VmRSS) is read from
 /proc every 10 s. At the end the guide stops by its ``--duration``, then ``leadthrough teach``
-loads the recording. It prints RSS after the first minute (set-up done), at the end, the
-growth, the file's size and rows, the guide's late periods and the emulator's report.
+loads the recording. It prints:
 
-    python benchmarks/long_session.py [--minutes 60] [--kind kuka-rsi] [--out DIR]
+* timing: the servo periods the guide ran and those it ran late (its clock), the controller
+  cycles the emulated controller ran without a fresh command (its count: RSI's ``Delay``, J519
+  statuses left unanswered, the RTDE program's counter unchanged), the emulator's own largest
+  lag behind the wall clock, and the first controller cycle's compute time against the
+  median (the first is kept for sessions up to ten minutes);
+* memory: RSS after the first minute (set-up done), at the end, the growth; the file's size;
+  ``teach``'s answer; the emulator's report.
+
+``--rt-priority P`` runs both processes with ``SCHED_FIFO`` priority P (the guide by its own
+option, the emulator set from here): the figures of a loaded machine. Default: ordinary
+scheduling, the figures of an idle machine.
+
+    python benchmarks/long_session.py [--minutes 60] [--kind kuka-rsi] [--rt-priority P]
+        [--out DIR]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -22,7 +35,7 @@ import time
 from pathlib import Path
 
 from leadthrough.drivers.controllers import DEFAULT_PORTS
-from leadthrough.sim.emulators.process import spawn_emulator, stop_emulator
+from leadthrough.sim.emulators.process import emulator_report, spawn_emulator, stop_emulator
 
 
 def _lt(*args: str) -> list[str]:
@@ -36,13 +49,17 @@ def _rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def _emulator(kind: str, port: int, minutes: float) -> subprocess.Popen[str]:
+def _emulator(kind: str, port: int, minutes: float,
+              rt_priority: int | None) -> subprocess.Popen[str]:
     presses: list[str] = []
     for k in range(int(minutes * 2) + 2):
         a = 5.0 + 30.0 * k
         presses += ["--enable", f"{a}:{a + 20}", "--mark", f"{a + 2}:{a + 2.2}"]
-    return spawn_emulator(kind, "er20", "127.0.0.1", port, "--seed", "3", *presses,
-                          timeout=120.0)
+    emu = spawn_emulator(kind, "er20", "127.0.0.1", port, "--seed", "3", *presses,
+                         timeout=120.0)
+    if rt_priority is not None:
+        os.sched_setscheduler(emu.pid, os.SCHED_FIFO, os.sched_param(rt_priority))
+    return emu
 
 
 def main() -> None:
@@ -51,6 +68,8 @@ def main() -> None:
     ap.add_argument("--kind", default="kuka-rsi", choices=sorted(DEFAULT_PORTS))
     ap.add_argument("--params", type=Path, default=None,
                     help="params file (default: the shipped er20 parameters)")
+    ap.add_argument("--rt-priority", type=int, default=None, metavar="P",
+                    help="SCHED_FIFO priority of the guide and the emulator")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     from leadthrough.sim.guiding_params import shipped_params_path
@@ -64,14 +83,16 @@ def main() -> None:
                     "--robot", "er20", "--params", str(params), "--enable-input", "0",
                     "--mark-input", "1", "--watchdog", "0.5", "--duration",
                     str(60.0 * args.minutes), "-o", str(session), "--json")
+    if args.rt_priority is not None:
+        guide_cmd += ["--rt-priority", str(args.rt_priority)]
     emu = None
     if args.kind != "kuka-rsi":
-        emu = _emulator(args.kind, port, args.minutes)
+        emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
     guide = subprocess.Popen(guide_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True)
     if emu is None:
         time.sleep(20.0)  # RSI: the PC listens (after compiling), then the robot sends
-        emu = _emulator(args.kind, port, args.minutes)
+        emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
     t0 = time.monotonic()
     samples: list[tuple[float, float]] = []
     while guide.poll() is None:
@@ -94,6 +115,15 @@ def main() -> None:
           f"{(after[-1] - first) if after else float('nan'):+.1f} MB (goal <= 50 MB)")
     print(f"recording {session}: {session.stat().st_size / 1e6:.1f} MB" if session.exists()
           else "no recording")
+    if "periods" in result:
+        emu_fields = emulator_report(report)
+        print(f"timing: {result['periods']} periods, {result['late_periods']} late (guide); "
+              f"{emu_fields.get('missed_cycles', '?')} controller cycles without a fresh "
+              f"command (emulator; its largest lag {emu_fields.get('max_lag', '?')} s); "
+              f"first controller cycle {result['cycle_us_first']:.0f} µs, median "
+              f"{result['cycle_us_median']:.0f} µs: ratio "
+              f"{result['cycle_us_first'] / result['cycle_us_median']:.2f} (goal <= 2), "
+              f"p99 {result['cycle_us_p99']:.0f} µs, max {result['cycle_us_max']:.0f} µs")
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
     print("emulator: " + " ".join(report.split()))

@@ -145,8 +145,7 @@ def _report(emu: RunningEmulator) -> EmulatorReport:
 
 def _limit_refusals(emu: RunningEmulator) -> list[str]:
     """Commands the controller refused for what they asked (not because it had stopped)."""
-    return [r.reason for r in emu.emulator.arm.log
-            if not r.accepted and not r.reason.startswith("arm ")]
+    return [r.reason for r in emu.emulator.arm.refusals]
 
 
 # --------------------------------------------------------------------------- normal work

@@ -162,12 +162,18 @@ def _stop_on_term(requests: LoopRequests) -> Iterator[None]:
 
 
 def _report(args: argparse.Namespace, result: LoopResult) -> int:
-    end = result.end
-    p99 = float(np.percentile(result.cycle_us, 99)) if result.cycle_us.size else math.nan
+    end, us = result.end, result.cycle_us
+    p99 = float(np.percentile(us, 99)) if us.size else math.nan
+    # the first controller cycle against the steady state (the kept cycles: the last ten
+    # minutes at most, so the first is only there in a session that short)
+    first = float(us[0]) if us.size and result.cycles == us.size else math.nan
     out: dict[str, Any] = {
         "end": str(end.cause), "end_detail": end.detail, "t_end_s": end.t,
         "state": end.state.name, "fault": end.fault.name,
-        "late_periods": result.late_periods, "cycle_us_p99": p99, "output": str(args.output)}
+        "late_periods": result.late_periods, "periods": result.periods,
+        "cycle_us_first": first, "cycle_us_median": float(np.median(us)) if us.size
+        else math.nan, "cycle_us_p99": p99, "cycle_us_max": float(us.max()) if us.size
+        else math.nan, "output": str(args.output)}
     if args.json:
         print(json.dumps(out, indent=2))
     else:

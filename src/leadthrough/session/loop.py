@@ -92,6 +92,8 @@ class LoopResult:
         late_periods: Servo periods that missed their slot (paced, or a real driver:
             :class:`~leadthrough.session.pacing.PeriodClock`); none is caught up.
         skipped_periods: Slots skipped after late periods (paced only).
+        periods: Servo periods run.
+        cycles: Controller cycles run (``cycle_us`` holds all of them when it is as long).
     """
 
     log: SessionLog | None
@@ -100,6 +102,8 @@ class LoopResult:
     servo_us: Array
     late_periods: int = 0
     skipped_periods: int = 0
+    periods: int = 0
+    cycles: int = 0
 
 
 def run_session(
@@ -170,7 +174,8 @@ def run_session(
                     clock.skipped)
     cycle_us, servo_us = times.split(every)
     return LoopResult(log=session_log, end=loop.end, cycle_us=cycle_us, servo_us=servo_us,
-                      late_periods=clock.late, skipped_periods=clock.skipped)
+                      late_periods=clock.late, skipped_periods=clock.skipped,
+                      periods=times.count, cycles=-(-times.count // every))
 
 
 def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | None,

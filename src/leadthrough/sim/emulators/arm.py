@@ -15,14 +15,18 @@ currents without most of the inertial torque: an 8 ms J519 recording identified 
 torque error against 5 % at 1 kHz.) A target that fails a
 check is refused and starts a controlled stop (each joint decelerates at the robot's
 acceleration limit; an E-stop at twice that), after which the arm is in ``FAULT`` until
-:meth:`EmulatedArm.reset`. Every command is logged (:class:`CommandRecord`) and
-:meth:`EmulatedArm.violations` re-checks the accepted ones, so a test can confirm that no
-non-finite target and no jump beyond the limits was ever executed.
+:meth:`EmulatedArm.reset`. Every command is counted, the latest ones are kept
+(:class:`CommandRecord`, the last :data:`LOG_KEEP`) with every refusal for a limit, and an audit
+re-checks each target the arm executes against the one before, independently of the checks
+that accepted it: :meth:`EmulatedArm.violations` lets a test confirm that no non-finite target
+and no jump beyond the limits was ever executed. Memory stays bounded however long the session
+runs (an hour at 4 ms is 900 000 commands: kept as objects, the garbage collector's full passes
+over them stall the 1 ms loop by tens of milliseconds).
 """
 
 from __future__ import annotations
 
-import math
+from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -34,9 +38,14 @@ from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.operator import EmulatedOperator
 from leadthrough.sim.robot import Feedback, SimConfig, SimRobot
 
-__all__ = ["ArmPhase", "CommandRecord", "EmulatedArm", "MotionLimits", "StopKind"]
+__all__ = ["LOG_KEEP", "ArmPhase", "CommandRecord", "EmulatedArm", "MotionLimits", "StopKind"]
 
 Array = NDArray[np.float64]
+
+#: Latest commands kept in :attr:`EmulatedArm.log` (40 s at 4 ms); the counts cover them all.
+LOG_KEEP = 10_000
+#: Violations and limit refusals kept (each also counted).
+_KEEP_FEW = 1_000
 
 
 class ArmPhase(StrEnum):
@@ -130,8 +139,13 @@ class EmulatedArm:
         self.stop_kind: StopKind | None = None
         self.stop_reason = ""
         self._decel = robot.acceleration_limit.copy()
-        self.log: list[CommandRecord] = []
-        self.executed: list[Array] = []  # every cycle target the arm followed
+        self.log: deque[CommandRecord] = deque(maxlen=LOG_KEEP)   # the latest commands
+        self.refusals: list[CommandRecord] = []  # refused for what they asked (first ones)
+        self.commands = self.accepted = 0
+        self._violations: list[str] = []
+        self._violation_count = 0
+        self._executed_count = 0
+        self._last_executed: Array | None = None  # the audit's previous cycle target
         self._pin = robot.model.createData()
 
     # ---------------------------------------------------------------------------- commands
@@ -183,13 +197,15 @@ class EmulatedArm:
         """
         q = np.asarray(q, dtype=float)
         if self.phase in (ArmPhase.STOPPING, ArmPhase.FAULT):
-            self.log.append(CommandRecord(t, tuple(q.tolist()), False, f"arm {self.phase}"))
+            self._log(CommandRecord(t, tuple(q.tolist()), False, f"arm {self.phase}"))
             return False
         reason = self.check(q)
-        self.log.append(CommandRecord(t, tuple(q.tolist()), not reason, reason))
+        self._log(CommandRecord(t, tuple(q.tolist()), not reason, reason))
         if reason:
             self.stop(refusal, reason)
             return False
+        if not np.all(np.isfinite(q)):
+            self._violation(f"accepted non-finite command at t={t:.3f}")
         self._advance(q)
         self.phase = ArmPhase.RUNNING
         if self.operator is not None:
@@ -198,8 +214,16 @@ class EmulatedArm:
 
     def refuse(self, q: tuple[float, ...], t: float, reason: str) -> None:
         """Log a command the protocol layer refused and start a limit stop."""
-        self.log.append(CommandRecord(t, tuple(float(x) for x in q), False, reason))
+        self._log(CommandRecord(t, tuple(float(x) for x in q), False, reason))
         self.stop(StopKind.LIMIT, reason)
+
+    def _log(self, record: CommandRecord) -> None:
+        self.commands += 1
+        self.accepted += record.accepted
+        self.log.append(record)
+        if not record.accepted and not record.reason.startswith("arm ") and (
+                len(self.refusals) < _KEEP_FEW):
+            self.refusals.append(record)
 
     def hold(self, extrapolate: bool = False) -> None:
         """No target this cycle: keep the last one, or continue at the last velocity (the
@@ -212,7 +236,7 @@ class EmulatedArm:
             self._advance(q)
 
     def _advance(self, q: Array) -> None:
-        self.executed.append(q.copy())
+        self._audit(q)
         v = (q - self._to) / self.cycle
         self._a = (v - self._v) / self.cycle
         self._v = v
@@ -233,7 +257,7 @@ class EmulatedArm:
         self.phase, self.stop_kind, self.stop_reason = ArmPhase.IDLE, None, ""
         self._to, self._v, self._a = self._q.copy(), np.zeros(self.robot.n), np.zeros(
             self.robot.n)
-        self.executed.append(self._q.copy())
+        self._audit(self._q)
 
     # ------------------------------------------------------------------------------ steps
     def step(self) -> None:
@@ -289,25 +313,38 @@ class EmulatedArm:
         return tuple((M.translation * 1000.0).tolist()) + tuple(np.degrees(rpy).tolist())
 
     # ------------------------------------------------------------------------------ audit
-    def violations(self) -> list[str]:
-        """What the arm executed that it should not have (should always be empty).
+    def _audit(self, q: Array) -> None:
+        """Re-check a cycle target the arm is about to follow against the one before: not
+        finite, outside the position limits, or a step faster than the velocity limit."""
+        k = self._executed_count
+        self._executed_count += 1
+        lo, hi, vmax = self.robot.lower_limits, self.robot.upper_limits, self.limits.velocity
+        prev = self._last_executed
+        if not np.all(np.isfinite(q)) or np.any(q < lo) or np.any(q > hi):
+            self._violation(f"cycle target {k} not finite or outside the position limits")
+        elif prev is not None and vmax is not None and np.any(
+                np.abs(q - prev) > vmax * (1 + self.limits.tolerance) * self.cycle):
+            self._violation(f"cycle target {k} steps faster than the velocity limit")
+        if self._last_executed is None:
+            self._last_executed = q.copy()
+        else:
+            self._last_executed[:] = q
 
-        Replays every accepted command of the log and every cycle target the arm followed:
-        a non-finite value, a position outside the joint limits, or a step between
-        consecutive targets faster than the velocity limit.
+    def _violation(self, text: str) -> None:
+        self._violation_count += 1
+        if len(self._violations) < _KEEP_FEW:
+            self._violations.append(text)
+
+    def violations(self) -> list[str]:
+        """What the arm executed that it should not have (should always be empty): an accepted
+        non-finite command, a cycle target not finite or outside the joint limits, or a step
+        between consecutive targets faster than the velocity limit (the first
+        1000, and a count of the others).
 
         Returns:
             One description per violation.
         """
-        out = [f"accepted non-finite command at t={r.t:.3f}" for r in self.log
-               if r.accepted and not all(math.isfinite(x) for x in r.q)]
-        lo, hi, vmax = self.robot.lower_limits, self.robot.upper_limits, self.limits.velocity
-        prev = None
-        for k, q in enumerate(self.executed):
-            if not np.all(np.isfinite(q)) or np.any(q < lo) or np.any(q > hi):
-                out.append(f"cycle target {k} not finite or outside the position limits")
-            elif prev is not None and vmax is not None and np.any(
-                    np.abs(q - prev) > vmax * (1 + self.limits.tolerance) * self.cycle):
-                out.append(f"cycle target {k} steps faster than the velocity limit")
-            prev = q
+        out = list(self._violations)
+        if self._violation_count > len(out):
+            out.append(f"... and {self._violation_count - len(out)} more")
         return out

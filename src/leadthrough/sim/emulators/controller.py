@@ -44,6 +44,9 @@ class EmulatorReport:
         max_lag: Largest lag of the loop behind the wall clock [s].
         resyncs: Times the loop dropped a lag of more than one controller cycle instead of
             catching it up (a real controller never sends a burst of cycles).
+        missed_cycles: Controller cycles, while the client streamed, that had no fresh command
+            in time (J519: no command answering the last status; RTDE: the program's counter
+            unchanged; RSI: no answer with the IPOC within the cycle, RSI's ``Delay``).
         operator_start: Simulated time the operator's script started [s] (None: no operator,
             or not yet).
         operator_end: Simulated time the script ends [s] (None: as above).
@@ -62,6 +65,7 @@ class EmulatorReport:
     delayed: int
     max_lag: float
     resyncs: int
+    missed_cycles: int = 0
     operator_start: float | None = None
     operator_end: float | None = None
 
@@ -91,6 +95,7 @@ class EmulatedController(ABC):
         self._outbox: list[tuple[float, socket.socket, bytes, tuple[str, int] | None]] = []
         self.sent = self.dropped = self.delayed = 0
         self.max_lag, self.resyncs = 0.0, 0
+        self.missed_cycles = 0  # counted by the protocol (see EmulatorReport)
         self.closed = False
         self._ticks = 0
         self._estopped = self._protective = False
@@ -240,15 +245,14 @@ class EmulatedController(ABC):
 
     def report(self) -> EmulatorReport:
         """The session so far."""
-        log = self.arm.log
-        accepted = sum(1 for r in log if r.accepted)
-        kind = self.arm.stop_kind
+        arm = self.arm
+        kind = arm.stop_kind
         return EmulatorReport(
-            kind=self.kind, sim_time=self.t, commands=len(log), accepted=accepted,
-            refused=len(log) - accepted, violations=tuple(self.arm.violations()),
+            kind=self.kind, sim_time=self.t, commands=arm.commands, accepted=arm.accepted,
+            refused=arm.commands - arm.accepted, violations=tuple(arm.violations()),
             stop_kind=None if kind is None else kind.value, stop_reason=self.arm.stop_reason,
             sent=self.sent, dropped=self.dropped, delayed=self.delayed,
-            max_lag=self.max_lag, resyncs=self.resyncs,
+            max_lag=self.max_lag, resyncs=self.resyncs, missed_cycles=self.missed_cycles,
             operator_start=None if self.operator is None else self.operator.t0,
             operator_end=None if self.operator is None else self.operator.finished_at)
 

@@ -138,6 +138,7 @@ class FanucJ519Emulator(UdpController):
             self._take(self._pending, t)
             self._pending = None
         elif self._motion and self.arm.phase is ArmPhase.RUNNING:
+            self.missed_cycles += 1
             self._silent += self.arm.cycle
             if self._silent >= self.watchdog - 1e-9:
                 self.arm.stop(StopKind.WATCHDOG, f"no command for {self._silent:.3f} s")

@@ -117,6 +117,7 @@ class KukaRsiEmulator(UdpController):
                 self._apply(np.array(self._answer.correction, dtype=float), t)
             else:
                 self.late_total += 1
+                self.missed_cycles += 1
                 self.late_run += 1
                 if self.late_run > self.timeout:
                     self.arm.stop(StopKind.WATCHDOG, f"RSI: {self.late_run} late answers in a "

@@ -226,6 +226,7 @@ class UrRtdeEmulator(EmulatedController):
         self._counter = counter
         self._armed = self._armed or fresh
         self._silent = 0.0 if fresh else self._silent + self.arm.cycle
+        self.missed_cycles += self._armed and not fresh
         if self._armed and self._silent > self.watchdog + 1e-9:
             self.arm.stop(StopKind.WATCHDOG, f"script watchdog: counter unchanged for "
                           f"{self._silent:.3f} s")
