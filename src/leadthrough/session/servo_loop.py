@@ -177,12 +177,12 @@ class ServoLoop:
                                value=type(driver).__name__,
                                expected="a fresh sample on the first read")
         q0 = fb.q.copy()
+        self._dry_period(q0, fb.t)
         self.estimator.reset(q0)
         self.controller.reset(q0, fb.t)
         self.interpolator.reset(q0)
-        for part in (self.estimator, self.controller, self.interpolator):
-            part.warm_up()
         self.interp_status = self.interpolator.update(self.cmd)
+        self._drain()  # the reset's transition: the session's, taken now, not in a period
         if self.board is not None:
             self.board.attach(driver.n)
             operator_link.publish_settings(self)
@@ -190,6 +190,33 @@ class ServoLoop:
             self.watch.start()
         self.t = fb.t
         return fb.t
+
+    def _dry_period(self, q0: Array, t: float) -> None:
+        """One period's compute on the first sample with the enabling device released, then
+        every part reset by the caller: the session's first period then runs on code and state
+        already touched. (Each part's ``warm_up`` loads its compiled code on copies of its
+        state; the first update of the state itself still took 2-3 times the steady-state
+        median, on every driver.) Its transitions are not the session's."""
+        estimator, controller, interpolator = self.estimator, self.controller, self.interpolator
+        estimator.reset(q0)
+        controller.reset(q0, t)
+        interpolator.reset(q0)
+        for part in (estimator, controller, interpolator):
+            part.warm_up()
+        self.e_in.t = t
+        estimator.update(self.e_in, self.e_out)
+        c_in = self.c_in
+        c_in.t, c_in.sequence, c_in.deadman = t, self.fb.sequence, False
+        c_in.q[:] = self.fb.q
+        c_in.current[:] = self.fb.current
+        c_in.wrench_base[:] = self.e_out.wrench
+        c_in.estimator_status = int(self.e_out.status)
+        controller.update(c_in, self.c_out)
+        interpolator.set_target(self.c_out.q, self.c_out.qd)
+        interpolator.update(self.cmd)
+        self.cmd.q[:] = q0
+        self.cmd.qd[:] = 0.0
+        self.seen = controller.event_count
 
     def begin_end(self, cause: EndCause, t: float) -> None:
         """Stop, then end: the controller is released (a stop at the acceleration limit) and

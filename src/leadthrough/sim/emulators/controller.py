@@ -46,7 +46,8 @@ class EmulatorReport:
             catching it up (a real controller never sends a burst of cycles).
         missed_cycles: Controller cycles, while the client streamed, that had no fresh command
             in time (J519: no command answering the last status; RTDE: the program's counter
-            unchanged; RSI: no answer with the IPOC within the cycle, RSI's ``Delay``).
+            unchanged; RSI: no answer with the IPOC within the cycle, RSI's ``Delay``, without
+            the run of them that ended the stream: that one is the stop's).
         operator_start: Simulated time the operator's script started [s] (None: no operator,
             or not yet).
         operator_end: Simulated time the script ends [s] (None: as above).

@@ -122,6 +122,9 @@ class KukaRsiEmulator(UdpController):
                 if self.late_run > self.timeout:
                     self.arm.stop(StopKind.WATCHDOG, f"RSI: {self.late_run} late answers in a "
                                   f"row (Timeout {self.timeout})")
+                    # the run that ended the stream is the stop's (the client went away, or
+                    # hung): reported there, not as cycles the stream missed and recovered from
+                    self.missed_cycles -= self.late_run
                 else:
                     self.arm.hold()
         if self.arm.phase in (ArmPhase.STOPPING, ArmPhase.FAULT):
