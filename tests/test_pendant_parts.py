@@ -135,6 +135,11 @@ def test_pendant_command_refuses_a_driver_it_does_not_have(capsys: pytest.Captur
     assert main(["pendant", "--driver", "ur", "--host", "192.0.2.1"]) == 2
     err = capsys.readouterr().err
     assert "--driver" in err and "ur" in err and "--sim" in err
+    # a controller that `guide --driver` speaks: refused too, pointing there
+    assert main(["pendant", "--driver", "ur-rtde", "--host", "192.0.2.1"]) == 2
+    err = capsys.readouterr().err
+    assert "guides the simulator only" in err and "leadthrough guide --driver" in err
+    assert "ur-rtde" in err and "kuka-rsi" in err and "fanuc-j519" in err
 
 
 def test_pendant_command_serves_the_simulator(tmp_path: Path,

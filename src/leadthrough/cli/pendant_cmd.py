@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError, LeadthroughError
 from leadthrough.identification.params_file import load_params
@@ -19,8 +20,11 @@ from leadthrough.robot.description import Robot, load_robot
 
 __all__ = ["DRIVERS", "register"]
 
-#: Drivers of real controllers by name: ``(robot, host) -> Driver``. This version has none
-#: (issue 25 adds them); ``--driver`` names one of these.
+#: Drivers of real controllers the pendant's live loop may run, by name: ``(robot, host) ->
+#: Driver``. None yet: the pendant's loop (:class:`~leadthrough.session.loop.ServoPeriods`)
+#: does not carry the robot loop's safety (:class:`~leadthrough.session.servo_loop.ServoLoop`:
+#: link faults and the watchdog, the controller's state, the enabling input's fresh press), so
+#: a robot is guided with ``leadthrough guide --driver`` until the two loops are one.
 DRIVERS: dict[str, Callable[[Robot, str], Driver]] = {}
 
 _DESCRIPTION = """\
@@ -33,7 +37,8 @@ taught points, and export (session.parquet, points.json, path.json / path.csv).
 On the simulator (the default) the page also provides the enabling device and lets you push
 the tool with the mouse: drag the handle at the tool; the force (10 N per cm, at most 80 N)
 goes into the simulated robot, the estimator sees it only through the motor currents, and the
-robot follows. The guiding loop runs in its own thread; the page never holds it up.
+robot follows. The guiding loop runs in its own process; the page never holds it up. A real
+robot is guided with `leadthrough guide --driver` (this version's pendant drives the simulator).
 
 The page is served on 127.0.0.1 only; --bind 0.0.0.0 serves it to the network (a tablet):
 anyone who reaches the port can then operate the pendant.
@@ -52,7 +57,8 @@ def register(sub: Any) -> None:
     where.add_argument("--sim", action="store_true",
                        help="the simulated robot (the default)")
     where.add_argument("--driver", default=None, metavar="D",
-                       help="a real controller's driver (needs --host and --params)")
+                       help="a real controller (refused in this version: the pendant drives the "
+                            "simulator; guide a robot with 'leadthrough guide --driver')")
     p.add_argument("--host", default=None, metavar="H", help="the controller's address")
     p.add_argument("--robot", default="er20", help="robot (default: er20)")
     p.add_argument("--params", type=Path, default=None,
@@ -78,9 +84,17 @@ def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession,
     """A live session on a real controller through the same backend as the simulator's."""
     factory = DRIVERS.get(args.driver)
     if factory is None:
-        have = ", ".join(sorted(DRIVERS)) or "none in this version (issue 25 adds them)"
+        if not DRIVERS:
+            raise ControlError(
+                "the pendant guides the simulator only in this version: its live loop does "
+                "not yet carry the robot loop's link, controller-state and enabling-input "
+                "safety", field="--driver", value=args.driver,
+                expected=f"--sim; on a robot: leadthrough guide --driver "
+                         f"{{{','.join(sorted(CONTROLLERS))}}} --host H --params P "
+                         f"--enable-input I --mark-input I")
         raise ControlError("no such driver", field="--driver", value=args.driver,
-                           expected=f"a real-controller driver: {have}; or --sim")
+                           expected=f"a real-controller driver: {', '.join(sorted(DRIVERS))}; "
+                                    f"or --sim")
     if args.host is None or args.params is None:
         raise ControlError("a robot needs its address and its identified parameters",
                            field="--host/--params", value=(args.host, args.params),
