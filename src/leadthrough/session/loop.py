@@ -45,6 +45,14 @@ Python's cyclic garbage collector is paused while the loop runs (and restored af
 collection stalls whichever cycle it falls in by tens of µs, and the loop creates no reference
 cycles for it to find (its temporaries are freed by reference counting; a test checks this), so
 pausing it costs no memory.
+
+The interpreter's thread switch interval is shortened to :data:`GIL_SWITCH_S` while the loop
+runs (and restored after). Other threads of the process (the session file's writer, the
+watchdog) run Python code; when the loop's thread wakes with a sample, it waits for the
+interpreter lock until the running thread yields it, at most one switch interval: Python's
+default 5 ms made the loop answer a 2 ms controller two cycles late every 10 s, when the writer
+converted a chunk, with no late period on the loop's own clock (measured with an emulated UR
+controller; ``benchmarks/long_session.py``).
 """
 
 from __future__ import annotations
@@ -52,6 +60,7 @@ from __future__ import annotations
 import gc
 import logging
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -71,11 +80,15 @@ from leadthrough.session.requests import LoopRequests
 from leadthrough.session.servo_loop import EndCause, LoopEnd, ServoLoop, transition_event
 from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
 
-__all__ = ["EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers", "run_session",
-           "transition_event"]
+__all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers",
+           "run_session", "transition_event"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
+
+#: The interpreter's thread switch interval while the loop runs [s] (see the module doc): the
+#: longest the loop's thread waits for the lock when another thread holds it in Python code.
+GIL_SWITCH_S = 2e-4
 
 
 @dataclass(frozen=True)
@@ -160,9 +173,12 @@ def run_session(
     t_start = loop.start()
     gc_was_enabled = gc.isenabled()
     gc.disable()
+    switch_interval = sys.getswitchinterval()
+    sys.setswitchinterval(GIL_SWITCH_S)
     try:
         _run(loop, rec, t_start, steps, clock, applied_wrench, times)
     finally:
+        sys.setswitchinterval(switch_interval)
         if gc_was_enabled:
             gc.enable()
         loop.close()

@@ -9,6 +9,7 @@ controller's cycle: take the command, send the status) and :meth:`close_sockets`
 
 from __future__ import annotations
 
+import math
 import socket
 import threading
 import time
@@ -45,9 +46,10 @@ class EmulatorReport:
         resyncs: Times the loop dropped a lag of more than one controller cycle instead of
             catching it up (a real controller never sends a burst of cycles).
         missed_cycles: Controller cycles, while the client streamed, that had no fresh command
-            in time (J519: no command answering the last status; RTDE: the program's counter
-            unchanged; RSI: no answer with the IPOC within the cycle, RSI's ``Delay``, without
-            the run of them that ended the stream: that one is the stop's).
+            at the cycle's time (J519: no command answering the last status; RTDE: the
+            program's counter unchanged; RSI: no answer with the IPOC, RSI's ``Delay``), without
+            the run of them that ended the stream (the client's stop request, or the
+            watchdog's stop: reported as the stop).
         operator_start: Simulated time the operator's script started [s] (None: no operator,
             or not yet).
         operator_end: Simulated time the script ends [s] (None: as above).
@@ -96,7 +98,9 @@ class EmulatedController(ABC):
         self._outbox: list[tuple[float, socket.socket, bytes, tuple[str, int] | None]] = []
         self.sent = self.dropped = self.delayed = 0
         self.max_lag, self.resyncs = 0.0, 0
-        self.missed_cycles = 0  # counted by the protocol (see EmulatorReport)
+        self.missed_cycles = 0  # see EmulatorReport; counted by the protocol (cycle_answered)
+        self._missed_run = 0     # missed cycles since the last fresh command
+        self._sent_at = -math.inf  # wall-clock time of the last cycle's packet [s]
         self.closed = False
         self._ticks = 0
         self._estopped = self._protective = False
@@ -158,6 +162,7 @@ class EmulatedController(ABC):
             addr: Destination (UDP), or None for a connected stream socket.
         """
         faults, t = self.options.faults, self.t
+        self._sent_at = time.monotonic()  # the cycle's time, whatever the faults do to it
         if faults.drop(t, self.rng):
             self.dropped += 1
             return
@@ -177,6 +182,33 @@ class EmulatedController(ABC):
             self.sent += 1
         except OSError:
             self.on_send_error(sock)
+
+    def wait_for_reply(self) -> None:
+        """No reply to the last cycle's packet yet: when this cycle runs early by the wall
+        clock (the 1 ms loop catching up after a lag of its own), wait until the cycle's real
+        time, a cycle after that packet went out, and read what has come in. A real
+        controller's cycles are evenly spaced: a reply counts as missing only when it is
+        missing at that time. The protocols call it before counting a missed cycle."""
+        if not self.options.realtime:
+            return
+        remaining = self._sent_at + self.arm.cycle - time.monotonic()
+        if remaining > 0:
+            time.sleep(remaining)
+            self.poll(self.t)
+
+    def cycle_answered(self, fresh: bool) -> None:
+        """Count a streaming cycle: with a fresh command, or missed."""
+        if fresh:
+            self._missed_run = 0
+        else:
+            self.missed_cycles += 1
+            self._missed_run += 1
+
+    def stream_ended(self) -> None:
+        """The stream ended (a stop request, or the watchdog): the cycles it missed just
+        before are the stop's, not missed cycles the stream recovered from."""
+        self.missed_cycles -= self._missed_run
+        self._missed_run = 0
 
     def on_send_error(self, sock: socket.socket) -> None:  # noqa: B027 (optional hook)
         """A send failed (the peer went away); protocols may drop the connection."""

@@ -107,6 +107,7 @@ class FanucJ519Emulator(UdpController):
             self.client, self.streaming, self._pending = addr, True, None
         elif isinstance(packet, StopPacket):
             self.streaming, self._motion = False, False
+            self.stream_ended()
             if self.arm.phase is ArmPhase.RUNNING:
                 self.arm.stop(StopKind.REQUEST, "stop packet")
         elif isinstance(packet, LimitQuery):
@@ -133,15 +134,19 @@ class FanucJ519Emulator(UdpController):
         """Take the command answering the last status, then send the next status."""
         if not self.streaming or self.client is None or self._sock is None:
             return
+        if self._pending is None and self._motion:
+            self.wait_for_reply()
         received = self._pending is not None
         if self._pending is not None:
+            self.cycle_answered(True)
             self._take(self._pending, t)
             self._pending = None
         elif self._motion and self.arm.phase is ArmPhase.RUNNING:
-            self.missed_cycles += 1
+            self.cycle_answered(False)
             self._silent += self.arm.cycle
             if self._silent >= self.watchdog - 1e-9:
                 self.arm.stop(StopKind.WATCHDOG, f"no command for {self._silent:.3f} s")
+                self.stream_ended()
             else:
                 self.arm.hold(extrapolate=True)
         self.sequence = (self.sequence + 1) & 0xFFFFFFFF

@@ -112,19 +112,19 @@ class KukaRsiEmulator(UdpController):
         if not self.active or self._sock is None:
             return
         if self._awaiting is not None:
+            if self._answer is None:
+                self.wait_for_reply()
+            self.cycle_answered(self._answer is not None)
             if self._answer is not None:
                 self.late_run = 0
                 self._apply(np.array(self._answer.correction, dtype=float), t)
             else:
                 self.late_total += 1
-                self.missed_cycles += 1
                 self.late_run += 1
                 if self.late_run > self.timeout:
                     self.arm.stop(StopKind.WATCHDOG, f"RSI: {self.late_run} late answers in a "
                                   f"row (Timeout {self.timeout})")
-                    # the run that ended the stream is the stop's (the client went away, or
-                    # hung): reported there, not as cycles the stream missed and recovered from
-                    self.missed_cycles -= self.late_run
+                    self.stream_ended()
                 else:
                     self.arm.hold()
         if self.arm.phase in (ArmPhase.STOPPING, ArmPhase.FAULT):

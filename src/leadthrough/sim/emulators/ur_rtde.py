@@ -221,19 +221,26 @@ class UrRtdeEmulator(EmulatedController):
         return self.registers.get(f"input_{kind}_register_{self.offset + i}", default)
 
     def _program_cycle(self, t: float) -> None:
-        counter, mode = int(self._register("int", 0)), int(self._register("int", 1))
+        counter = int(self._register("int", 0))
+        if self._armed and counter == self._counter:
+            self.wait_for_reply()
+            counter = int(self._register("int", 0))
+        mode = int(self._register("int", 1))
         fresh = counter != self._counter
         self._counter = counter
         self._armed = self._armed or fresh
         self._silent = 0.0 if fresh else self._silent + self.arm.cycle
-        self.missed_cycles += self._armed and not fresh
+        if self._armed and mode != Mode.STOP:  # the stop's own cycle ends the stream
+            self.cycle_answered(fresh)
         if self._armed and self._silent > self.watchdog + 1e-9:
             self.arm.stop(StopKind.WATCHDOG, f"script watchdog: counter unchanged for "
                           f"{self._silent:.3f} s")
             self._halt(ScriptState.WATCHDOG)
+            self.stream_ended()
         elif mode == Mode.STOP:
             self.arm.stop(StopKind.REQUEST, "stop requested (mode 2)")
             self._halt(ScriptState.STOPPED)
+            self.stream_ended()
         elif mode == Mode.SERVO and fresh:
             q = np.array([float(self._register("double", i)) for i in range(6)])
             self.arm.command(q, t, refusal=StopKind.PROTECTIVE)
