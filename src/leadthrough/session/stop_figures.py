@@ -1,0 +1,104 @@
+"""How a session's first fault ended, from its recording: the commanded TCP speed when the fault
+latched, the largest commanded deceleration after it, the stop distance and time.
+
+Two accelerations are measured, both of the *commanded* motion (what leadthrough sent, not the
+robot's response):
+
+* ``cycle_acc``: the guiding controller's Cartesian twist (``twist_cmd_base``), differenced
+  over its own cycles: what the stop at the acceleration limit bounds;
+* ``servo_acc``: the TCP of the interpolated joint command (``q_cmd``, forward kinematics at
+  each servo period), second-differenced at the servo period: what the robot is told between
+  the controller's cycles. The interpolator joins the cycles' joint setpoints
+  with cubic segments, so this follows the Cartesian ramp only up to the curvature of the
+  kinematics within a cycle and the segments' joins: a few percent above ``cycle_acc`` in a
+  stop from speed.
+
+Both start one controller cycle before the fault (the last guided cycle's setpoint is where the
+stop starts from) and run to the end of the recording.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.control.safety_states import Fault, State
+from leadthrough.robot.description import Robot
+from leadthrough.robot.inverse_kinematics import pose_of
+from leadthrough.session.record import SessionLog
+
+__all__ = ["StopFigures", "stop_figures"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class StopFigures:
+    """The first fault of a session and the commanded stop after it (see the module doc).
+
+    Attributes:
+        fault: The fault latched first (``Fault.NONE``: none).
+        t_fault: The loop's time it latched [s] (NaN: none).
+        speed_at_fault: Commanded TCP speed in the cycle before [m/s].
+        cycle_acc: Largest commanded Cartesian acceleration of the controller's cycles from
+            there on [m/s²].
+        servo_acc: Largest TCP acceleration of the interpolated joint command from there on
+            [m/s²].
+        distance: Commanded TCP travel from the fault to the end of the recording [m].
+        stop_time: From the fault to the commanded motion's rest [s] (NaN: not at rest by the
+            end of the recording).
+        logged: A ``...->FAULT`` transition with the fault's name is among the events.
+        latched_to_end: The fault state held to the end of the recording.
+    """
+
+    fault: Fault
+    t_fault: float
+    speed_at_fault: float
+    cycle_acc: float
+    servo_acc: float
+    distance: float
+    stop_time: float
+    logged: bool
+    latched_to_end: bool
+
+
+def stop_figures(log: SessionLog, robot: Robot, cycle_s: float) -> StopFigures:
+    """The figures of ``log``'s first fault (see :class:`StopFigures`).
+
+    Args:
+        log: A session's recording.
+        robot: Its robot (forward kinematics of the joint command).
+        cycle_s: The guiding controller's cycle [s] (a multiple of the servo period).
+    """
+    faulted = np.flatnonzero(log.state == int(State.FAULT))
+    if faulted.size == 0:
+        return StopFigures(Fault.NONE, math.nan, math.nan, math.nan, math.nan, math.nan,
+                           math.nan, False, False)
+    k = int(faulted[0])
+    dt = float(log.time[1] - log.time[0]) if log.time.size > 1 else cycle_s
+    every = max(1, round(cycle_s / dt))
+    start = max(k - every, 0)
+    v = log.twist_cmd_base[start::every, :3]
+    cycle_acc = (float(np.linalg.norm(np.diff(v, axis=0), axis=1).max()) / cycle_s
+                 if len(v) > 1 else 0.0)
+    data = robot.model.createData()
+    p = np.array([pose_of(robot, q, data).translation for q in log.q_cmd[start:]])
+    servo_acc = 0.0
+    if len(p) > 2:
+        second = p[2:] - 2 * p[1:-1] + p[:-2]
+        servo_acc = float(np.linalg.norm(second, axis=1).max()) / dt ** 2
+    distance = float(np.linalg.norm(np.diff(p[every:], axis=0), axis=1).sum()) if len(p) > every \
+        else 0.0
+    moving = np.flatnonzero(np.any(log.qd_cmd[k:] != 0.0, axis=1))
+    rest = k + (int(moving[-1]) + 1 if moving.size else 0)
+    stop_time = (float(log.time[rest] - log.time[k]) if rest < log.time.size else math.nan)
+    fault = Fault(int(log.fault[k]))
+    logged = any(e.kind == "transition" and e.label.endswith("FAULT")
+                 and e.cause.endswith(fault.name) for e in log.events)
+    return StopFigures(fault, float(log.time[k]),
+                       float(np.linalg.norm(log.twist_cmd_base[max(k - 1, 0), :3])),
+                       cycle_acc, servo_acc, distance, stop_time, logged,
+                       bool(np.all(log.state[k:] == int(State.FAULT))))
