@@ -1,17 +1,22 @@
 """How a session's first fault ended, from its recording: the commanded TCP speed when the fault
 latched, the largest commanded deceleration after it, the stop distance and time.
 
-Two accelerations are measured, both of the *commanded* motion (what leadthrough sent, not the
-robot's response):
+Three accelerations are measured, all of the *commanded* motion (what leadthrough sent, not
+the robot's response):
 
 * ``cycle_acc``: the guiding controller's Cartesian twist (``twist_cmd_base``), differenced
   over its own cycles: what the stop at the acceleration limit bounds;
-* ``servo_acc``: the TCP of the interpolated joint command (``q_cmd``, forward kinematics at
-  each servo period), second-differenced at the servo period: what the robot is told between
-  the controller's cycles. The interpolator joins the cycles' joint setpoints
-  with cubic segments, so this follows the Cartesian ramp only up to the curvature of the
-  kinematics within a cycle and the segments' joins: a few percent above ``cycle_acc`` in a
-  stop from speed.
+* ``command_acc``: the TCP of the interpolated joint command (``q_cmd``, forward kinematics at
+  each servo period), second-differenced with a lag of one controller cycle at every servo
+  period: the command's acceleration averaged over a cycle;
+* ``command_peak``: the same second-differenced at the servo period: the peak within a cycle.
+  The interpolator (:class:`~leadthrough.control.interpolation.HermiteInterpolator`) joins the
+  setpoints with cubic segments whose end velocity is the segment's mean velocity (the IK
+  advances q by q̇·T); a cubic from v₀ to that v₁ accelerates at 4(v₁ − v₀)/T at its start
+  and −2(v₁ − v₀)/T at its end: within each cycle of a ramp at the limit a the command's
+  acceleration swings between 4a and −2a (mean a). With one servo period per cycle (J519 at
+  8 ms) the samples are the setpoints and the peak is not seen; at 2 ms (UR, 5 per cycle) the
+  second difference shows it up to about 2.8a.
 
 Both start one controller cycle before the fault (the last guided cycle's setpoint is where the
 stop starts from) and run to the end of the recording.
@@ -45,8 +50,10 @@ class StopFigures:
         speed_at_fault: Commanded TCP speed in the cycle before [m/s].
         cycle_acc: Largest commanded Cartesian acceleration of the controller's cycles from
             there on [m/s²].
-        servo_acc: Largest TCP acceleration of the interpolated joint command from there on
-            [m/s²].
+        command_acc: Largest TCP acceleration of the interpolated joint command averaged over
+            a controller cycle, from there on [m/s²].
+        command_peak: Largest TCP acceleration of the interpolated joint command at the servo
+            period, from there on [m/s²].
         distance: Commanded TCP travel from the fault to the end of the recording [m].
         stop_time: From the fault to the commanded motion's rest [s] (NaN: not at rest by the
             end of the recording).
@@ -58,7 +65,8 @@ class StopFigures:
     t_fault: float
     speed_at_fault: float
     cycle_acc: float
-    servo_acc: float
+    command_acc: float
+    command_peak: float
     distance: float
     stop_time: float
     logged: bool
@@ -76,7 +84,7 @@ def stop_figures(log: SessionLog, robot: Robot, cycle_s: float) -> StopFigures:
     faulted = np.flatnonzero(log.state == int(State.FAULT))
     if faulted.size == 0:
         return StopFigures(Fault.NONE, math.nan, math.nan, math.nan, math.nan, math.nan,
-                           math.nan, False, False)
+                           math.nan, math.nan, False, False)
     k = int(faulted[0])
     dt = float(log.time[1] - log.time[0]) if log.time.size > 1 else cycle_s
     every = max(1, round(cycle_s / dt))
@@ -86,10 +94,8 @@ def stop_figures(log: SessionLog, robot: Robot, cycle_s: float) -> StopFigures:
                  if len(v) > 1 else 0.0)
     data = robot.model.createData()
     p = np.array([pose_of(robot, q, data).translation for q in log.q_cmd[start:]])
-    servo_acc = 0.0
-    if len(p) > 2:
-        second = p[2:] - 2 * p[1:-1] + p[:-2]
-        servo_acc = float(np.linalg.norm(second, axis=1).max()) / dt ** 2
+    command_acc, command_peak = _second_difference(p, every, cycle_s), _second_difference(
+        p, 1, dt)
     distance = float(np.linalg.norm(np.diff(p[every:], axis=0), axis=1).sum()) if len(p) > every \
         else 0.0
     moving = np.flatnonzero(np.any(log.qd_cmd[k:] != 0.0, axis=1))
@@ -100,5 +106,13 @@ def stop_figures(log: SessionLog, robot: Robot, cycle_s: float) -> StopFigures:
                  and e.cause.endswith(fault.name) for e in log.events)
     return StopFigures(fault, float(log.time[k]),
                        float(np.linalg.norm(log.twist_cmd_base[max(k - 1, 0), :3])),
-                       cycle_acc, servo_acc, distance, stop_time, logged,
+                       cycle_acc, command_acc, command_peak, distance, stop_time, logged,
                        bool(np.all(log.state[k:] == int(State.FAULT))))
+
+
+def _second_difference(p: Array, lag: int, step: float) -> float:
+    """Largest |p[i + lag] - 2 p[i] + p[i - lag]| / (lag·step)² [m/s²] (0: too short)."""
+    if len(p) <= 2 * lag:
+        return 0.0
+    second = p[2 * lag:] - 2 * p[lag:-lag] + p[:-2 * lag]
+    return float(np.linalg.norm(second, axis=1).max()) / (lag * step) ** 2
