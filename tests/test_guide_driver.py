@@ -145,8 +145,9 @@ def test_guide_against_the_emulator_until_ctrl_c(kind: str, tmp_path: Path) -> N
 
 
 def test_guide_on_a_robot_needs_an_enabling_input_and_a_live_controller(tmp_path: Path) -> None:
-    """No --enable-input, a simulator setting with --driver, and a controller that does not
-    answer: each a one-line error, exit 2, before any command."""
+    """No --enable-input, a simulator setting with --driver, the reset button on the enabling
+    input, and a controller that does not answer: each a one-line error, exit 2, before any
+    command."""
     out = tmp_path / "s.parquet"
     params = str(shipped_params_path("er20"))
     base = [sys.executable, "-m", "leadthrough", "guide", "--robot", "er20", "--params", params,
@@ -156,6 +157,10 @@ def test_guide_on_a_robot_needs_an_enabling_input_and_a_live_controller(tmp_path
     operator = subprocess.run([*base, "--enable-input", "0", "--operator", "push-x"],
                               capture_output=True, text=True, timeout=120)
     assert operator.returncode == 2 and "--operator" in operator.stderr
+    clash = subprocess.run([*base, "--enable-input", "0", "--reset-input", "0"],
+                           capture_output=True, text=True, timeout=120)
+    assert clash.returncode == 2 and "reset_input" in clash.stderr, clash.stderr
+    assert "compiling" not in clash.stderr            # refused before anything is built
     dead = subprocess.run([*base, "--enable-input", "0", "--port", "9"], capture_output=True,
                           text=True, timeout=120)
     assert dead.returncode == 2 and "Traceback" not in dead.stderr, dead.stderr

@@ -9,13 +9,14 @@ five in a row are a fault. ``benchmarks/wire_faults.py`` prints the same for the
 protocols.
 
 Tolerances: the controller's commanded Cartesian acceleration is bounded exactly (the stop's
-ramp is the limit times the cycle, up to rounding: 1e-9 relative). The TCP of the interpolated
-joint command (UR: five 2 ms periods per 10 ms cycle), averaged over a controller cycle, is the
-cycles' Cartesian ramp mapped through the joint-space cubics: it follows it up to the
-kinematics' curvature over one cycle's travel (2 mm at 0.2 m/s): 2 % of the limit. Its peak
-within a cycle is not bounded by the limit (the cubics swing between 4 and -2 times the
-cycle's acceleration, :mod:`leadthrough.session.stop_figures`): not asserted, reported by the
-benchmark.
+ramp is the limit times the cycle, up to rounding: 1e-9 relative). With one servo period per
+controller cycle (J519 at 8 ms, RSI at 12 ms) the joint command is the cycles' setpoints, the
+IK's Euler steps of that ramp: their TCP follows it up to the kinematics' curvature over one
+cycle's travel (under 2 mm at 0.2 m/s): 2 % of the limit. At 2 ms (UR, five periods per
+cycle) the interpolated command does NOT keep the limit within a cycle: the Hermite cubics
+swing between 4 and -2 times the cycle's acceleration (:mod:`leadthrough.session.stop_figures`;
+``benchmarks/wire_faults.py`` reports 2.8 times at the 2 ms samples); the UR test asserts only
+the cubics' own bound, 4 times the limit, so that anything worse shows.
 """
 
 from __future__ import annotations
@@ -153,11 +154,14 @@ def _clean(r: LoopResult, f: StopFigures, in_motion: bool = True) -> bool:
     return guided and not early and (not in_motion or f.speed_at_fault > 0.1)
 
 
-def _check_stop(f: StopFigures, report: str) -> None:
+def _check_stop(f: StopFigures, report: str, interpolated: bool = False) -> None:
     assert f.speed_at_fault > 0.1                                  # a stop from motion
     assert f.latched_to_end and f.logged                           # latched, logged
     assert f.cycle_acc <= LIMIT_ACC * (1 + CYCLE_TOL), f
-    assert f.command_acc <= LIMIT_ACC * (1 + CMD_TOL), f
+    if interpolated:      # not the limit: the cubics' bound (module doc)
+        assert f.command_peak <= 4 * LIMIT_ACC * (1 + CMD_TOL), f
+    else:
+        assert f.command_peak <= LIMIT_ACC * (1 + CMD_TOL), f
     assert "violations: ()" in report, report                      # the emulator's record
 
 
@@ -182,14 +186,15 @@ def test_a_wire_fault_in_motion_ends_in_a_latched_logged_stop(case: str, er20: R
         assert not log.qd_cmd[-1].any() and f.stop_time <= 0.2 / LIMIT_ACC + 0.05
 
 
-def test_a_stop_from_speed_at_2_ms_keeps_the_limit_between_cycles(er20: Robot) -> None:
-    """UR RTDE: five servo periods per controller cycle, the interpolated command's TCP."""
+def test_a_stop_from_speed_at_2_ms_keeps_the_limit_at_the_cycles(er20: Robot) -> None:
+    """UR RTDE: five servo periods per controller cycle: the setpoints keep the limit, the
+    interpolated command only the cubics' bound (module doc)."""
     for _ in range(3):
         r, f, report, _ = _session("ur-rtde", er20, ["--protective-stop-at", str(AT)])
         if _clean(r, f):
             break
     assert _clean(r, f) and f.fault is Fault.CONTROLLER_STATE, f
-    _check_stop(f, report)
+    _check_stop(f, report, interpolated=True)
 
 
 def test_rsi_isolated_late_answers_are_tolerated_a_run_is_a_fault(er20: Robot) -> None:

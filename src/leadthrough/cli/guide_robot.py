@@ -93,6 +93,10 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
                    guiding: GuidingConfig) -> int:
     """Run ``leadthrough guide --driver`` (see the module doc)."""
     _check_args(args)
+    # the inputs checked before anything is built (a clash of two inputs: exit 2 at once)
+    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
+                          reset_input=args.reset_input,
+                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
     for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
                                                tuple(args.cpus) if args.cpus else None)):
         print(f"leadthrough: {line}", file=sys.stderr, flush=True)
@@ -102,9 +106,6 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
     # open on, and cycles it is not answered in count against the session (RSI's late count)
     parts = _loop_parts(robot, pf, guiding, driver.dt)
     requests = LoopRequests()
-    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
-                          reset_input=args.reset_input,
-                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
     settings: dict[str, object] = {"driver": args.driver, "host": args.host,
                                    "port": args.port, "enable_input": args.enable_input,
                                    "mark_input": args.mark_input,

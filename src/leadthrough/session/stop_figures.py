@@ -58,7 +58,9 @@ class StopFigures:
         stop_time: From the fault to the commanded motion's rest [s] (NaN: not at rest by the
             end of the recording).
         logged: A ``...->FAULT`` transition with the fault's name is among the events.
-        latched_to_end: The fault state held to the end of the recording.
+        latched_to_end: The fault state held to the end of the recording (a loop that ended
+            on a lost link before its next controller cycle: the recording ended within a
+            cycle of the fault).
     """
 
     fault: Fault
@@ -81,33 +83,38 @@ def stop_figures(log: SessionLog, robot: Robot, cycle_s: float) -> StopFigures:
         robot: Its robot (forward kinematics of the joint command).
         cycle_s: The guiding controller's cycle [s] (a multiple of the servo period).
     """
-    faulted = np.flatnonzero(log.state == int(State.FAULT))
-    if faulted.size == 0:
-        return StopFigures(Fault.NONE, math.nan, math.nan, math.nan, math.nan, math.nan,
-                           math.nan, math.nan, False, False)
-    k = int(faulted[0])
     dt = float(log.time[1] - log.time[0]) if log.time.size > 1 else cycle_s
     every = max(1, round(cycle_s / dt))
+    faulted = np.flatnonzero(log.state == int(State.FAULT))
+    tripped = [e for e in log.events if e.kind == "transition" and e.label.endswith("FAULT")]
+    if faulted.size:
+        k, fault = int(faulted[0]), Fault(int(log.fault[faulted[0]]))
+        latched = bool(np.all(log.state[k:] == int(State.FAULT)))
+    elif tripped:       # the loop ended (link lost) before a controller cycle recorded it
+        k = min(int(np.searchsorted(log.time, tripped[0].t)), log.time.size - 1)
+        fault = Fault[tripped[0].cause.rsplit(":", 1)[-1]]
+        latched = k >= log.time.size - every
+    else:
+        return StopFigures(Fault.NONE, math.nan, math.nan, math.nan, math.nan, math.nan,
+                           math.nan, math.nan, False, False)
     start = max(k - every, 0)
     v = log.twist_cmd_base[start::every, :3]
     cycle_acc = (float(np.linalg.norm(np.diff(v, axis=0), axis=1).max()) / cycle_s
                  if len(v) > 1 else 0.0)
     data = robot.model.createData()
     p = np.array([pose_of(robot, q, data).translation for q in log.q_cmd[start:]])
-    command_acc, command_peak = _second_difference(p, every, cycle_s), _second_difference(
-        p, 1, dt)
+    command_acc, command_peak = _second_difference(p, every, dt), _second_difference(p, 1, dt)
     distance = float(np.linalg.norm(np.diff(p[every:], axis=0), axis=1).sum()) if len(p) > every \
         else 0.0
     moving = np.flatnonzero(np.any(log.qd_cmd[k:] != 0.0, axis=1))
     rest = k + (int(moving[-1]) + 1 if moving.size else 0)
     stop_time = (float(log.time[rest] - log.time[k]) if rest < log.time.size else math.nan)
-    fault = Fault(int(log.fault[k]))
     logged = any(e.kind == "transition" and e.label.endswith("FAULT")
                  and e.cause.endswith(fault.name) for e in log.events)
     return StopFigures(fault, float(log.time[k]),
                        float(np.linalg.norm(log.twist_cmd_base[max(k - 1, 0), :3])),
                        cycle_acc, command_acc, command_peak, distance, stop_time, logged,
-                       bool(np.all(log.state[k:] == int(State.FAULT))))
+                       latched)
 
 
 def _second_difference(p: Array, lag: int, step: float) -> float:
