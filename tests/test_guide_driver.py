@@ -210,7 +210,7 @@ def test_a_fault_is_reset_from_its_input_and_guiding_needs_a_fresh_press(
     trace = [(round(e.t, 3), e.label, e.cause) for e in log.events]
     assert faults and resets, trace
     for f in faults:      # each at a NaN, caused by it, logged with its cause
-        assert f.cause.endswith("NONFINITE_INPUT") or f.cause.endswith("ESTIMATOR"), f
+        assert f.cause.endswith("NONFINITE_INPUT") or f.cause.endswith("ESTIMATOR"), (f, trace)
         assert any(a + 0.8 <= f.t <= a + 0.81 + slack for a in RESET_PERIODS), (f, trace)
     for r in resets:      # each from a press of the reset button, after a fault
         assert any(a + 2.2 <= r.t <= a + 2.2 + slack for a in RESET_PERIODS), (r, trace)

@@ -279,6 +279,11 @@ class ServoLoop:
         """
         self.controller.reset(q, t)
         self.estimator.reset(q)
+        # the last output is the estimator's before the reset (a latched fault of a NaN
+        # sample): the controller cycle of this period must not read it as the fresh one's
+        self.e_out.status = EstimatorStatus.WARMING_UP
+        self.e_out.wrench[:] = 0.0
+        self.e_out.tau_ext[:] = 0.0
         self.interpolator.reset(q)
         self.cmd.q[:] = q
         self.cmd.qd[:] = 0.0
