@@ -18,7 +18,8 @@ cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
   (:meth:`~leadthrough.drivers.cycle_limits.CycleLimiter.skip`), so the next target is judged
   against what the controller did meanwhile; so is an answer the controller reports it did
   not take in time (J519's "command received" bit, RSI's late-answer count), which also sets
-  ``COMMAND_REJECTED`` in the feedback. A write with no new packet to answer sends
+  ``COMMAND_REJECTED`` in the feedback (RSI: only late answers in a run,
+  :mod:`~leadthrough.drivers.late_answers`). A write with no new packet to answer sends
   nothing (``unanswered`` counts it): the controller is waiting for its next cycle, not for
   a second answer.
 
@@ -138,7 +139,8 @@ class StreamingDriver(ABC, Generic[S]):
         if late and self.limiter is not None:
             self.limiter.retract(self.extrapolates)
             self.late_answers += 1
-        self._sample, self._newest, self._sample_late = sample, sample, late
+        self._sample, self._newest = sample, sample
+        self._sample_late = self._rejected(sample, late)
         self._answer_due = True
 
     def read(self, fb: DriverFeedback) -> bool:
@@ -304,6 +306,11 @@ class StreamingDriver(ABC, Generic[S]):
         """Whether ``sample`` reports that the controller did not take our answer to the
         packet before it in time (default: the protocol does not tell)."""
         return False
+
+    def _rejected(self, sample: S, late: bool) -> bool:
+        """Whether ``sample``'s feedback reports ``COMMAND_REJECTED`` (default: every late
+        answer; a controller that tolerates isolated ones may wait for a run)."""
+        return late
 
     def _answered_previous(self, sample: S) -> bool:
         """Whether our last answer was to the packet just before ``sample``."""
