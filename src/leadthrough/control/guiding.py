@@ -150,6 +150,7 @@ class GuidingController:
         if cfg.controller != "virtual-friction":
             s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
         s.hold_s = cfg.settle_s + cfg.rezero_s
+        s.drift_cycles = cfg.settle_s / cfg.dt
         s.release_drop = RELEASE_DROP
         s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
         s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
@@ -228,7 +229,7 @@ class GuidingController:
         s.qd_cmd = s.qd_dls = 0.0
         s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
-        s.twist = s.release_peak = s.release_smooth = 0.0
+        s.twist = s.release_peak = s.release_smooth = s.rest_baseline = 0.0
         s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
         s.hand_released = False
         s.hand_release_s = math.inf
@@ -280,7 +281,7 @@ class GuidingController:
         self._write_live_settings(config)
         if self._auto is not None:
             s.kinematics_fresh = False   # eq. 36 again, in the new frame
-        s.release_peak = s.release_smooth = 0.0
+        s.release_peak = s.release_smooth = s.rest_baseline = 0.0
 
     def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
         """Latch ``fault`` from outside the cycle (a guiding loop's driver or controller-state

@@ -45,6 +45,7 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("hand_release", b1),                    # HandReleaseConfig.enabled
         ("hand_drop_fraction", f8), ("hand_lockout_s", f8), ("hand_window_s", f8),  # [-, s, s]
         ("hand_alpha", f8), ("hand_forget", f8), ("hand_rise_forget", f8),  # per cycle
+        ("drift_cycles", f8),                    # settle_s/dt: cycles for δ of drift at rest
         ("max_speed", f8, (2,)),                 # (v_max, ω_max) [m/s, rad/s]
         ("max_step", f8, (2,)),                  # (a_max·dt, α_max·dt) [m/s, rad/s]
         ("stop_fraction", f8),                   # IKConfig.stop_acceleration_fraction
@@ -71,6 +72,8 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("release_smooth", *six), ("release_peak", *six),  # release.py
         ("hand_smooth", *six), ("hand_peak", *six), ("hand_reference", *six),  # hand_release
         ("hand_peak_age", f8, (2,)),             # time since each part's peak [s]
+        ("rest_baseline", *six),                 # rest_drift.py: b (0 while moving)
+        ("rest_wrench", *six),                   # the law's input at rest: w − b
         # state: the commanded TCP pose and the next one
         ("pose_rotation", *pose), ("pose_position", f8, (3,)),
         ("next_rotation", *pose), ("next_position", f8, (3,)),
