@@ -150,7 +150,12 @@ class GuidingController:
         if cfg.controller != "virtual-friction":
             s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
         s.hold_s = cfg.settle_s + cfg.rezero_s
-        s.drift_cycles = cfg.settle_s / cfg.dt
+        # rest_drift.py: the release detector's smoothing and window measure the drift's rate
+        s.drift_rate = 1.0 / cfg.drift_s if cfg.drift_s > 0.0 else 0.0
+        s.drift_span_s = RELEASE_WINDOW_S - RELEASE_SMOOTHING_S
+        s.drift_alpha_fast = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
+        s.drift_alpha_slow = cfg.dt / (RELEASE_WINDOW_S + cfg.dt)
+        s.drift_decay = math.exp(-cfg.dt / cfg.drift_s) if cfg.drift_s > 0.0 else 0.0
         s.release_drop = RELEASE_DROP
         s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
         s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
@@ -230,8 +235,9 @@ class GuidingController:
         s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
         s.twist = s.release_peak = s.release_smooth = s.rest_baseline = 0.0
+        s.drift_fast = s.drift_slow = 0.0
         s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
-        s.hand_released = False
+        s.hand_released = s.hand_settled = False
         s.hand_release_s = math.inf
         s.pose_rotation = ik.rotation_tool_to_base
         s.pose_position = p

@@ -34,7 +34,7 @@ from leadthrough.control.hand_release import fresh_rise, let_go_step
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
 from leadthrough.control.release import release_step
-from leadthrough.control.rest_drift import rest_baseline_step
+from leadthrough.control.rest_drift import drift_step
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.se3 import (
     copy_pose,
@@ -165,16 +165,13 @@ def _law_wrench(wrench_base: Array, rotation: Array, tool: bool, finite: bool, m
 
 @njit(cache=True, nogil=True)
 def _rest_wrench(ctl: Record, guiding: bool) -> None:
-    """The virtual-friction law's input: guiding at rest, the estimate less the drift baseline
-    that follows it (:mod:`leadthrough.control.rest_drift`); else the estimate (the baseline
-    restarts from 0 when guiding starts or the tool comes to rest)."""
-    if guiding and _is_zero(ctl.twist) and ctl.law == Law.VIRTUAL_FRICTION:
-        rest_baseline_step(ctl.wrench, ctl.friction, ctl.drift_cycles, ctl.rest_baseline,
-                           ctl.rest_wrench)
-    else:
-        for i in range(6):
-            ctl.rest_baseline[i] = 0.0
-            ctl.rest_wrench[i] = ctl.wrench[i]
+    """The virtual-friction law's input: guiding at rest, the estimate less its drift at rest
+    (:mod:`leadthrough.control.rest_drift`); moving, the estimate (the baseline relaxes);
+    not guiding, the estimate (the baseline restarts from 0)."""
+    at_rest = guiding and _is_zero(ctl.twist) and ctl.law == Law.VIRTUAL_FRICTION
+    drift_step(ctl.wrench, ctl.friction, ctl.drift_rate, ctl.dt, ctl.drift_alpha_fast,
+               ctl.drift_alpha_slow, ctl.drift_span_s, ctl.drift_decay if guiding else 0.0,
+               at_rest, ctl.drift_fast, ctl.drift_slow, ctl.rest_baseline, ctl.rest_wrench)
 
 
 @njit(cache=True, nogil=True)
@@ -245,16 +242,19 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.hand_peak_age[:] = 0.0
     if (let_go and not at_rest) or released_at_rest:
         ctl.hand_released = True
+        ctl.hand_settled = False
         ctl.hand_release_s = 0.0
         ctl.release_s = 0.0
     # a quick rise is a grip; once the drives have settled, so is a rise of δ over the level
     # the estimate settled to, followed at the drives' drift rate (the law's rest input)
-    if at_rest and ctl.hand_release_s < ctl.hold_s <= ctl.hand_release_s + ctl.dt:
+    if (ctl.hand_released and not ctl.hand_settled and at_rest
+            and ctl.hand_release_s >= ctl.hold_s):
+        ctl.hand_settled = True
         for i in range(6):
-            ctl.rest_baseline[i] = ctl.hand_smooth[i]
-            ctl.rest_wrench[i] = ctl.wrench[i] - ctl.hand_smooth[i]
+            ctl.rest_baseline[i] = ctl.drift_fast[i]
+            ctl.rest_wrench[i] = ctl.wrench[i] - ctl.drift_fast[i]
     rose = fresh_rise(ctl.hand_smooth, ctl.friction, ctl.hand_rise_forget, ctl.hand_reference)
-    if at_rest and ctl.hand_release_s >= ctl.hold_s:
+    if ctl.hand_settled and at_rest:
         for i in range(6):
             rose = rose or abs(ctl.rest_wrench[i]) >= ctl.friction[i]
     if ctl.hand_released and ctl.hand_release_s >= ctl.hand_lockout_s and rose:
