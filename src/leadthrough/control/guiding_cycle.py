@@ -169,7 +169,8 @@ def _rest_wrench(ctl: Record, guiding: bool) -> None:
     (:mod:`leadthrough.control.rest_drift`); moving, the estimate (the baseline relaxes);
     not guiding, the estimate (the baseline restarts from 0)."""
     at_rest = guiding and _is_zero(ctl.twist) and ctl.law == Law.VIRTUAL_FRICTION
-    drift_step(ctl.wrench, ctl.friction, ctl.drift_rate, ctl.dt, ctl.drift_alpha_fast,
+    drift_step(ctl.wrench, ctl.friction, ctl.drift_rate, ctl.release_drop, ctl.dt,
+               ctl.drift_alpha_fast,
                ctl.drift_alpha_slow, ctl.drift_span_s, ctl.drift_decay if guiding else 0.0,
                at_rest, ctl.drift_fast, ctl.drift_slow, ctl.rest_baseline, ctl.rest_wrench)
 

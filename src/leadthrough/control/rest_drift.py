@@ -20,20 +20,25 @@ within it; a grip through the 3 Hz filter, δ within ~0.25 s, is six times faste
 first-order smoothings of it (``fast_s``, the release detector's 0.05 s against estimator
 noise, and ``slow_s``, its 0.3 s window: a ramp of rate ρ leaves a gap of ρ·(slow_s − fast_s));
 while guiding at rest and the rate is within δ_i/drift_s, a baseline b_i follows the fast
-smoothing at no more than δ_i/drift_s (and holds while the estimate changes faster: a hand's
-grip or letting go, which b does not take up). The threshold of eq. 33 counts from it: the law
+smoothing at no more than δ_i/drift_s, as long as that smoothing is within δ_i/2 of it (the
+release detector's :data:`~leadthrough.control.release.RELEASE_DROP`: a change that it counts
+as a hand's). A hand's grip or letting go is faster: b holds while it happens and does not
+take up the level it leaves, until the estimate comes back to within δ_i/2 of b (the hand
+lets go). The threshold of eq. 33 counts from it: the law
 at rest sees w − b, or w where that is smaller (the baseline only ever holds the tool where the
 paper's law would move it, never moves it where the paper's law would not: estimator noise
 below δ still produces no motion at all). In motion the law is the paper's (it sees w) and b
 relaxes to 0 over ``drift_s`` (the gears slip and their friction is the sliding one the model
 describes), so that a single cycle of motion does not forget it. b starts at 0 when guiding
-starts.
+starts (and is 0 while not guiding).
 
 What this costs and what it does not cover: a push that rises more slowly than δ/drift_s
-from rest is taken for the drives and does not move the tool (it must rise faster); a hand
-that rests on the still tool below δ is taken up at δ/drift_s after its grip, so that pushing
-harder then needs δ over the resting force; the first 10 ms of a quick rise are followed, so a
-push from rest moves the tool up to one cycle later than the paper's law; a drift
+from rest is taken for the drives and does not move the tool (it must rise faster); a
+change of less than δ/2 is taken up, so that a hand resting that lightly on the still tool
+must add δ over it to move it; after a motion b has relaxed toward 0 and follows only once
+the estimate passes within δ/2 of it (before, the law is the paper's); the first cycles of
+a quick rise are followed, so a push from rest may move the tool a cycle later than the
+paper's law; a drift
 faster than δ/drift_s still creeps, later; and a phantom that arrives quickly after a stop or
 a release and still exceeds δ when the settling ends (the gears unloading) moves the tool as
 the paper's law does; the stop after letting go (``--hand-release``) holds that one too.
@@ -56,7 +61,7 @@ Array = NDArray[np.float64]
 
 
 @njit(cache=True, nogil=True)
-def drift_step(wrench: Array, friction: Array, rate_per_delta: float, dt: float,
+def drift_step(wrench: Array, friction: Array, rate_per_delta: float, band: float, dt: float,
                alpha_fast: float, alpha_slow: float, span_s: float, decay: float, at_rest: bool,
                fast: Array, slow: Array, baseline: Array, out: Array) -> None:
     """One cycle: smooth the estimate twice, let the baseline follow its slow changes while at
@@ -67,6 +72,9 @@ def drift_step(wrench: Array, friction: Array, rate_per_delta: float, dt: float,
         friction: The law's δ per axis [N, N·m], shape (6,).
         rate_per_delta: 1/drift_s [1/s]: a change of δ_i·rate_per_delta per second or slower
             is the drives' (0: none is, the paper's law).
+        band: Fraction of δ_i within which the fast smoothing must be of the baseline for the
+            baseline to follow it (a change the release detector counts as a hand's, δ/2, is
+            never taken up).
         dt: Controller cycle [s].
         alpha_fast: Weight of a new sample in the fast smoothing, in (0, 1].
         alpha_slow: Weight of a new sample in the slow smoothing, in (0, 1].
@@ -89,7 +97,8 @@ def drift_step(wrench: Array, friction: Array, rate_per_delta: float, dt: float,
         slow[i] += alpha_slow * (w - slow[i])
         if at_rest:
             limit = friction[i] * rate_per_delta
-            if abs(fast[i] - slow[i]) <= limit * span_s:
+            if (abs(fast[i] - slow[i]) <= limit * span_s
+                    and abs(fast[i] - baseline[i]) <= band * friction[i]):
                 step = limit * dt
                 baseline[i] += min(max(fast[i] - baseline[i], -step), step)
             r = w - baseline[i]
