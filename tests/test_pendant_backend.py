@@ -310,20 +310,21 @@ def test_the_shipped_parameters_guide_the_simulated_er20(er20: Robot) -> None:
 def test_after_a_release_the_tool_stays_at_rest(er20: Robot, hand_release: bool) -> None:
     """Issue 24: with the shipped parameters (identified on the realistic plant) the estimate
     drifts at rest after the release (the servo's integral against the gears' static friction,
-    ~8 N/s on this instance). At rest: from the settle time (the first cycle at rest after the
-    release, plus ``settle_s``) to the end of a 10 s session the commanded twist is exactly 0
-    and the commanded TCP moves by less than 1 mm."""
+    3-8 N/s on this instance); before rest_drift.py the tool moved again from 11-14 s on, with
+    and without the stop after letting go. At rest: from the settle time (the first cycle at
+    rest after the release, plus ``settle_s``) to the end of a 16 s session the commanded twist
+    is exactly 0 and the commanded TCP moves by less than 1 mm."""
     guiding = light_guiding()
     if hand_release:
         guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
     push = run_sim_session(er20, shipped_guiding_params(er20), SimSessionConfig(
-        operator="push-x", duration_s=10.0, loop=LoopConfig(guiding=guiding)))
+        operator="push-x", duration_s=16.0, loop=LoopConfig(guiding=guiding)))
     log = push.log
     release = push_x().pushes[0].t_end
     moving = np.any(log.twist_cmd_base != 0.0, axis=1)
     stopped = np.flatnonzero((log.time >= release) & ~moving)[0]
     settled = log.time >= log.time[stopped] + guiding.settle_s
-    assert log.time[-1] - log.time[settled][0] > 4.0        # 4 s and more of rest to check
+    assert log.time[-1] - log.time[settled][0] > 10.0       # 10 s and more of rest to check
     assert not moving[settled].any()
     travel = np.linalg.norm(log.tcp_cmd_base[settled] - log.tcp_cmd_base[stopped], axis=1)
     assert travel.max() < 1e-3
