@@ -25,6 +25,9 @@ One cycle:
    :data:`RELEASE_DROP` × δ or more within about :data:`RELEASE_WINDOW_S`: the peak forgets
    slow drifts), breaking away takes the stopping friction: the paper's
    "larger friction once the force is removed", applied while the drives settle or unload.
+   At rest the law's threshold counts from the estimate's slow drift (at no more than
+   δ/``drift_s``: the servo's integral loading the gears' static friction;
+   :mod:`~leadthrough.control.rest_drift`), which only ever holds the tool.
    Then the speed and acceleration limits
    (:mod:`~leadthrough.control.limits`, speed scaled down near singularities). STOPPING and
    FAULT: decelerate to zero at the acceleration limit, or slower if the joints need longer to
@@ -288,6 +291,7 @@ class GuidingController:
         if self._auto is not None:
             s.kinematics_fresh = False   # eq. 36 again, in the new frame
         s.release_peak = s.release_smooth = s.rest_baseline = 0.0
+        s.drift_fast = s.drift_slow = 0.0
 
     def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
         """Latch ``fault`` from outside the cycle (a guiding loop's driver or controller-state

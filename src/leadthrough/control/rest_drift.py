@@ -17,31 +17,32 @@ What tells them apart is speed. A hand that grips or lets go changes the estimat
 README's "up to ~10 N/s as the drives' static friction takes up load" under a steady hand are
 within it; a grip through the 3 Hz filter, δ within ~0.25 s, is six times faster. So
 (:func:`drift_step`) the estimate's rate is measured per axis as the gap between two
-first-order smoothings of it (``fast_s``, the release detector's 0.05 s against estimator
-noise, and ``slow_s``, its 0.3 s window: a ramp of rate ρ leaves a gap of ρ·(slow_s − fast_s));
-while guiding at rest and the rate is within δ_i/drift_s, a baseline b_i follows the fast
-smoothing at no more than δ_i/drift_s, as long as that smoothing is within δ_i/2 of it (the
-release detector's :data:`~leadthrough.control.release.RELEASE_DROP`: a change that it counts
-as a hand's). A hand's grip or letting go is faster: b holds while it happens and does not
-take up the level it leaves, until the estimate comes back to within δ_i/2 of b (the hand
-lets go). The threshold of eq. 33 counts from it: the law
-at rest sees w − b, or w where that is smaller (the baseline only ever holds the tool where the
-paper's law would move it, never moves it where the paper's law would not: estimator noise
-below δ still produces no motion at all). In motion the law is the paper's (it sees w) and b
-relaxes to 0 over ``drift_s`` (the gears slip and their friction is the sliding one the model
-describes), so that a single cycle of motion does not forget it. b starts at 0 when guiding
-starts (and is 0 while not guiding).
+first-order smoothings of it (the release detector's 0.05 s against estimator noise and its
+0.3 s window: a ramp of rate ρ leaves a gap of ρ·0.25 s). While guiding at rest and that rate
+is within δ_i/drift_s, a baseline b_i follows the fast smoothing at no more than δ_i/drift_s,
+as long as that smoothing is within δ_i/2 of it (the release detector's
+:data:`~leadthrough.control.release.RELEASE_DROP`: a change that it counts as a hand's). A
+hand's grip or letting go is faster: b holds while it happens and does not take up the level
+it leaves, until the estimate comes back to within δ_i/2 of b (the hand lets go). The
+threshold of eq. 33 counts from b: the law at rest sees w − b, or w where that is smaller (the
+baseline only ever holds the tool where the paper's law would move it, never moves it where
+the paper's law would not: estimator noise below δ still produces no motion at all). In
+motion the law is the paper's (it sees w) and b relaxes to 0 over ``drift_s`` (the gears slip
+and their friction is the sliding one the model describes), so that a single cycle of motion
+does not forget it. b is 0 while not guiding. With the stop after letting go
+(:mod:`leadthrough.control.hand_release`) the guiding cycle restarts b from the level the
+estimate settled to, and a rise of δ over b resumes guiding.
 
 What this costs and what it does not cover: a push that rises more slowly than δ/drift_s
-from rest is taken for the drives and does not move the tool (it must rise faster); a
-change of less than δ/2 is taken up, so that a hand resting that lightly on the still tool
-must add δ over it to move it; after a motion b has relaxed toward 0 and follows only once
-the estimate passes within δ/2 of it (before, the law is the paper's); the first cycles of
-a quick rise are followed, so a push from rest may move the tool a cycle later than the
-paper's law; a drift
-faster than δ/drift_s still creeps, later; and a phantom that arrives quickly after a stop or
-a release and still exceeds δ when the settling ends (the gears unloading) moves the tool as
-the paper's law does; the stop after letting go (``--hand-release``) holds that one too.
+from rest is taken for the drives and does not move the tool (it must rise faster; the seam
+operator's lean at a point, which grows by design as slowly as the tool is short of it, is
+such a push); the part of a hand's rest on the still tool that came slowly or within δ/2 of
+b is taken up, so the hand must add δ over it to move the tool; after a motion b has relaxed
+toward 0 and follows only once the estimate passes within δ/2 of it (until then the law is
+the paper's); the first cycles of a quick rise are followed, so a push from rest may move the
+tool a cycle later than the paper's law; a drift faster than δ/drift_s still creeps, later;
+and a phantom that arrives quickly after a stop or a release (the gears unloading) and still
+exceeds δ when the settling ends moves the tool as the paper's law does.
 
 Compiled (Numba, ``nopython``, cached on disk), run by the guiding cycle
 (:mod:`leadthrough.control.guiding_cycle`) on the controller's record (``drift_*``).
