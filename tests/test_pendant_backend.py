@@ -13,6 +13,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from leadthrough.control.guiding import GuidingConfig
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.control.safety import Fault, State
 from leadthrough.errors import ControlError, TeachError
 from leadthrough.pendant.backend import (
@@ -43,6 +45,7 @@ from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.record import load_session
 from leadthrough.sim.driver import InjectedFaultKind
 from leadthrough.sim.guiding_params import shipped_guiding_params
+from leadthrough.sim.operator_scripts import push_x
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
 from leadthrough.teach import teach_session
 
@@ -303,15 +306,28 @@ def test_the_shipped_parameters_guide_the_simulated_er20(er20: Robot) -> None:
     assert np.all(rest.result.log.twist_cmd_base == 0.0)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 24: on the realistic plant, with the parameters "
-                   "identified on it, the tool stops after the release (overrun 0.9 mm) but "
-                   "creeps again once the release's settling ends (moving until 9.2 s of a 10 s "
-                   "session); README, Limitations")
-def test_after_a_release_the_tool_stays_at_rest(er20: Robot) -> None:
-    params = shipped_guiding_params(er20)
-    push = run_sim_session(er20, params, SimSessionConfig(
-        operator="push-x", loop=LoopConfig(guiding=light_guiding())))
-    assert np.all(push.result.log.twist_cmd_base[-500:] == 0.0)
+@pytest.mark.parametrize("hand_release", [False, True], ids=["law", "hand-release"])
+def test_after_a_release_the_tool_stays_at_rest(er20: Robot, hand_release: bool) -> None:
+    """Issue 24: with the shipped parameters (identified on the realistic plant) the estimate
+    drifts at rest after the release (the servo's integral against the gears' static friction,
+    3-8 N/s on this instance); before rest_drift.py the tool moved again from 11-14 s on, with
+    and without the stop after letting go. At rest: from the settle time (the first cycle at
+    rest after the release, plus ``settle_s``) to the end of a 16 s session the commanded twist
+    is exactly 0 and the commanded TCP moves by less than 1 mm."""
+    guiding = light_guiding()
+    if hand_release:
+        guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
+    push = run_sim_session(er20, shipped_guiding_params(er20), SimSessionConfig(
+        operator="push-x", duration_s=16.0, loop=LoopConfig(guiding=guiding)))
+    log = push.log
+    release = push_x().pushes[0].t_end
+    moving = np.any(log.twist_cmd_base != 0.0, axis=1)
+    stopped = np.flatnonzero((log.time >= release) & ~moving)[0]
+    settled = log.time >= log.time[stopped] + guiding.settle_s
+    assert log.time[-1] - log.time[settled][0] > 10.0       # 10 s and more of rest to check
+    assert not moving[settled].any()
+    travel = np.linalg.norm(log.tcp_cmd_base[settled] - log.tcp_cmd_base[stopped], axis=1)
+    assert travel.max() < 1e-3
 
 
 def test_marks_stop_at_the_limit_with_a_notice() -> None:

@@ -25,6 +25,9 @@ One cycle:
    :data:`RELEASE_DROP` × δ or more within about :data:`RELEASE_WINDOW_S`: the peak forgets
    slow drifts), breaking away takes the stopping friction: the paper's
    "larger friction once the force is removed", applied while the drives settle or unload.
+   At rest the law's threshold counts from the estimate's slow drift (at no more than
+   δ/``drift_s``: the servo's integral loading the gears' static friction;
+   :mod:`~leadthrough.control.rest_drift`), which only ever holds the tool.
    Then the speed and acceleration limits
    (:mod:`~leadthrough.control.limits`, speed scaled down near singularities). STOPPING and
    FAULT: decelerate to zero at the acceleration limit, or slower if the joints need longer to
@@ -150,6 +153,12 @@ class GuidingController:
         if cfg.controller != "virtual-friction":
             s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
         s.hold_s = cfg.settle_s + cfg.rezero_s
+        # rest_drift.py: the release detector's smoothing and window measure the drift's rate
+        s.drift_rate = 1.0 / cfg.drift_s if cfg.drift_s > 0.0 else 0.0
+        s.drift_span_s = RELEASE_WINDOW_S - RELEASE_SMOOTHING_S
+        s.drift_alpha_fast = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
+        s.drift_alpha_slow = cfg.dt / (RELEASE_WINDOW_S + cfg.dt)
+        s.drift_decay = math.exp(-cfg.dt / cfg.drift_s) if cfg.drift_s > 0.0 else 0.0
         s.release_drop = RELEASE_DROP
         s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
         s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
@@ -228,9 +237,10 @@ class GuidingController:
         s.qd_cmd = s.qd_dls = 0.0
         s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
-        s.twist = s.release_peak = s.release_smooth = 0.0
+        s.twist = s.release_peak = s.release_smooth = s.rest_baseline = 0.0
+        s.drift_fast = s.drift_slow = 0.0
         s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
-        s.hand_released = False
+        s.hand_released = s.hand_settled = False
         s.hand_release_s = math.inf
         s.pose_rotation = ik.rotation_tool_to_base
         s.pose_position = p
@@ -280,7 +290,8 @@ class GuidingController:
         self._write_live_settings(config)
         if self._auto is not None:
             s.kinematics_fresh = False   # eq. 36 again, in the new frame
-        s.release_peak = s.release_smooth = 0.0
+        s.release_peak = s.release_smooth = s.rest_baseline = 0.0
+        s.drift_fast = s.drift_slow = 0.0
 
     def trip(self, t: float, fault: Fault, value: float = math.nan, index: int = -1) -> None:
         """Latch ``fault`` from outside the cycle (a guiding loop's driver or controller-state

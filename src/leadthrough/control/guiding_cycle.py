@@ -34,6 +34,7 @@ from leadthrough.control.hand_release import fresh_rise, let_go_step
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
 from leadthrough.control.release import release_step
+from leadthrough.control.rest_drift import drift_step
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.control.se3 import (
     copy_pose,
@@ -84,6 +85,7 @@ def guiding_cycle(inputs: Records, controller: Records, ik_records: Records,
     scale = rules.speed_scale(sup, ik.manipulability)
     _law_wrench(inp.wrench_base, ik.tcp_rotation, ctl.tool_frame, sup.inputs_finite,
                 ctl.axis_mask, ctl.wrench)
+    _rest_wrench(ctl, sup.state == State.GUIDING)
     # 2.–3. the next twist and pose: the law within the limits, or a stop
     joint_stop = -1.0   # cycles a stop gives the joints from the setpoint (-1: not computed)
     if sup.state == State.GUIDING:
@@ -162,6 +164,18 @@ def _law_wrench(wrench_base: Array, rotation: Array, tool: bool, finite: bool, m
 
 
 @njit(cache=True, nogil=True)
+def _rest_wrench(ctl: Record, guiding: bool) -> None:
+    """The virtual-friction law's input: guiding at rest, the estimate less its drift at rest
+    (:mod:`leadthrough.control.rest_drift`); moving, the estimate (the baseline relaxes);
+    not guiding, the estimate (the baseline restarts from 0)."""
+    at_rest = guiding and _is_zero(ctl.twist) and ctl.law == Law.VIRTUAL_FRICTION
+    drift_step(ctl.wrench, ctl.friction, ctl.drift_rate, ctl.release_drop, ctl.dt,
+               ctl.drift_alpha_fast,
+               ctl.drift_alpha_slow, ctl.drift_span_s, ctl.drift_decay if guiding else 0.0,
+               at_rest, ctl.drift_fast, ctl.drift_slow, ctl.rest_baseline, ctl.rest_wrench)
+
+
+@njit(cache=True, nogil=True)
 def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
            speed_scale: float) -> float:
     """GUIDING: the law's twist within the limits and the next pose; with a workspace box, the
@@ -184,7 +198,7 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
         decelerate_twist(ctl.twist, ctl.max_step,
                          joint_stop_cycles(ctl.qd_cmd, ik.stop_velocity_step), ctl.desired_twist)
     elif ctl.law == Law.VIRTUAL_FRICTION:
-        virtual_friction(ctl.twist, ctl.wrench,
+        virtual_friction(ctl.twist, ctl.rest_wrench,
                          ctl.stopping_friction if settling else ctl.friction,
                          ctl.stopping_friction, ctl.law_coefficients, ctl.desired_twist)
     else:
@@ -217,7 +231,9 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     """The hand's state (:mod:`leadthrough.control.hand_release`): a letting go, in motion or
     at rest (``release.py``'s), starts the stop (``hand_released``, ``hand_release_s`` = 0;
     ``release_s`` = 0: the settling after a release). Only a fresh rise after the lockout
-    ends it: a quick one while the drives settle (``hold_s``), any rise of δ after."""
+    ends it: a quick one, or once the drives have settled (``hold_s``) a rise of δ over the
+    level the estimate settled to, which follows the drives' drift at rest
+    (:mod:`leadthrough.control.rest_drift`: the baseline restarts from the estimate then)."""
     let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
                          ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
                          ctl.hand_peak, ctl.hand_peak_age)
@@ -227,13 +243,21 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.hand_peak_age[:] = 0.0
     if (let_go and not at_rest) or released_at_rest:
         ctl.hand_released = True
+        ctl.hand_settled = False
         ctl.hand_release_s = 0.0
         ctl.release_s = 0.0
-    # while the drives settle only a quick rise is a grip; after, any rise of δ over the
-    # settled level is (the reference then follows falls only)
-    settled = ctl.hand_release_s >= ctl.hold_s
-    rose = fresh_rise(ctl.hand_smooth, ctl.friction, 1.0 if settled else ctl.hand_rise_forget,
-                      ctl.hand_reference)
+    # a quick rise is a grip; once the drives have settled, so is a rise of δ over the level
+    # the estimate settled to, followed at the drives' drift rate (the law's rest input)
+    if (ctl.hand_released and not ctl.hand_settled and at_rest
+            and ctl.hand_release_s >= ctl.hold_s):
+        ctl.hand_settled = True
+        for i in range(6):
+            ctl.rest_baseline[i] = ctl.drift_fast[i]
+            ctl.rest_wrench[i] = ctl.wrench[i] - ctl.drift_fast[i]
+    rose = fresh_rise(ctl.hand_smooth, ctl.friction, ctl.hand_rise_forget, ctl.hand_reference)
+    if ctl.hand_settled and at_rest:
+        for i in range(6):
+            rose = rose or abs(ctl.rest_wrench[i]) >= ctl.friction[i]
     if ctl.hand_released and ctl.hand_release_s >= ctl.hand_lockout_s and rose:
         ctl.hand_released = False
     ctl.hand_release_s += ctl.dt

@@ -45,6 +45,8 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("hand_release", b1),                    # HandReleaseConfig.enabled
         ("hand_drop_fraction", f8), ("hand_lockout_s", f8), ("hand_window_s", f8),  # [-, s, s]
         ("hand_alpha", f8), ("hand_forget", f8), ("hand_rise_forget", f8),  # per cycle
+        ("drift_rate", f8), ("drift_span_s", f8),   # rest_drift.py: 1/settle_s [1/s], [s]
+        ("drift_alpha_fast", f8), ("drift_alpha_slow", f8), ("drift_decay", f8),  # per cycle
         ("max_speed", f8, (2,)),                 # (v_max, ω_max) [m/s, rad/s]
         ("max_step", f8, (2,)),                  # (a_max·dt, α_max·dt) [m/s, rad/s]
         ("stop_fraction", f8),                   # IKConfig.stop_acceleration_fraction
@@ -55,6 +57,7 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("residual_fresh", b1),                  # residual is that of the commanded pose
         ("resync", b1),                          # hold the setpoint's pose as the commanded one
         ("hand_released", b1),                   # the hand let go: stopping (hand_release.py)
+        ("hand_settled", b1),                    # ... and the drives have settled at rest
         # state: scalars
         ("rest_s", f8),                          # time at rest [s] (0 while moving)
         ("release_s", f8),                       # time since the last release at rest [s]
@@ -71,6 +74,9 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("release_smooth", *six), ("release_peak", *six),  # release.py
         ("hand_smooth", *six), ("hand_peak", *six), ("hand_reference", *six),  # hand_release
         ("hand_peak_age", f8, (2,)),             # time since each part's peak [s]
+        ("drift_fast", *six), ("drift_slow", *six),  # rest_drift.py: the two smoothings
+        ("rest_baseline", *six),                 # rest_drift.py: b
+        ("rest_wrench", *six),                   # the law's input at rest: w − b
         # state: the commanded TCP pose and the next one
         ("pose_rotation", *pose), ("pose_position", f8, (3,)),
         ("next_rotation", *pose), ("next_position", f8, (3,)),
