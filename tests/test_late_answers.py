@@ -11,6 +11,7 @@ from leadthrough.drivers.late_answers import (
     LATE_WINDOW,
     LateAnswerTolerance,
 )
+from leadthrough.errors import DriverError
 
 RSI_TIMEOUT = 100   # the shipped context's Timeout: late answers in a row before RSI stops
 
@@ -59,5 +60,5 @@ def test_crowded_late_answers_are_a_fault() -> None:
 
 
 def test_bad_settings_are_refused() -> None:
-    with pytest.raises(ValueError, match="in_window"):
+    with pytest.raises(DriverError, match="in_window"):
         LateAnswerTolerance(run=5, in_window=3, window=250)

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 from collections import deque
 
+from leadthrough.errors import DriverError
+
 __all__ = ["LATE_IN_WINDOW", "LATE_RUN", "LATE_WINDOW", "LateAnswerTolerance"]
 
 #: Late answers in a row that are a fault.
@@ -41,6 +43,9 @@ LATE_WINDOW = 250
 
 class LateAnswerTolerance:
     """Counts late answers; says when they come in a run (see the module doc).
+
+    Raises:
+        DriverError: The counts are not 1 <= run <= in_window <= window.
 
     Args:
         run: Late answers in a row that are a fault (>= 1; 1: every late answer is one).
@@ -56,8 +61,9 @@ class LateAnswerTolerance:
     def __init__(self, run: int = LATE_RUN, in_window: int = LATE_IN_WINDOW,
                  window: int = LATE_WINDOW) -> None:
         if not (1 <= run <= in_window <= window):
-            raise ValueError(f"need 1 <= run ({run}) <= in_window ({in_window}) <= window "
-                             f"({window})")
+            raise DriverError("late-answer tolerance out of order", field="run, in_window, "
+                              "window", value=(run, in_window, window),
+                              expected="1 <= run <= in_window <= window")
         self.run, self.in_window, self.window = run, in_window, window
         self._recent: deque[int] = deque(maxlen=in_window)
         self._last_late: int | None = None
