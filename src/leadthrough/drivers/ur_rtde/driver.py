@@ -62,6 +62,7 @@ RUNTIME_PLAYING = 2
 ESTOP_MODES = frozenset((6, 7))
 PROTECTIVE_MODES = frozenset((3, 5, 12, 13))
 FAULT_MODES = frozenset((8, 9))
+_KEEP_SENT = 64  # commands remembered for the program's echo (0.13 s at 500 Hz)
 
 
 def controller_state(values: dict[str, object], register: str) -> ControllerState:
@@ -118,13 +119,18 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self.host, self.script_port = host, script_port
         self.script = script if script is not None else ServoScriptParameters()
         self._fixed_timeout = timeout is not None
-        outputs = (*DEFAULT_OUTPUTS[:-1],
-                   f"output_int_register_{self.script.register_offset}")
+        reg = self.script.register_offset
+        outputs = (*DEFAULT_OUTPUTS[:-1], f"output_int_register_{reg + 1}",
+                   f"output_int_register_{reg}")
         self.client = RtdeClient(host, port, outputs=outputs, frequency=frequency,
                                  register_offset=self.script.register_offset,
                                  timeout=connect_timeout)
         self._register = outputs[-1]
+        self._echo = outputs[-2]
         self._counter = 0
+        self._sent: dict[int, Array] = {}  # recent targets sent, by watchdog counter
+        self._late_counter: int | None = None
+        self._taken: Array | None = None
         self._last: RtdeState | None = None
         self._t0: float | None = None
 
@@ -139,6 +145,8 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         if not self._fixed_timeout:
             self.timeout = 3.0 * self._dt
         self._counter, self._t0 = 0, None
+        self._sent.clear()
+        self._late_counter, self._taken = None, None
         if self.script_port is None:
             return
         try:
@@ -202,7 +210,33 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
 
     def _send(self, q: Array) -> None:
         self._counter = (self._counter + 1) & 0x7FFFFFFF
+        self._sent[self._counter] = q.copy()
+        self._sent.pop(self._counter - _KEEP_SENT, None)
         self.client.send(ServoCommand(tuple(q.tolist()), self._counter, Mode.SERVO))
+
+    late_is_refusal = False  # the program's servoj repeats the last target: a held cycle
+
+    def _answer_late(self, sample: RtdeState) -> bool:
+        """Our last command missed the program's cycle: the package's echo (the counter of
+        the targets servoj took) is not its counter (once per command: a client that is
+        slow to answer sees several packages before its next one)."""
+        echo = sample.values.get(self._echo)
+        if (echo is None or self._answered is None or int(echo) == self._counter
+                or self._late_counter == self._counter):
+            return False
+        self._late_counter = self._counter
+        self._taken = self._sent.get(int(echo))
+        return True
+
+    def _after_late_answer(self) -> None:
+        """The arm holds the targets servoj last took: the next command is judged from them
+        (a retract would assume the command before the late one; under a slow client that
+        one may be late too)."""
+        assert self.limiter is not None
+        if self._taken is not None:
+            self.limiter.reset(self._taken)
+        else:
+            self.limiter.retract(self.extrapolates)
 
     def _no_data_hint(self) -> str:
         return "data packages: is RTDE enabled on the controller?"
