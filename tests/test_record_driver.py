@@ -121,12 +121,12 @@ def test_a_robot_away_from_the_start_without_an_approach_is_refused(
     assert report.violations == ()
 
 
-def _fast_swing(robot: Robot, duration: float = 2.0) -> TrajectorySamples:
-    """Joint 1 out and back from POSE at up to 0.79 of its speed limit: two cycles' motion
-    in one is beyond the limit (a servoj jump)."""
+def _fast_swing(robot: Robot, duration: float = 2.0, share: float = 0.79) -> TrajectorySamples:
+    """Joint 1 out and back from POSE at up to ``share`` of its speed limit (0.79: two
+    cycles' motion in one is beyond the limit, a servoj jump)."""
     t = np.arange(0.0, duration + 1e-9, 1e-3)
     w = 2.0 * np.pi / duration
-    amp = 0.79 * robot.velocity_limit[0] / w
+    amp = share * robot.velocity_limit[0] / w
     q = np.tile(np.asarray(POSE), (t.size, 1))
     qd, qdd = np.zeros_like(q), np.zeros_like(q)
     q[:, 0] += amp * (1.0 - np.cos(w * t))
@@ -168,6 +168,37 @@ def test_late_answers_on_rtde_are_held_cycles_never_a_servoj_jump(
     else:  # the target after a late answer was two cycles' motion in one: protective stop
         assert done is None and report.refused == 1 and report.stop_kind == "protective"
         assert "velocity" in report.stop_reason
+
+
+@pytest.mark.parametrize("stall", [0.04, 0.08])
+def test_a_client_stall_is_caught_up_at_the_limits_or_stops_past_max_stale(
+        stall: float, robots: dict[str, Robot]) -> None:
+    robot = robots["ur5"]
+    traj = _fast_swing(robot, share=0.93)
+    with _robot("ur-rtde", robot) as (driver, emu):
+        write, count = driver.write, [0]
+
+        def stalling_write(cmd: JointCommand) -> None:
+            count[0] += 1
+            if count[0] == 500:  # 0.5 s into the trajectory, at 0.93 of the speed limit
+                time.sleep(stall)
+            write(cmd)
+
+        driver.write = stalling_write  # type: ignore[method-assign]
+        try:
+            done: TrajectoryRecording | None = record_trajectory(driver, robot, traj)
+            error = ""
+        except TrajectoryAbortedError as e:
+            done, error = None, str(e)
+        report = emu.emulator.report()
+    assert report.refused == 0 and report.violations == ()
+    if stall < 0.05:  # 20 cycles held (max_stale_s 0.05): the robot fell behind the trajectory
+        # (up to 0.12 rad at 2.9 rad/s, 0.1 stops a run) and caught up at the limiter's speed;
+        # it followed what it was sent, so the run goes on
+        assert done is not None, error
+        assert done.max_following_error > 0.05
+    else:  # 40 cycles without a command: a stop naming it, not a following error
+        assert done is None and "went by without a command" in error
 
 
 def test_rsi_refuses_a_trajectory_beyond_its_correction_range_before_moving(
