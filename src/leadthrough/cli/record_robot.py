@@ -60,12 +60,18 @@ def check_rsi_reach(driver: KukaRsiDriver, traj: TrajectorySamples, source: Path
         return
     row, j = (int(x) for x in np.argwhere(out)[0])
     start = (driver.client.reference or (float("nan"),) * 6)[j]
+    q = np.degrees(traj.q[:, j])
+    span, reach = float(np.ptp(q)), float(np.degrees(hi[j] - lo[j]))
+    advice = (f"the trajectory spans {span:.1f} deg on A{j + 1}, more than that range: no "
+              "start pose reaches all of it" if span > reach else
+              "let the KRL program move the robot before RSI_ON to a pose from which all of "
+              f"it is in reach (the trajectory's start, or the middle of its A{j + 1} range, "
+              f"{(q.min() + q.max()) / 2:.1f} deg)")
     raise ControlError(
         f"the trajectory leaves RSI's correction range in row {row}: RSI corrects A{j + 1} "
         f"only within {np.degrees(lo[j]):.1f} .. {np.degrees(hi[j]):.1f} deg (the shipped "
-        f"context's range, from where RSI started, {start:.1f} deg); let the KRL program move "
-        "the robot to the trajectory's start before RSI_ON", source=source,
-        field=f"q{j + 1}", value=round(float(np.degrees(traj.q[row, j])), 2),
+        f"context's range from where RSI started, {start:.1f} deg); {advice}", source=source,
+        field=f"q{j + 1}", value=round(float(q[row]), 2),
         expected=f"{np.degrees(lo[j]):.1f} .. {np.degrees(hi[j]):.1f} deg")
 
 
