@@ -8,9 +8,13 @@ behind the real protocol on a loopback socket), then exactly what a user runs:
 ``validate``d on one held-out recording of the same robot (another excitation, in-process): the
 relative torque error and J of each, and their difference. The wire recording is at the
 controller's cycle (8 ms J519, 2 ms RTDE, 4 ms RSI), carries its transport delay and, for RSI,
-joint torque instead of current. The RSI emulator starts at the trajectory's first sample
-(``emulate --q0``), as the KRL program moves a real KUKA there before ``RSI_ON``: RSI corrects
-only within ±90° per axis of where it started.
+joint torque instead of current. RSI corrects only within ±90° per axis of where it started
+(85.5° with the driver's margin), and the excitation spans more than that on every axis (up
+to 425° on A6): no start pose reaches all of it, and ``record --driver kuka-rsi`` refuses it
+before moving. So RSI runs the excitation contracted per axis towards the middle of its range
+(positions, speeds and accelerations by the same factor) to 0.97 of that reach, from the
+middle (``emulate --q0``, as the KRL program would move a real KUKA there before ``RSI_ON``),
+and is compared with the same contracted trajectory in-process.
 
 Then guiding (``--guide``, with the shipped guiding parameters of the simulated er20 and its
 robot instance): ``leadthrough emulate --operator S`` (the scripted operator at the emulated
