@@ -145,8 +145,9 @@ def test_guide_against_the_emulator_until_ctrl_c(kind: str, tmp_path: Path) -> N
 
 
 def test_guide_on_a_robot_needs_an_enabling_input_and_a_live_controller(tmp_path: Path) -> None:
-    """No --enable-input, a simulator setting with --driver, and a controller that does not
-    answer: each a one-line error, exit 2, before any command."""
+    """No --enable-input, a simulator setting with --driver, the reset button on the enabling
+    input, and a controller that does not answer: each a one-line error, exit 2, before any
+    command."""
     out = tmp_path / "s.parquet"
     params = str(shipped_params_path("er20"))
     base = [sys.executable, "-m", "leadthrough", "guide", "--robot", "er20", "--params", params,
@@ -156,7 +157,82 @@ def test_guide_on_a_robot_needs_an_enabling_input_and_a_live_controller(tmp_path
     operator = subprocess.run([*base, "--enable-input", "0", "--operator", "push-x"],
                               capture_output=True, text=True, timeout=120)
     assert operator.returncode == 2 and "--operator" in operator.stderr
+    clash = subprocess.run([*base, "--enable-input", "0", "--reset-input", "0"],
+                           capture_output=True, text=True, timeout=120)
+    assert clash.returncode == 2 and "reset_input" in clash.stderr, clash.stderr
+    assert "compiling" not in clash.stderr            # refused before anything is built
     dead = subprocess.run([*base, "--enable-input", "0", "--port", "9"], capture_output=True,
                           text=True, timeout=120)
     assert dead.returncode == 2 and "Traceback" not in dead.stderr, dead.stderr
     assert not out.exists()
+
+
+# a fault in each press and a reset press after it: enabling device [a, a + 1.5), a NaN in a
+# reply at a + 0.8, the reset button [a + 2.2, a + 2.4), the next press at a + 6 (the
+# estimator's warm-up and tare after the reset, 1 s of its samples, take 3 s here: guide
+# --driver kuka-rsi runs RSI's 4 ms cycle, the emulator sends every 12 ms)
+RESET_PERIODS = [1.0 + 6 * k for k in range(30)]
+
+
+def _reset_emulator_args() -> list[str]:
+    args = ["--seed", "1", "--q0", *map(str, POSE)]
+    for a in RESET_PERIODS:
+        args += ["--enable", f"{a}:{a + 1.5}", "--nan", f"{a + 0.8}:{a + 0.81}",
+                 "--reset", f"{a + 2.2}:{a + 2.4}"]
+    return args
+
+
+def test_a_fault_is_reset_from_its_input_and_guiding_needs_a_fresh_press(
+        tmp_path: Path) -> None:
+    """``guide --driver kuka-rsi --reset-input 2`` against the emulator: each press ends in
+    a latched fault (a NaN in a reply), the reset button resets it once the NaN has gone and
+    the stop is at rest, guiding starts again only at the next press of the enabling device
+    (none while it is still held or released after the reset), all without restarting; the
+    session file records the faults and the resets. RSI at 12 ms, whose isolated late answers
+    are no fault (J519 refuses each late answer: on a machine as loaded as a shared runner its
+    sessions latch a fault of their own now and then, which says nothing of the reset)."""
+    kind = "kuka-rsi"
+    host = free_loopback_address(DEFAULT_PORTS[kind])
+    out = tmp_path / "session.parquet"
+    guide = _guide(kind, host, out, "--reset-input", "2")   # the PC listens first
+    emu = None
+    try:
+        _wait_for_line(guide, "compiling the loop done", 120)
+        emu = spawn_emulator(kind, "er20", host, DEFAULT_PORTS[kind], "--cycle-ms", "12",
+                             *_reset_emulator_args())
+        _wait_for_line(guide, "leadthrough: guiding", 120)
+        time.sleep(14.0)                         # two or three periods
+        guide.send_signal(signal.SIGINT)
+        stdout, stderr = guide.communicate(timeout=60)
+    finally:
+        if guide.poll() is None:
+            guide.kill()
+        report = stop_process(emu) if emu is not None else ""
+    assert guide.returncode == 0 and "session ended: stop requested" in stdout, stderr
+    log = load_session(out)   # on the emulator's clock (RSI's IPOC counts from IPOC_START)
+    log = dataclasses.replace(log, time=log.time - IPOC_START * 1e-3, events=[
+        dataclasses.replace(e, t=e.t - IPOC_START * 1e-3) for e in log.events])
+    slack = 0.04      # three 12 ms cycles: the input's packet, its sample, the next cycle
+    faults = [e for e in log.events if e.kind == "transition" and e.label.endswith("FAULT")]
+    resets = [e for e in log.events if e.kind == "loop" and e.label == "fault reset"]
+    starts, _ = _guiding_starts_and_ends(log)
+    trace = [(round(e.t, 3), e.label, e.cause) for e in log.events]
+    assert faults and resets, trace
+    for f in faults:      # each at a NaN, caused by it, logged with its cause
+        assert f.cause.endswith("NONFINITE_INPUT") or f.cause.endswith("ESTIMATOR"), (f, trace)
+        assert any(a + 0.8 <= f.t <= a + 0.81 + slack for a in RESET_PERIODS), (f, trace)
+    for r in resets:      # each from a press of the reset button, after a fault
+        assert any(a + 2.2 <= r.t <= a + 2.2 + slack for a in RESET_PERIODS), (r, trace)
+        assert any(f.t < r.t for f in faults)
+    # faulted from each fault to its reset: no guiding in between
+    for f in faults:
+        after = [r.t for r in resets if r.t > f.t]
+        until = after[0] if after else log.time[-1]
+        inside = (log.time > f.t + slack) & (log.time < until)
+        assert np.all(log.state[inside] == int(State.FAULT)), (f, trace)
+    # guiding again after a reset, only at the next fresh press of the enabling device
+    again = [t for t in starts if any(r.t < t for r in resets)]
+    assert again, (starts, trace)
+    for t in again:
+        assert any(a - slack <= t <= a + slack for a in RESET_PERIODS), (t, starts)
+    assert "violations: ()" in report and "refused: 0" in report, report

@@ -41,7 +41,8 @@ _EPILOG = """examples (two terminals):
   leadthrough emulate kuka-rsi --robot er20 --seed 1 --port 49152   (sends to 127.0.0.1:49152)
 ports: J519 60015 and RTDE 30004 (+ secondary interface 30002, where the servo URScript
 program is sent) are listened on; the KUKA robot sends its RSI documents to --host:--port.
-inputs: J519 DI[1] / UR DI0 / KUKA $IN[1] = enabling device, DI[2] / DI1 / $IN[2] = mark.
+inputs: J519 DI[1] / UR DI0 / KUKA $IN[1] = enabling device, DI[2] / DI1 / $IN[2] = mark,
+DI[3] / DI2 / $IN[3] = fault reset.
 """
 
 
@@ -86,6 +87,8 @@ def register(sub: Any) -> None:
                    help="enabling device held")
     g.add_argument("--mark", type=_window, action="append", default=[],
                    help="mark button pressed")
+    g.add_argument("--reset", type=_window, action="append", default=[],
+                   help="fault reset button pressed")
     o = p.add_argument_group("an operator at the robot")
     o.add_argument("--operator", default=None, choices=OPERATOR_NAMES,
                    help="a scripted operator who holds the enabling device, pushes the tool "
@@ -119,7 +122,8 @@ def _options(args: argparse.Namespace) -> EmulatorOptions:
         estop_at=args.estop_at, protective_stop_at=args.protective_stop_at)
     return EmulatorOptions(
         host=args.host, cycle_ms=args.cycle_ms, watchdog=args.watchdog,
-        inputs=InputSchedule(enable=tuple(args.enable), mark=tuple(args.mark)), faults=faults,
+        inputs=InputSchedule(enable=tuple(args.enable), mark=tuple(args.mark),
+                             reset=tuple(args.reset)), faults=faults,
         q0=tuple(args.q0) if args.q0 else None, generation="cb3" if args.cb3 else "e-series",
         operator=None if args.operator is None else OperatorPlan(
             args.operator, seed=args.operator_seed, delay_s=args.operator_delay))

@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     require_folder(args.output)
     if args.driver is not None:
         return guide_on_robot(args, robot, pf, guiding)
-    refuse_settings(args, ("enable_input", "mark_input", "host", "port"),
+    refuse_settings(args, ("enable_input", "mark_input", "reset_input", "host", "port"),
                     "a robot setting given for the simulator",
                     "--driver D with it (the simulator scripts its inputs)")
     args.operator = args.operator or "push-x"

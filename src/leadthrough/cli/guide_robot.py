@@ -9,8 +9,10 @@ until the user stops it.
    at open: a mismatch, a refused stream or no answer is a clear error, exit 2).
 3. The loop (:func:`~leadthrough.session.loop.run_session`) at the controller's cycle, the
    guiding controller at the multiple of it nearest 10 ms; guiding only on a fresh press of the
-   enabling input; marks from the mark input; the recording streamed to ``-o`` in chunks
-   (:class:`~leadthrough.session.session_file.SessionFileSink`).
+   enabling input; marks from the mark input; a fault reset from the reset input
+   (``--reset-input``: a fresh press, once the fault's cause has cleared and the robot is at
+   rest; guiding then needs a fresh press of the enabling device); the recording streamed
+   to ``-o`` in chunks (:class:`~leadthrough.session.session_file.SessionFileSink`).
 4. Ctrl-C (SIGINT) or SIGTERM: a stop request (a commanded stop at the acceleration limit, the
    loop ends at rest), then the driver closes the stream; a second Ctrl-C aborts.
 
@@ -65,6 +67,10 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
                         "required with --driver")
     g.add_argument("--mark-input", type=int, default=None, metavar="I",
                    help="the digital input of the 'mark point' button")
+    g.add_argument("--reset-input", type=int, default=None, metavar="I",
+                   help="the digital input of the fault reset button: a fresh press resets a "
+                        "latched fault once its cause has cleared and the robot is at rest "
+                        "(then press the enabling device again to guide)")
     g.add_argument("--watchdog", type=float, default=0.05, metavar="S",
                    help="a driver exchange longer than this is a fault (a commanded stop) "
                         "[s]; one blocked over max(1 s, S) is aborted (default 0.05)")
@@ -87,6 +93,10 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
                    guiding: GuidingConfig) -> int:
     """Run ``leadthrough guide --driver`` (see the module doc)."""
     _check_args(args)
+    # the inputs checked before anything is built (a clash of two inputs: exit 2 at once)
+    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
+                          reset_input=args.reset_input,
+                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
     for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
                                                tuple(args.cpus) if args.cpus else None)):
         print(f"leadthrough: {line}", file=sys.stderr, flush=True)
@@ -96,11 +106,10 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
     # open on, and cycles it is not answered in count against the session (RSI's late count)
     parts = _loop_parts(robot, pf, guiding, driver.dt)
     requests = LoopRequests()
-    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
-                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
     settings: dict[str, object] = {"driver": args.driver, "host": args.host,
                                    "port": args.port, "enable_input": args.enable_input,
-                                   "mark_input": args.mark_input}
+                                   "mark_input": args.mark_input,
+                                   "reset_input": args.reset_input}
     dt = driver.dt
     # Ctrl-C: a stop request while the loop runs, and nothing more once it has ended (the
     # stream's own end and the file are written); a second one aborts
@@ -113,7 +122,7 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
               f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
         result = run_session(driver, *parts, args.duration, options=options,
                              requests=requests, settings=settings, sink=sink)
-    return _report(args, result)
+    return _report(args, result, getattr(driver, "late_answers", 0))
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -161,7 +170,8 @@ def _stop_on_term(requests: LoopRequests) -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _report(args: argparse.Namespace, result: LoopResult) -> int:
+def _report(args: argparse.Namespace, result: LoopResult, late_answers: int) -> int:
+    """The session's summary (``late_answers``: answers the controller counted late)."""
     end, us = result.end, result.cycle_us
     p99 = float(np.percentile(us, 99)) if us.size else math.nan
     # the first controller cycle against the steady state (the kept cycles: the last ten
@@ -170,7 +180,8 @@ def _report(args: argparse.Namespace, result: LoopResult) -> int:
     out: dict[str, Any] = {
         "end": str(end.cause), "end_detail": end.detail, "t_end_s": end.t,
         "state": end.state.name, "fault": end.fault.name,
-        "late_periods": result.late_periods, "periods": result.periods,
+        "late_periods": result.late_periods, "late_answers": late_answers,
+        "periods": result.periods,
         "cycle_us_first": first, "cycle_us_median": float(np.median(us)) if us.size
         else math.nan, "cycle_us_p99": p99, "cycle_us_max": float(us.max()) if us.size
         else math.nan, "output": str(args.output)}
@@ -179,6 +190,7 @@ def _report(args: argparse.Namespace, result: LoopResult) -> int:
     else:
         print(f"session ended: {end.cause}{' (' + end.detail + ')' if end.detail else ''}; "
               f"state {end.state.name}, fault {end.fault.name}; {result.late_periods} late "
-              f"periods; controller cycle p99 {out['cycle_us_p99']:.0f} µs -> {args.output}")
+              f"periods, {late_answers} answers late; controller cycle p99 "
+              f"{out['cycle_us_p99']:.0f} µs -> {args.output}")
     ok = end.cause in (EndCause.STOP_REQUESTED, EndCause.DURATION)
     return 0 if ok else 1

@@ -18,10 +18,11 @@ cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
   (:meth:`~leadthrough.drivers.cycle_limits.CycleLimiter.skip`), so the next target is judged
   against what the controller did meanwhile; so is an answer the controller reports it did
   not take in time (J519's "command received" bit, RSI's late-answer count, the UR program's
-  echo of the command it took), which also sets ``COMMAND_REJECTED`` in the feedback where
-  the controller counts it against the stream (J519, RSI; a UR program just holds a cycle).
-  A write with no new packet to answer sends nothing (``unanswered`` counts it): the
-  controller is waiting for its next cycle, not for a second answer.
+  echo of the command it took), which also sets ``COMMAND_REJECTED`` in the feedback (RSI:
+  only late answers in a run, :mod:`~leadthrough.drivers.late_answers`; UR: never, its
+  program just holds a cycle). A write with no new packet to answer sends nothing
+  (``unanswered`` counts it): the controller is waiting for its next cycle, not for a second
+  answer.
 
 :meth:`~StreamingDriver.open` connects, runs the protocol's handshake and waits for the first
 packet, checking it against the robot file (joint count, and every joint inside its limits,
@@ -112,11 +113,6 @@ class StreamingDriver(ABC, Generic[S]):
     """Whether the controller continues at the last velocity for one cycle without a target
     (else it holds the last target); see :meth:`CycleLimiter.skip`."""
 
-    late_is_refusal = True
-    """Whether an answer that came too late is a command the controller did not take
-    (``COMMAND_REJECTED`` in the feedback: J519, RSI) or just a cycle it held, as for a lost
-    packet (a UR program's ``servoj`` repeats the last target)."""
-
     reports_torque = False
     """Whether the controller reports joint torque (``make_feedback`` then has a torque
     array)."""
@@ -145,7 +141,7 @@ class StreamingDriver(ABC, Generic[S]):
             self._after_late_answer()
             self.late_answers += 1
         self._sample, self._newest = sample, sample
-        self._sample_late = late and self.late_is_refusal
+        self._sample_late = self._rejected(sample, late)
         self._answer_due = True
 
     def read(self, fb: DriverFeedback) -> bool:
@@ -317,6 +313,11 @@ class StreamingDriver(ABC, Generic[S]):
         back to the state before it, then a cycle without a target)."""
         assert self.limiter is not None
         self.limiter.retract(self.extrapolates)
+
+    def _rejected(self, sample: S, late: bool) -> bool:
+        """Whether ``sample``'s feedback reports ``COMMAND_REJECTED`` (default: every late
+        answer; a controller that tolerates isolated ones may wait for a run)."""
+        return late
 
     def _answered_previous(self, sample: S) -> bool:
         """Whether our last answer was to the packet just before ``sample``."""

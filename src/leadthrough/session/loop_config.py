@@ -68,6 +68,12 @@ class LoopOptions:
             for a real robot.
         mark_input: The digital input wired to the "mark point" button; None: marks come only
             from ``LoopRequests.mark``.
+        reset_input: The digital input wired to the fault reset button; None: resets come
+            only from ``LoopRequests.reset_fault``. A fresh press (debounced as the mark
+            button) is a reset request: accepted with a fault latched, its cause cleared
+            (the controller reporting OK, the feedback finite and within the following-error
+            limit) and the commanded motion at rest; guiding then needs a fresh press of the
+            enabling device (:mod:`~leadthrough.session.operator_link`).
         paced: Pace a simulated driver to the wall clock (real time) instead of running flat
             out; a real driver paces the loop itself.
         watchdog_s: A driver exchange (write, step, read) longer than this is a fault, and one
@@ -83,6 +89,7 @@ class LoopOptions:
     enable_input: int | None = None
     software_enable: bool = False
     mark_input: int | None = None
+    reset_input: int | None = None
     paced: bool = False
     watchdog_s: float = 0.05
     abort_s: float = 1.0
@@ -95,6 +102,10 @@ class LoopOptions:
             ("mark_input", _bit_or_none(self.mark_input)
              and (self.mark_input is None or self.mark_input != self.enable_input),
              bits + ", not the enabling input"),
+            ("reset_input", _bit_or_none(self.reset_input)
+             and (self.reset_input is None
+                  or self.reset_input not in (self.enable_input, self.mark_input)),
+             bits + ", not the enabling or the mark input"),
             ("software_enable", not (self.software_enable and self.enable_input is not None),
              "False with an enable_input (one enabling device)"),
             ("watchdog_s", math.isfinite(self.watchdog_s) and self.watchdog_s > 0, "> 0 s"),

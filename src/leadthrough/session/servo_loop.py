@@ -126,6 +126,8 @@ class ServoLoop:
         self.enable_level = _enable_source(self, options, requests, deadman)
         self.mark_bit = -1 if options.mark_input is None else options.mark_input
         self.mark_button = MarkButton()
+        self.reset_bit = -1 if options.reset_input is None else options.reset_input
+        self.reset_button = MarkButton()   # one reset request per (debounced) press
         self.requests = requests
         self.board = None if requests is None else requests.board
         self.held = self.ready = False
@@ -287,6 +289,11 @@ class ServoLoop:
         """
         self.controller.reset(q, t)
         self.estimator.reset(q)
+        # the last output is the estimator's before the reset (a latched fault of a NaN
+        # sample): the controller cycle of this period must not read it as the fresh one's
+        self.e_out.status = EstimatorStatus.WARMING_UP
+        self.e_out.wrench[:] = 0.0
+        self.e_out.tau_ext[:] = 0.0
         self.interpolator.reset(q)
         self.cmd.q[:] = q
         self.cmd.qd[:] = 0.0
@@ -324,6 +331,9 @@ class ServoLoop:
         if self.mark_bit >= 0 and self.mark_button.update(
                 input_bit(self.inputs, self.mark_bit), t_loop):
             self.mark(t_loop, None)
+        if self.reset_bit >= 0 and self.reset_button.update(
+                input_bit(self.inputs, self.reset_bit), t_loop):
+            operator_link.reset_fault(self, t_loop)
         requests = self.requests
         if requests is not None:
             if requests.pending:

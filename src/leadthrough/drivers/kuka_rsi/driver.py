@@ -18,7 +18,12 @@ Every document (4 ms) is a feedback sample:
   so that what takes currents (the estimator, identification) works unchanged;
 * ``DiL`` → ``inputs`` (bit k = ``$IN[k+1]``);
 * ``Delay`` grown by more than the documents we never received (the robot counted an answer
-  of ours as late) → ``COMMAND_REJECTED``. RSI reports no E-stop or protective stop: the
+  of ours as late): counted (``late_answers``, ``tolerance``); only late answers in a run
+  (:class:`~leadthrough.drivers.late_answers.LateAnswerTolerance`: 5 in a row, or 20 within
+  250 cycles; RSI itself stops after ``Timeout`` = 100 in a row) → ``COMMAND_REJECTED``.
+  An isolated late answer is one cycle in which the robot held its last correction, which RSI
+  carries on from; latching a fault on each would end sessions on any PC that is not
+  real-time. RSI reports no E-stop or protective stop: the
   robot stops sending (after an E-stop, a stop of the KRL program, or ``Timeout`` late
   answers in a row), which the driver sees as silence: ``read`` returns False, and the caller
   stops on stale feedback.
@@ -42,6 +47,7 @@ from leadthrough.drivers.cycle_limits import CycleLimits
 from leadthrough.drivers.kuka_rsi.client import DEFAULT_PORT, RsiClient
 from leadthrough.drivers.kuka_rsi.config import EthernetConfig, RsiContext
 from leadthrough.drivers.kuka_rsi.messages import RobotMessage
+from leadthrough.drivers.late_answers import LateAnswerTolerance
 from leadthrough.drivers.protocol import ControllerState, DriverFeedback
 from leadthrough.drivers.streaming import Array, StreamingDriver
 from leadthrough.errors import DriverError
@@ -63,6 +69,8 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         timeout: Longest wait for a document [s]; None: 3 cycles.
         connect_timeout: Longest wait for the robot's first document [s].
         margin: Fraction of the limits kept.
+        tolerance: When late answers are ``COMMAND_REJECTED`` (default: 5 in a row or 20
+            within 250 cycles; ``LateAnswerTolerance(1, 1, 1)``: every one).
     """
 
     controller = "KUKA RSI"
@@ -72,7 +80,8 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     def __init__(self, robot: Robot, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
                  cycle: float = 0.004, context: RsiContext | None = None,
                  config: EthernetConfig | None = None, timeout: float | None = None,
-                 connect_timeout: float = 30.0, margin: float = 0.95) -> None:
+                 connect_timeout: float = 30.0, margin: float = 0.95,
+                 tolerance: LateAnswerTolerance | None = None) -> None:
         if robot.n != 6:
             raise DriverError("the RSI configuration streams 6 axes (A1-A6)",
                               source=robot.name, field="robot.n", value=robot.n, expected="6")
@@ -89,7 +98,10 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         self._ipoc0 = 0
         self._delay: int | None = None
         self._seen = 0  # sequence of the newest document received
+        self._late_count = 0  # late answers the newest document reports
         self.corrections_clipped = 0
+        #: Late answers counted, and when they are a fault.
+        self.tolerance = tolerance if tolerance is not None else LateAnswerTolerance()
 
     @property
     def address(self) -> tuple[str, int]:
@@ -142,6 +154,7 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     def _started(self, first: RobotMessage) -> None:
         self._ipoc0 = first.ipoc
         self._delay, self._seen = first.delay, 0
+        self.tolerance.reset()
         if self.limiter is not None:  # answered at once: zero motion
             self._send(self.limiter.limit(self._start_target(first)))
             self._answered = 0
@@ -162,7 +175,11 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         self._delay = sample.delay if sample.delay is not None else self._delay
         unseen = self._sequence(sample) - self._seen - 1
         self._seen = self._sequence(sample)
-        return self._answered is not None and counted > max(unseen, 0)
+        self._late_count = (counted - max(unseen, 0) if self._answered is not None else 0)
+        return self._late_count > 0
+
+    def _rejected(self, sample: RobotMessage, late: bool) -> bool:
+        return self.tolerance.update(self._sequence(sample), self._late_count if late else 0)
 
     def _fill(self, fb: DriverFeedback, sample: RobotMessage) -> None:
         fb.t = sample.ipoc * 1e-3

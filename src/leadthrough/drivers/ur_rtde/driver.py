@@ -237,7 +237,9 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
                 np.minimum(hi, held + step, out=hi)
         return np.clip(q, lo, np.maximum(lo, hi))
 
-    late_is_refusal = False  # the program's servoj repeats the last target: a held cycle
+    def _rejected(self, sample: RtdeState, late: bool) -> bool:
+        """Never: the program's servoj repeats the last target, a held cycle, not a refusal."""
+        return False
 
     def _answer_late(self, sample: RtdeState) -> bool:
         """Our last command missed the program's cycle: the package's echo (the counter of

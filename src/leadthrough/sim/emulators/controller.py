@@ -142,7 +142,7 @@ class EmulatedController(ABC):
         state = self.options.inputs.state(self.t)
         if self.operator is not None:
             hands = self.operator.inputs(self.t)
-            state = {name: state[name] or hands[name] for name in state}
+            state = {name: state[name] or hands.get(name, False) for name in state}
         return state
 
     def datagrams(self, sock: socket.socket | None) -> Iterator[tuple[bytes, tuple[str, int]]]:

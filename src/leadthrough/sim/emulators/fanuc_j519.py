@@ -58,7 +58,7 @@ __all__ = ["FanucJ519Emulator"]
 
 JERK_PER_ACCEL = 50.0  # jerk limit = 50/s × acceleration limit
 WATCHDOG_CYCLES = 4
-DI_INPUTS = {1: "enable", 2: "mark"}  # DI number -> input name
+DI_INPUTS = {1: "enable", 2: "mark", 3: "reset"}  # DI number -> input name
 
 
 class FanucJ519Emulator(UdpController):

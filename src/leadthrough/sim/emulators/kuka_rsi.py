@@ -21,7 +21,8 @@ cycle. Its behaviour, read from the shipped context (``leadthrough_rsi.rsix``):
   file's nominal ``gear_ratio × torque_constant``: the drive torque (before friction) that a
   real controller would compute, with the current sensor's noise; a driver recovers the
   current by dividing by the same factor;
-* ``<DiL>``: $IN[1] (bit 0) enabling device, $IN[2] (bit 1) mark button;
+* ``<DiL>``: $IN[1] (bit 0) enabling device, $IN[2] (bit 1) mark button, $IN[3] (bit 2)
+  fault reset button;
 * ``<RIst>`` / ``<RSol>``: TCP of the measured / commanded axes (forward kinematics) in mm
   and KUKA A B C (Z-Y-X Euler) degrees.
 
@@ -173,5 +174,5 @@ class KukaRsiEmulator(UdpController):
             delay=self.late_total if want("DEF_Delay") else None,
             gear_torque=tuple((fb.current * self._tpa).tolist())
             if want("GearTorque.A1") else None,
-            digital_inputs=int(state["enable"]) | int(state["mark"]) << 1
-            if want("DiL") else None)
+            digital_inputs=(int(state["enable"]) | int(state["mark"]) << 1
+                            | int(state["reset"]) << 2) if want("DiL") else None)

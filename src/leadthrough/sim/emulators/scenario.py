@@ -18,8 +18,9 @@ from leadthrough.sim.emulators.operator import OperatorPlan
 
 __all__ = ["INPUT_NAMES", "EmulatorOptions", "FaultPlan", "InputSchedule", "Window"]
 
-INPUT_NAMES = ("enable", "mark")
-"""Digital inputs the emulators report: the enabling device and the mark button."""
+INPUT_NAMES = ("enable", "mark", "reset")
+"""Digital inputs the emulators report: the enabling device, the mark button and the fault
+reset button (bits 0, 1, 2: J519 DI[1..3], UR DI0-2, KUKA $IN[1..3])."""
 
 
 @dataclass(frozen=True)
@@ -49,12 +50,14 @@ class InputSchedule:
     Attributes:
         enable: Windows where the enabling device is held.
         mark: Windows where the mark button is pressed.
+        reset: Windows where the fault reset button is pressed.
         callback: If given, called with the time [s] instead; returns {name: state} for the
             names of :data:`INPUT_NAMES` (missing names are off).
     """
 
     enable: tuple[Window, ...] = ()
     mark: tuple[Window, ...] = ()
+    reset: tuple[Window, ...] = ()
     callback: Callable[[float], Mapping[str, bool]] | None = None
 
     def state(self, t: float) -> dict[str, bool]:
@@ -62,7 +65,8 @@ class InputSchedule:
         if self.callback is not None:
             got = self.callback(t)
             return {name: bool(got.get(name, False)) for name in INPUT_NAMES}
-        return {"enable": _within(t, self.enable), "mark": _within(t, self.mark)}
+        return {"enable": _within(t, self.enable), "mark": _within(t, self.mark),
+                "reset": _within(t, self.reset)}
 
 
 @dataclass(frozen=True)

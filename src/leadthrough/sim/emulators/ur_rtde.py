@@ -271,7 +271,8 @@ class UrRtdeEmulator(EmulatedController):
             "timestamp": t, "actual_q": tuple(q), "actual_current": tuple(fb.current),
             "target_q": tuple(arm.target), "target_qd": tuple(arm.target_velocity),
             "actual_qd": tuple(qd),
-            "actual_digital_input_bits": int(inputs["enable"]) | int(inputs["mark"]) << 1,
+            "actual_digital_input_bits": (int(inputs["enable"]) | int(inputs["mark"]) << 1
+                                          | int(inputs["reset"]) << 2),
             "actual_digital_output_bits": 0,
             "robot_mode": ROBOT_RUNNING if powered else ROBOT_POWER_OFF,
             "joint_mode": (JOINT_RUNNING,) * 6, "safety_mode": safety, "safety_status": safety,
