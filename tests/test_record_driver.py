@@ -19,8 +19,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from leadthrough.cli.record_robot import check_rsi_reach
 from leadthrough.data.io import load_recording
 from leadthrough.drivers.controllers import DEFAULT_PORTS, connect
+from leadthrough.drivers.protocol import JointCommand
 from leadthrough.drivers.streaming import StreamingDriver
 from leadthrough.errors import ControlError, DriverError
 from leadthrough.excitation.fourier import TrajectorySamples
@@ -28,6 +30,7 @@ from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot import Robot, load_robot
 from leadthrough.session.trajectory_recording import (
     TrajectoryAbortedError,
+    TrajectoryRecording,
     TrajectoryRunConfig,
     approach_move,
     record_trajectory,
@@ -116,6 +119,138 @@ def test_a_robot_away_from_the_start_without_an_approach_is_refused(
         report = emu.emulator.report()
     assert e.value.field == "q" and e.value.value == pytest.approx(0.05, abs=2e-3)
     assert report.violations == ()
+
+
+def _fast_swing(robot: Robot, duration: float = 2.0, share: float = 0.79) -> TrajectorySamples:
+    """Joint 1 out and back from POSE at up to ``share`` of its speed limit (0.79: two
+    cycles' motion in one is beyond the limit, a servoj jump)."""
+    t = np.arange(0.0, duration + 1e-9, 1e-3)
+    w = 2.0 * np.pi / duration
+    amp = share * robot.velocity_limit[0] / w
+    q = np.tile(np.asarray(POSE), (t.size, 1))
+    qd, qdd = np.zeros_like(q), np.zeros_like(q)
+    q[:, 0] += amp * (1.0 - np.cos(w * t))
+    qd[:, 0], qdd[:, 0] = amp * w * np.sin(w * t), amp * w * w * np.cos(w * t)
+    return TrajectorySamples(time=t, q=q, qd=qd, qdd=qdd)
+
+
+def _late_every(driver: StreamingDriver, n: int, delay: float) -> None:  # type: ignore[type-arg]
+    """Make every ``n``-th answer of ``driver`` leave ``delay`` [s] late (a slow client)."""
+    write, count = driver.write, [0]
+
+    def late_write(cmd: JointCommand) -> None:
+        count[0] += 1
+        if count[0] % n == 0:
+            time.sleep(delay)
+        write(cmd)
+
+    driver.write = late_write  # type: ignore[method-assign]
+
+
+@pytest.mark.parametrize("echo", [True, False])
+def test_late_answers_on_rtde_are_held_cycles_never_a_servoj_jump(
+        echo: bool, robots: dict[str, Robot]) -> None:
+    robot = robots["ur5"]
+    traj = _fast_swing(robot)
+    with _robot("ur-rtde", robot) as (driver, emu):
+        if not echo:  # the driver blind to the program's echo: what it did before
+            driver._answer_late = lambda sample: False  # type: ignore[method-assign]
+        _late_every(driver, 40, 2.5 * driver.dt)
+        try:
+            done: TrajectoryRecording | None = record_trajectory(driver, robot, traj)
+        except TrajectoryAbortedError:
+            done = None
+        report = emu.emulator.report()
+    assert report.violations == ()
+    if echo:  # each late answer was seen, the next target judged from what servoj took
+        assert done is not None and report.refused == 0, report.stop_reason
+        assert driver.late_answers >= 10
+    else:  # the target after a late answer was two cycles' motion in one: protective stop
+        assert done is None and report.refused == 1 and report.stop_kind == "protective"
+        assert "velocity" in report.stop_reason
+
+
+@pytest.mark.parametrize("stall", [0.04, 0.08])
+def test_a_client_stall_is_caught_up_at_the_limits_or_stops_past_max_stale(
+        stall: float, robots: dict[str, Robot]) -> None:
+    robot = robots["ur5"]
+    traj = _fast_swing(robot, share=0.93)
+    with _robot("ur-rtde", robot) as (driver, emu):
+        write, count = driver.write, [0]
+
+        def stalling_write(cmd: JointCommand) -> None:
+            count[0] += 1
+            if count[0] == 500:  # 0.5 s into the trajectory, at 0.93 of the speed limit
+                time.sleep(stall)
+            write(cmd)
+
+        driver.write = stalling_write  # type: ignore[method-assign]
+        try:
+            done: TrajectoryRecording | None = record_trajectory(driver, robot, traj)
+            error = ""
+        except TrajectoryAbortedError as e:
+            done, error = None, str(e)
+        report = emu.emulator.report()
+    assert report.refused == 0 and report.violations == ()
+    if stall < 0.05:  # 20 cycles held (max_stale_s 0.05): the robot fell behind the trajectory
+        # (up to 0.12 rad at 2.9 rad/s, 0.1 stops a run) and caught up at the limiter's speed;
+        # it followed what it was sent, so the run goes on
+        assert done is not None, error
+        assert done.max_following_error > 0.05
+    else:  # 40 cycles without a command: a stop naming it, not a following error
+        assert done is None and "went by without a command" in error
+
+
+def test_rsi_refuses_a_trajectory_beyond_its_correction_range_before_moving(
+        robots: dict[str, Robot], tmp_path: Path) -> None:
+    robot = robots["er20"]
+    far = _trajectory()
+    far.q[:, 0] += 1.6  # A1 up to 92 deg (and more) from where RSI started: beyond 0.95 x 90
+    with _robot("kuka-rsi", robot) as (driver, emu):
+        lo, hi = driver.reach()  # type: ignore[attr-defined]
+        with pytest.raises(ControlError) as e:
+            check_rsi_reach(driver, far, tmp_path / "far.csv")  # type: ignore[arg-type]
+        check_rsi_reach(driver, _trajectory(), tmp_path / "near.csv")  # type: ignore[arg-type]
+        time.sleep(0.2)
+        report = emu.emulator.report()
+        q_now = emu.emulator.arm.sample().q
+    np.testing.assert_allclose(np.degrees(hi - lo), 2 * 0.95 * 90.0)
+    np.testing.assert_allclose(np.degrees((lo + hi) / 2), np.degrees(POSE), atol=1e-3)
+    assert e.value.field == "q1" and "correction range" in str(e.value)
+    assert e.value.value == pytest.approx(np.degrees(far.q[:, 0].min()), abs=0.01)
+    # nothing moved: every target the robot got was where RSI started
+    assert report.refused == 0 and report.violations == ()
+    np.testing.assert_allclose(q_now, POSE, atol=1e-3)
+
+
+def test_record_rsi_beyond_the_correction_range_exits_2_and_emulate_checks_q0(
+        tmp_path: Path) -> None:
+    far = _trajectory(1.0)
+    far.q[:, 0] += 1.6
+    traj = tmp_path / "far.csv"
+    save_trajectory(traj, far, robot="er20")
+    port = DEFAULT_PORTS["kuka-rsi"]
+    host = free_loopback_address(port)
+    out = tmp_path / "rec.parquet"
+    rec = subprocess.Popen([sys.executable, "-m", "leadthrough", "record", "--driver",
+                            "kuka-rsi", "--host", host, "--robot", "er20", "--trajectory",
+                            str(traj), "-o", str(out)],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    emu = spawn_emulator("kuka-rsi", "er20", host, port, "--q0", *map(str, POSE))
+    try:
+        _, stderr = rec.communicate(timeout=120)
+    finally:
+        stop_process(emu)
+    assert rec.returncode == 2 and "correction range" in stderr and "q1" in stderr, stderr
+    assert "Traceback" not in stderr and not out.exists()
+    emulate = [sys.executable, "-m", "leadthrough", "emulate", "kuka-rsi", "--robot", "er20",
+               "--duration", "1", "--q0"]
+    short = subprocess.run([*emulate, "0", "0"], capture_output=True, text=True, check=False)
+    assert short.returncode == 2 and "'--q0'" in short.stderr and "6 finite" in short.stderr
+    wide = subprocess.run([*emulate, "0", "0", "9", "0", "0", "0"], capture_output=True,
+                          text=True, check=False)
+    assert wide.returncode == 2 and "joint 3" in wide.stderr and "9.0" in wide.stderr
+    assert "-1.274 .. 2.845 rad" in wide.stderr and "Traceback" not in wide.stderr
 
 
 @pytest.mark.parametrize("kind", ["fanuc-j519", "ur-rtde"])

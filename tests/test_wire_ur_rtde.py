@@ -270,3 +270,26 @@ def test_controller_state_from_the_rtde_codes(safety: int, robot: int, runtime: 
     values = {"safety_mode": safety, "robot_mode": robot, "runtime_state": runtime,
               "output_int_register_24": program}
     assert controller_state(values, "output_int_register_24") == expected
+
+
+def test_a_command_is_within_a_cycle_of_every_target_the_arm_may_hold() -> None:
+    """The echo says servoj holds target 7; 8 (declared late) may still be taken before the
+    next command: that one stays within one cycle at the limiter's speed of both."""
+    from leadthrough.drivers.ur_rtde.driver import UrRtdeDriver
+
+    robot = load_robot("ur5")
+    driver = UrRtdeDriver(robot, "127.0.0.1")
+    step = robot.velocity_limit * driver.margin * driver.dt
+    held, late = np.asarray(POSE), np.asarray(POSE) + 0.9 * step * DIRECTION
+    driver._sent = {7: held, 8: late}
+    driver._counter, driver._echoed = 8, 7
+    wanted = held + 1.5 * step * DIRECTION  # what the limiter allows from `late`
+    sent = driver._within_reach(wanted)
+    np.testing.assert_allclose(sent, held + step * DIRECTION)
+    assert np.all(np.abs(sent - late) <= step + 1e-12)
+    # nothing in flight: the limiter's output passes unchanged
+    driver._echoed = 8
+    np.testing.assert_array_equal(driver._within_reach(late + 0.5 * step), late + 0.5 * step)
+    # no echo seen yet (a program that does not echo): unchanged
+    driver._echoed = None
+    np.testing.assert_array_equal(driver._within_reach(wanted), wanted)

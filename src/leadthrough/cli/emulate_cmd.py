@@ -20,6 +20,7 @@ import threading
 from typing import Any
 
 from leadthrough.errors import SimulationError
+from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.emulators import (
     DEFAULT_PORTS,
     EMULATORS,
@@ -74,7 +75,10 @@ def register(sub: Any) -> None:
     p.add_argument("--cycle-ms", type=int, choices=(2, 4, 8, 12), default=None,
                    help="controller cycle (default: J519 8, RTDE 2 (CB3 8), RSI 4)")
     p.add_argument("--cb3", action="store_true", help="RTDE: a CB3 controller (125 Hz)")
-    p.add_argument("--q0", type=float, nargs="+", metavar="RAD", help="start pose [rad]")
+    p.add_argument("--q0", type=float, nargs="+", metavar="RAD",
+                   help="start pose, one value per joint in radians, within the robot file's "
+                        "joint limits (default: the robot's neutral pose); for kuka-rsi, "
+                        "where the KRL program moved the robot before RSI_ON")
     p.add_argument("--watchdog", type=float, default=None,
                    help="silence tolerated before the controller stops [s]")
     p.add_argument("--duration", type=float, default=None, help="stop after this long [s]")
@@ -125,9 +129,32 @@ def _options(args: argparse.Namespace) -> EmulatorOptions:
             args.operator, seed=args.operator_seed, delay_s=args.operator_delay))
 
 
+def check_start_pose(q0: list[float] | None, robot: Robot) -> None:
+    """``--q0``: one finite value per joint [rad], each within the robot file's limits.
+
+    Raises:
+        SimulationError: Naming ``--q0``, the value and the expected range (exit code 2).
+    """
+    if q0 is None:
+        return
+    if len(q0) != robot.n or not all(math.isfinite(x) for x in q0):
+        raise SimulationError("bad start pose", field="--q0", value=q0,
+                              expected=f"{robot.n} finite joint positions [rad] "
+                                       f"({robot.name})")
+    for j, x in enumerate(q0):
+        lo, hi = float(robot.lower_limits[j]), float(robot.upper_limits[j])
+        if not lo <= x <= hi:
+            raise SimulationError(f"start pose outside joint {j + 1}'s limits",
+                                  field=f"--q0 (joint {j + 1})", value=x,
+                                  expected=f"{lo:.4g} .. {hi:.4g} rad ({robot.name}; "
+                                           "--q0 is in radians)")
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough emulate``."""
-    emulator = make_emulator(args.kind, args.robot, args.seed, args.port, _options(args))
+    robot = load_robot(args.robot)
+    check_start_pose(args.q0, robot)
+    emulator = make_emulator(args.kind, robot, args.seed, args.port, _options(args))
     try:
         emulator.open()
     except OSError as e:

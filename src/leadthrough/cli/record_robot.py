@@ -6,19 +6,22 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from leadthrough.data.io import save_recording
 from leadthrough.drivers.controllers import CONTROLLERS, connect
+from leadthrough.drivers.kuka_rsi.driver import KukaRsiDriver
 from leadthrough.errors import ControlError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot
 from leadthrough.session.trajectory_recording import TrajectoryRunConfig, record_trajectory
 
-__all__ = ["add_connection_arguments", "add_driver_arguments", "record_on_robot",
+__all__ = ["add_connection_arguments", "add_driver_arguments", "check_rsi_reach",
+           "record_on_robot",
            "refuse_settings"]
 
 _SIM_ONLY = ("seed", "run", "plant", "warm_up", "payload_mass", "payload_com")
@@ -42,6 +45,36 @@ def refuse_settings(args: argparse.Namespace, names: tuple[str, ...], message: s
                                value=getattr(args, name), expected=expected)
 
 
+def check_rsi_reach(driver: KukaRsiDriver, traj: TrajectorySamples, source: Path) -> None:
+    """Every sample of ``traj`` within RSI's correction range from where RSI started
+    (:meth:`KukaRsiDriver.reach`); the approach's straight joint path from there to the first
+    sample then is too.
+
+    Raises:
+        ControlError: Naming the first sample and axis out of range (exit code 2), before
+            the robot moves.
+    """
+    lo, hi = driver.reach()
+    out = (traj.q < lo) | (traj.q > hi)
+    if not out.any():
+        return
+    row, j = (int(x) for x in np.argwhere(out)[0])
+    start = (driver.client.reference or (float("nan"),) * 6)[j]
+    q = np.degrees(traj.q[:, j])
+    span, reach = float(np.ptp(q)), float(np.degrees(hi[j] - lo[j]))
+    advice = (f"the trajectory spans {span:.1f} deg on A{j + 1}, more than that range: no "
+              "start pose reaches all of it" if span > reach else
+              "let the KRL program move the robot before RSI_ON to a pose from which all of "
+              f"it is in reach (the trajectory's start, or the middle of its A{j + 1} range, "
+              f"{(q.min() + q.max()) / 2:.1f} deg)")
+    raise ControlError(
+        f"the trajectory leaves RSI's correction range in row {row}: RSI corrects A{j + 1} "
+        f"only within {np.degrees(lo[j]):.1f} .. {np.degrees(hi[j]):.1f} deg (the shipped "
+        f"context's range from where RSI started, {start:.1f} deg); {advice}", source=source,
+        field=f"q{j + 1}", value=round(float(q[row]), 2),
+        expected=f"{np.degrees(lo[j]):.1f} .. {np.degrees(hi[j]):.1f} deg")
+
+
 def add_connection_arguments(g: Any) -> None:
     """``--driver``, ``--host`` and ``--port`` (into an argument group or parser)."""
     g.add_argument("--driver", default=None, choices=sorted(CONTROLLERS),
@@ -60,6 +93,8 @@ def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamp
     driver = connect(args.driver, robot, args.host, args.port)
     bar = Progress(f"recording on {args.driver} at {args.host}", 1, lines=True)
     with driver:
+        if isinstance(driver, KukaRsiDriver):  # before any motion
+            check_rsi_reach(driver, traj, args.trajectory)
         done = record_trajectory(driver, robot, traj, config, progress=bar)
     bar.close()
     save_recording(done.recording, args.output)

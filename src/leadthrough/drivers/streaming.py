@@ -17,11 +17,12 @@ cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
   lost or came too late went by without a target from us; the limiter is told
   (:meth:`~leadthrough.drivers.cycle_limits.CycleLimiter.skip`), so the next target is judged
   against what the controller did meanwhile; so is an answer the controller reports it did
-  not take in time (J519's "command received" bit, RSI's late-answer count), which also sets
-  ``COMMAND_REJECTED`` in the feedback (RSI: only late answers in a run,
-  :mod:`~leadthrough.drivers.late_answers`). A write with no new packet to answer sends
-  nothing (``unanswered`` counts it): the controller is waiting for its next cycle, not for
-  a second answer.
+  not take in time (J519's "command received" bit, RSI's late-answer count, the UR program's
+  echo of the command it took), which also sets ``COMMAND_REJECTED`` in the feedback (RSI:
+  only late answers in a run, :mod:`~leadthrough.drivers.late_answers`; UR: never, its
+  program just holds a cycle). A write with no new packet to answer sends nothing
+  (``unanswered`` counts it): the controller is waiting for its next cycle, not for a second
+  answer.
 
 :meth:`~StreamingDriver.open` connects, runs the protocol's handshake and waits for the first
 packet, checking it against the robot file (joint count, and every joint inside its limits,
@@ -137,7 +138,7 @@ class StreamingDriver(ABC, Generic[S]):
             return
         late = self._answer_late(sample)
         if late and self.limiter is not None:
-            self.limiter.retract(self.extrapolates)
+            self._after_late_answer()
             self.late_answers += 1
         self._sample, self._newest = sample, sample
         self._sample_late = self._rejected(sample, late)
@@ -306,6 +307,12 @@ class StreamingDriver(ABC, Generic[S]):
         """Whether ``sample`` reports that the controller did not take our answer to the
         packet before it in time (default: the protocol does not tell)."""
         return False
+
+    def _after_late_answer(self) -> None:
+        """The limiter follows what the controller did instead of our late answer (default:
+        back to the state before it, then a cycle without a target)."""
+        assert self.limiter is not None
+        self.limiter.retract(self.extrapolates)
 
     def _rejected(self, sample: S, late: bool) -> bool:
         """Whether ``sample``'s feedback reports ``COMMAND_REJECTED`` (default: every late

@@ -179,6 +179,12 @@ class ServoLoop:
                                value=type(driver).__name__,
                                expected="a fresh sample on the first read")
         q0 = fb.q.copy()
+        if not driver.simulated:  # answered at once (a hold where it stands): the compute
+            # below may outlast the cycle, and a packet seen and not answered in time is a
+            # late answer to the controller (RSI counts it, the loop faults on it)
+            self.cmd.q[:] = q0
+            self.cmd.qd[:] = 0.0
+            driver.write(self.cmd)
         self._dry_period(q0, fb.t)
         self.estimator.reset(q0)
         self.controller.reset(q0, fb.t)
@@ -188,6 +194,10 @@ class ServoLoop:
         if self.board is not None:
             self.board.attach(driver.n)
             operator_link.publish_settings(self)
+        if not driver.simulated:  # the newest packet, for the first period to answer (those
+            # that came during the compute went unanswered and unseen, as lost ones)
+            driver.step()
+            driver.read(fb)
         if self.watch is not None:
             self.watch.start()
         self.t = fb.t

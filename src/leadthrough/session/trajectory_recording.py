@@ -17,9 +17,13 @@ controller cycle, in three phases:
    the controller reports torque), and the target that was in force.
 
 Anything that is not a normal sample stops the run: a controller state flag (E-stop,
-protective stop, not ready), a non-finite sample, a stretch of stale feedback or of commands the
-controller did not take in time (``COMMAND_REJECTED``: a late answer) longer than
-``max_stale_s``, a following error beyond ``max_following_error``, or a
+protective stop, not ready), a non-finite sample, a stretch of stale feedback, of commands the
+controller did not take in time (``COMMAND_REJECTED``: a late answer) or of controller cycles
+that went by without a command (a sequence jump: this side stalled) longer than
+``max_stale_s``, a following error beyond ``max_following_error`` (against the target in force
+at the controller: a streaming driver's limited one, which after held cycles catches up with
+the trajectory at the controller's speed limit; the recording's ``max_following_error`` is
+against the trajectory), or a
 :class:`~leadthrough.errors.DriverError`. The robot then gets a **commanded stop**: the
 target's velocity brought to zero at each joint's acceleration limit (while the link lasts;
 a broken link leaves the stop to the controller's own watchdog), and the run raises
@@ -42,6 +46,7 @@ from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
 from leadthrough.drivers.protocol import ControllerState, Driver, DriverFeedback, JointCommand
+from leadthrough.drivers.streaming import StreamingDriver
 from leadthrough.errors import ControlError, DriverError, check_fields
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.robot.description import Robot
@@ -165,6 +170,10 @@ class _Run:
         self.stale_run = 0
         self.phase = "start"
         self.max_stale = max(1, math.ceil(config.max_stale_s / driver.dt))
+        # the target in force at the controller: a streaming driver's limited one (behind the
+        # stream after cycles the controller held), else the command itself
+        self.limiter = driver.limiter if isinstance(driver, StreamingDriver) else None
+        self.last_sequence: int | None = None
 
     def first_sample(self) -> None:
         end = time.monotonic() + self.config.first_sample_s
@@ -198,9 +207,14 @@ class _Run:
                 self.stop(f"{self.stale_run} commands in a row not taken", phase)
         else:
             self.stale_run = 0
+        gap = 0 if self.last_sequence is None else self.fb.sequence - self.last_sequence - 1
+        self.last_sequence = int(self.fb.sequence)
+        if gap > self.max_stale:  # cycles that went by without a command of ours
+            self.stop(f"{gap} controller cycles went by without a command", phase)
         if not (np.all(np.isfinite(self.fb.q)) and np.all(np.isfinite(self.fb.current))):
             self.stop("a non-finite sample", phase)
-        err = float(np.max(np.abs(self.cmd.q - self.fb.q)))
+        target = self.cmd.q if self.limiter is None else self.limiter.position
+        err = float(np.max(np.abs(target - self.fb.q)))
         if err > self.config.max_following_error:
             self.stop(f"following error {err:.3g} rad", phase)
         return True

@@ -113,6 +113,21 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         """The newest ``<Rob>`` document."""
         return self.client.last_message
 
+    def reach(self) -> tuple[Array, Array]:
+        """The joint positions the corrections can reach [rad], (lower, upper), shapes (6,):
+        the reference (``ASPos`` at ``RSI_ON``) plus the context's correction range as the
+        driver clips it (AXISCORR, within ``margin`` of AXISCORRMON). A target beyond it is
+        clipped: the robot stops short of it and the run ends on a following error.
+
+        Raises:
+            DriverError: Not open yet (no reference).
+        """
+        ref = self.client.reference
+        if ref is None:
+            raise DriverError("no reference yet", field="ASPos", value=None,
+                              expected="open() first (the robot's first document)")
+        return np.radians(np.array(ref) + self._ak_lo), np.radians(np.array(ref) + self._ak_hi)
+
     def listen(self) -> tuple[str, int]:
         """Bind the UDP port now (``open`` then waits on it); returns the bound address, the
         real port when 0 was asked (for a robot or emulator to be pointed at)."""

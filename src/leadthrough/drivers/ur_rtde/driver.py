@@ -25,7 +25,11 @@ Commands write the six targets, a watchdog counter (+1 per command) and mode 1 (
 the input registers; targets pass a :class:`~leadthrough.drivers.cycle_limits.CycleLimiter`
 with the robot file's joint speed limits (a ``servoj`` target too far from the last one makes
 the controller stop with a protective stop; ``servoj`` smooths the targets itself, so their
-acceleration is not limited here). :meth:`UrRtdeDriver.close` writes
+acceleration is not limited here). The program echoes the counter of the targets it gave
+``servoj`` in ``output_int_register_{R+1}``: a package whose echo is not our last command's
+counter means that command came after the program's read (a slow client), and the arm held
+the echoed targets for the cycle; the next command is judged from those (counted in
+``late_answers``; not a refusal: the program only held a cycle). :meth:`UrRtdeDriver.close` writes
 mode 2 (the program stops the arm with ``stopj`` and halts), then pauses and disconnects.
 
 Mode, safety and runtime codes: Universal Robots' RTDE guide (output table) and the
@@ -62,6 +66,7 @@ RUNTIME_PLAYING = 2
 ESTOP_MODES = frozenset((6, 7))
 PROTECTIVE_MODES = frozenset((3, 5, 12, 13))
 FAULT_MODES = frozenset((8, 9))
+_KEEP_SENT = 64  # commands remembered for the program's echo (0.13 s at 500 Hz)
 
 
 def controller_state(values: dict[str, object], register: str) -> ControllerState:
@@ -118,13 +123,19 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self.host, self.script_port = host, script_port
         self.script = script if script is not None else ServoScriptParameters()
         self._fixed_timeout = timeout is not None
-        outputs = (*DEFAULT_OUTPUTS[:-1],
-                   f"output_int_register_{self.script.register_offset}")
+        reg = self.script.register_offset
+        outputs = (*DEFAULT_OUTPUTS[:-1], f"output_int_register_{reg + 1}",
+                   f"output_int_register_{reg}")
         self.client = RtdeClient(host, port, outputs=outputs, frequency=frequency,
                                  register_offset=self.script.register_offset,
                                  timeout=connect_timeout)
         self._register = outputs[-1]
+        self._echo = outputs[-2]
         self._counter = 0
+        self._sent: dict[int, Array] = {}  # recent targets sent, by watchdog counter
+        self._late_counter: int | None = None
+        self._taken: Array | None = None
+        self._echoed: int | None = None  # the newest echo of the program
         self._last: RtdeState | None = None
         self._t0: float | None = None
 
@@ -139,6 +150,8 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         if not self._fixed_timeout:
             self.timeout = 3.0 * self._dt
         self._counter, self._t0 = 0, None
+        self._sent.clear()
+        self._late_counter, self._taken, self._echoed = None, None, None
         if self.script_port is None:
             return
         try:
@@ -201,8 +214,58 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         fb.inputs_read = "actual_digital_input_bits" in v
 
     def _send(self, q: Array) -> None:
+        q = self._within_reach(q)
         self._counter = (self._counter + 1) & 0x7FFFFFFF
+        self._sent[self._counter] = q.copy()
+        self._sent.pop(self._counter - _KEEP_SENT, None)
         self.client.send(ServoCommand(tuple(q.tolist()), self._counter, Mode.SERVO))
+
+    def _within_reach(self, q: Array) -> Array:
+        """``q`` [rad] within one cycle at the limiter's speed of every target the arm may
+        hold when it takes it: the newest echoed one and each sent after it (a late command
+        may still be taken before this one). Usually that is the last target sent alone and
+        the limiter's output passes unchanged; the targets are pairwise within that step, so
+        the intersection is never empty."""
+        if self._echoed is None:
+            return q
+        step = self.robot.velocity_limit * self.margin * self._dt
+        lo, hi = np.full(self._n, -np.inf), np.full(self._n, np.inf)
+        for c in range(max(self._echoed, self._counter - _KEEP_SENT + 1), self._counter + 1):
+            held = self._sent.get(c)
+            if held is not None:
+                np.maximum(lo, held - step, out=lo)
+                np.minimum(hi, held + step, out=hi)
+        return np.clip(q, lo, np.maximum(lo, hi))
+
+    def _rejected(self, sample: RtdeState, late: bool) -> bool:
+        """Never: the program's servoj repeats the last target, a held cycle, not a refusal."""
+        return False
+
+    def _answer_late(self, sample: RtdeState) -> bool:
+        """Our last command missed the program's cycle: the package's echo (the counter of
+        the targets servoj took) is not its counter (once per command: a client that is
+        slow to answer sees several packages before its next one)."""
+        echo = sample.values.get(self._echo)
+        if echo is None or self._answered is None:
+            return False
+        if self._echoed is None and int(echo) not in self._sent:
+            return False  # no echo of ours yet (a program that does not echo: never)
+        self._echoed = int(echo)
+        if self._echoed == self._counter or self._late_counter == self._counter:
+            return False
+        self._late_counter = self._counter
+        self._taken = self._sent.get(self._echoed)
+        return True
+
+    def _after_late_answer(self) -> None:
+        """The arm holds the targets servoj last took: the next command is judged from them
+        (a retract would assume the command before the late one; under a slow client that
+        one may be late too)."""
+        assert self.limiter is not None
+        if self._taken is not None:
+            self.limiter.reset(self._taken)
+        else:
+            self.limiter.retract(self.extrapolates)
 
     def _no_data_hint(self) -> str:
         return "data packages: is RTDE enabled on the controller?"

@@ -11,7 +11,8 @@ RTDE port (30002 for 30004, as on a UR controller; an ephemeral port when the RT
 and runs ``leadthrough_servo.script`` when it receives it, with the received program's
 watchdog time and register offset: the program writes 1 to its state register, then every
 cycle reads the registers: mode 1 servos to the six targets (``servoj``, modelled by the
-arm's per-cycle interpolation; lookahead and gain are not modelled), mode 0 holds, mode 2
+arm's per-cycle interpolation; lookahead and gain are not modelled) and reports their watchdog
+counter in its output register R+1 (the package of that cycle carries it), mode 0 holds, mode 2
 stops the arm and halts the program (state 2). Once the watchdog counter has changed, when
 it then does not change for the watchdog time (the program's, unless ``options.watchdog``),
 the program stops the arm at its deceleration and halts (state 3, ``runtime_state``
@@ -243,6 +244,7 @@ class UrRtdeEmulator(EmulatedController):
             self.stream_ended()
         elif mode == Mode.SERVO and fresh:
             q = np.array([float(self._register("double", i)) for i in range(6)])
+            self.out_int[self.offset + 1] = counter  # the command servoj takes
             self.arm.command(q, t, refusal=StopKind.PROTECTIVE)
         else:
             self.arm.hold()
