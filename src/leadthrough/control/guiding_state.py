@@ -45,7 +45,7 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("hand_release", b1),                    # HandReleaseConfig.enabled
         ("hand_drop_fraction", f8), ("hand_lockout_s", f8), ("hand_window_s", f8),  # [-, s, s]
         ("hand_alpha", f8), ("hand_forget", f8), ("hand_rise_forget", f8),  # per cycle
-        ("drift_rate", f8), ("drift_span_s", f8),   # rest_drift.py: 1/settle_s [1/s], [s]
+        ("drift_rate", f8), ("drift_span_s", f8),   # rest_drift.py: 1/drift_s [1/s], [s]
         ("drift_alpha_fast", f8), ("drift_alpha_slow", f8), ("drift_decay", f8),  # per cycle
         ("max_speed", f8, (2,)),                 # (v_max, ω_max) [m/s, rad/s]
         ("max_step", f8, (2,)),                  # (a_max·dt, α_max·dt) [m/s, rad/s]

@@ -43,7 +43,7 @@ from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
 from leadthrough.sim.emulators.controller import UdpController
-from leadthrough.sim.emulators.scenario import EmulatorOptions
+from leadthrough.sim.emulators.scenario import EmulatorOptions, input_bits
 
 __all__ = ["KukaRsiEmulator"]
 
@@ -174,5 +174,4 @@ class KukaRsiEmulator(UdpController):
             delay=self.late_total if want("DEF_Delay") else None,
             gear_torque=tuple((fb.current * self._tpa).tolist())
             if want("GearTorque.A1") else None,
-            digital_inputs=(int(state["enable"]) | int(state["mark"]) << 1
-                            | int(state["reset"]) << 2) if want("DiL") else None)
+            digital_inputs=input_bits(state) if want("DiL") else None)

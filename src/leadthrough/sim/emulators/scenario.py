@@ -16,7 +16,7 @@ import numpy as np
 from leadthrough.errors import SimulationError
 from leadthrough.sim.emulators.operator import OperatorPlan
 
-__all__ = ["INPUT_NAMES", "EmulatorOptions", "FaultPlan", "InputSchedule", "Window"]
+__all__ = ["INPUT_NAMES", "EmulatorOptions", "FaultPlan", "InputSchedule", "Window", "input_bits"]
 
 INPUT_NAMES = ("enable", "mark", "reset")
 """Digital inputs the emulators report: the enabling device, the mark button and the fault
@@ -65,8 +65,13 @@ class InputSchedule:
         if self.callback is not None:
             got = self.callback(t)
             return {name: bool(got.get(name, False)) for name in INPUT_NAMES}
-        return {"enable": _within(t, self.enable), "mark": _within(t, self.mark),
-                "reset": _within(t, self.reset)}
+        return {name: _within(t, getattr(self, name)) for name in INPUT_NAMES}
+
+
+def input_bits(state: Mapping[str, bool]) -> int:
+    """The inputs as one word: bit k is the input ``INPUT_NAMES[k]`` (UR's DI0-2, KUKA's
+    $IN[1..3])."""
+    return sum(int(state[name]) << k for k, name in enumerate(INPUT_NAMES))
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
 from leadthrough.sim.emulators.controller import EmulatedController
 from leadthrough.sim.emulators.rtde_session import RtdeSession
-from leadthrough.sim.emulators.scenario import EmulatorOptions
+from leadthrough.sim.emulators.scenario import EmulatorOptions, input_bits
 from leadthrough.sim.emulators.ur_secondary import ReceivedProgram, ScriptListener
 
 __all__ = ["PRODUCED_OUTPUTS", "UrRtdeEmulator"]
@@ -271,8 +271,7 @@ class UrRtdeEmulator(EmulatedController):
             "timestamp": t, "actual_q": tuple(q), "actual_current": tuple(fb.current),
             "target_q": tuple(arm.target), "target_qd": tuple(arm.target_velocity),
             "actual_qd": tuple(qd),
-            "actual_digital_input_bits": (int(inputs["enable"]) | int(inputs["mark"]) << 1
-                                          | int(inputs["reset"]) << 2),
+            "actual_digital_input_bits": input_bits(inputs),
             "actual_digital_output_bits": 0,
             "robot_mode": ROBOT_RUNNING if powered else ROBOT_POWER_OFF,
             "joint_mode": (JOINT_RUNNING,) * 6, "safety_mode": safety, "safety_status": safety,
