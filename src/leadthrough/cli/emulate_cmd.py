@@ -178,5 +178,6 @@ def run(args: argparse.Namespace) -> int:
     gc.freeze()
     report = emulator.run(stop)
     for key, value in dataclasses.asdict(report).items():
-        print(f"{key}: {value}")
+        for name, item in (value.items() if isinstance(value, dict) else [("", value)]):
+            print(f"{key}{'.' if name else ''}{name}: {item}")  # timing.late: ...
     return 0
