@@ -212,13 +212,16 @@ class EmulatedController(ABC):
         clock (the 1 ms loop catching up after a lag of its own), wait until the cycle's real
         time, a cycle after that packet went out, and read what has come in. A real
         controller's cycles are evenly spaced: a reply counts as missing only when it is
-        missing at that time. The protocols call it before counting a missed cycle."""
+        missing at that time. When the cycle runs late, read once more all the same: a reply
+        that came in while this step simulated the arm (after the step's first read) is no
+        missing reply (whether it came by the deadline is the answer timing's to say, from
+        its kernel stamp). The protocols call it before counting a missed cycle."""
         if not self.options.realtime:
             return
         remaining = self._sent_at + self.arm.cycle - time.monotonic()
         if remaining > 0:
             time.sleep(remaining)
-            self.poll(self.t)
+        self.poll(self.t)
 
     def cycle_answered(self, fresh: bool) -> None:
         """Count a streaming cycle: with a fresh command, or missed."""
