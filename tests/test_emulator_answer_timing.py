@@ -72,6 +72,20 @@ def test_late_answers_that_coincide_with_the_emulators_lag_are_told_apart() -> N
     assert [e.endswith(" lag") for e in c.events] == [True, True, False]
 
 
+def test_a_send_call_that_held_the_emulator_up_is_the_emulators() -> None:
+    """A status whose send call took 1.5 ms (the emulator held up inside it, though on time
+    by its schedule), answered 4.5 ms after the call began but 3 ms after it returned: late,
+    with the emulator's lag. Answered 4.5 ms after a call that took 0.1 ms: the client's."""
+    t = _timing()
+    t.sent(1, T0, lag=0.0, done=T0 + 1.5e-3)
+    t.answer(T0 + 4.5e-3, key=1)
+    t.sent(2, T0 + 0.010, lag=0.0, done=T0 + 0.0101)
+    t.answer(T0 + 0.0145, key=2)
+    c = t.counts()
+    assert (c.late, c.late_with_lag) == (2, 1)
+    assert c.events == ("t=0.000 #1 +4.5 ms lag", "t=0.000 #2 +4.5 ms")
+
+
 def test_never_answered_statuses_expire_and_a_resync_skips_cycles() -> None:
     """A status with no answer within the horizon is never answered; one whose deadline fell in
     a resynchronisation (a 10 ms lag dropped: 2 cycle slots of 4 ms skipped) coincides with the

@@ -7,8 +7,9 @@ after the controller sent its status packet. The emulator is a Python process st
 ``missed_cycles``) cannot tell a client that answered late from an emulator that sent late or
 read late. :class:`AnswerTiming` does, from timestamps alone:
 
-* each timed status is stamped (``CLOCK_REALTIME``) just before the send system call, with
-  how late the emulator sent it behind its own schedule;
+* each timed status is stamped (``CLOCK_REALTIME``) just before the send system call and
+  just after it returned (on loopback the datagram reaches the peer's socket in between),
+  with how late the emulator sent it behind its own schedule;
 * each answer carries the **kernel's receive timestamp** (``SO_TIMESTAMPNS``, read with
   ``recvmsg``: :func:`enable_rx_stamps`, :func:`recv_stamped`), the time it reached the
   emulator's socket whenever the emulator got round to reading it. An answer is **late** when
@@ -17,8 +18,9 @@ read late. :class:`AnswerTiming` does, from timestamps alone:
 * a late or missing answer **coincides with the emulator's lag** when the status went out more
   than ``tolerance`` behind schedule, or the emulator's loop was behind (:meth:`lagged`,
   :meth:`resynced`) between the send and the answer (the deadline for a missing one), or the
-  answer's time is only an upper bound (``exact=False``: see below). Those are not shown to
-  be the client's;
+  answer is late only when timed from before the send call (it came within a cycle of the
+  call's return: the emulator was held up inside it), or the answer's time is only an upper
+  bound (``exact=False``: see below). Those are not shown to be the client's;
 * the emulator's own misses are counted apart: statuses sent more than ``tolerance`` late and
   cycle slots skipped by its resynchronisations.
 
@@ -125,6 +127,7 @@ class _Status:
     label: float   # simulated time of the send [s], for the events
     sent: float    # wall clock (CLOCK_REALTIME) just before the send [s]
     lag: float     # how late the emulator sent it behind its schedule [s]
+    done: float    # wall clock just after the send call returned [s]
 
 
 class AnswerTiming:
@@ -148,7 +151,8 @@ class AnswerTiming:
         self.events: list[str] = []
 
     # ------------------------------------------------------------------------ the emulator
-    def sent(self, key: int, at: float, lag: float, label: float = 0.0) -> None:
+    def sent(self, key: int, at: float, lag: float, label: float = 0.0,
+             done: float | None = None) -> None:
         """A timed status left.
 
         Args:
@@ -156,12 +160,13 @@ class AnswerTiming:
             at: Wall clock just before the send system call [s, ``CLOCK_REALTIME``].
             lag: How late that was behind the emulator's schedule [s].
             label: Simulated time, for the events [s].
+            done: Wall clock just after the call returned [s] (None: ``at``).
         """
         self.expire(at)
         self.statuses += 1
         if lag > self.tolerance:
             self.sends_late += 1
-        self._pending[key] = _Status(label, at, lag)
+        self._pending[key] = _Status(label, at, lag, at if done is None else done)
 
     def lagged(self, start: float, end: float) -> None:
         """The emulator's loop was behind its schedule from ``start`` to ``end``
@@ -202,7 +207,7 @@ class AnswerTiming:
             self.in_time += 1
             return
         self.late += 1
-        lag = not exact or self._coincides(status, rx)
+        lag = not exact or rx - status.done <= self.cycle or self._coincides(status, rx)
         self.late_with_lag += lag
         self._event(status, key, f"+{response * 1e3:.1f} ms", lag)
 

@@ -205,7 +205,7 @@ class EmulatedController(ABC):
             self.on_send_error(sock)
             return
         if key is not None:
-            self.timing.sent(key, at, late, label=self.t)
+            self.timing.sent(key, at, late, label=self.t, done=time.time())
 
     def wait_for_reply(self) -> None:
         """No reply to the last cycle's packet yet: when this cycle runs early by the wall
