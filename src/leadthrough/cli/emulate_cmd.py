@@ -6,7 +6,9 @@ limit checks, E-stop and protective stop (:mod:`leadthrough.sim.emulators`). Dig
 (enabling device, mark button) and faults are scripted with time windows ``START:END`` in
 seconds since the start (``END`` may be ``inf``). One line ``leadthrough: emulating ...`` on
 stdout says it is ready; on Ctrl-C (or SIGTERM) it prints its report: commands taken and
-refused, executed targets that broke a limit (always none), why the arm stopped.
+refused, executed targets that broke a limit (always none), why the arm stopped, and the
+answers timed against the actual sends (``timing.*``:
+:mod:`leadthrough.sim.emulators.answer_timing`).
 """
 
 from __future__ import annotations
