@@ -12,6 +12,11 @@ loads the recording. It prints:
   statuses left unanswered, the RTDE program's counter unchanged), the emulator's own largest
   lag behind the wall clock, and the first controller cycle's compute time against the
   median (the first is kept for sessions up to ten minutes);
+* attribution (the emulator's ``timing.*``, :mod:`leadthrough.sim.emulators.answer_timing`):
+  every answer timed by the kernel's receive stamp against the status packet's actual send:
+  answers in time, late (after send + one cycle) and never answered, and of those the ones
+  that coincide with the emulator's own lag; the statuses the emulator sent late (more than
+  1 ms behind its schedule) and the cycle slots its resynchronisations skipped;
 * memory: RSS after the first minute (set-up done), at the end, the growth; the file's size;
   ``teach``'s answer; the emulator's report.
 
@@ -28,6 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import select
 import subprocess
 import sys
 import tempfile
@@ -49,6 +55,20 @@ def _rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def _wait_for(proc: subprocess.Popen[str], text: str, timeout: float) -> str:
+    """Read ``proc``'s stderr until a line holds ``text`` (or it ends, or ``timeout`` [s]);
+    returns what was read."""
+    assert proc.stderr is not None
+    read, end = "", time.monotonic() + timeout
+    while time.monotonic() < end:
+        ready, _, _ = select.select([proc.stderr], [], [], max(0.0, end - time.monotonic()))
+        line = proc.stderr.readline() if ready else ""
+        read += line
+        if not line or text in line:
+            break
+    return read
+
+
 def _emulator(kind: str, port: int, minutes: float,
               rt_priority: int | None) -> subprocess.Popen[str]:
     presses: list[str] = []
@@ -60,6 +80,19 @@ def _emulator(kind: str, port: int, minutes: float,
     if rt_priority is not None:
         os.sched_setscheduler(emu.pid, os.SCHED_FIFO, os.sched_param(rt_priority))
     return emu
+
+
+def _attribution(emu: dict[str, str]) -> str:
+    """The emulator's answer timing as one paragraph (see the module doc)."""
+    def f(name: str) -> str:
+        return emu.get(f"timing.{name}", "?")
+
+    return (f"attribution: {f('statuses')} statuses timed; answers in time {f('in_time')}, "
+            f"late {f('late')} (with the emulator's lag {f('late_with_lag')}), never "
+            f"{f('never')} (with its lag {f('never_with_lag')}); emulator: statuses sent late "
+            f"{f('sends_late')}, cycles skipped {f('cycles_skipped')} ({emu.get('resyncs', '?')} "
+            f"resyncs); stale answers {f('stale')}; worst answer {f('worst_answer_ms')} ms\n"
+            f"  late/missing answers: {f('events')}")
 
 
 def main() -> None:
@@ -90,8 +123,9 @@ def main() -> None:
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
     guide = subprocess.Popen(guide_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True)
-    if emu is None:
-        time.sleep(20.0)  # RSI: the PC listens (after compiling), then the robot sends
+    early_stderr = ""
+    if emu is None:  # RSI: the PC listens (after compiling), then the robot sends
+        early_stderr = _wait_for(guide, "compiling the loop done", timeout=300.0)
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
     t0 = time.monotonic()
     samples: list[tuple[float, float]] = []
@@ -103,7 +137,8 @@ def main() -> None:
         time.sleep(10.0)
     stdout, stderr = guide.communicate()
     report = stop_emulator(emu, timeout=30.0)
-    result = json.loads(stdout) if stdout.strip().startswith("{") else {"stderr": stderr}
+    result = (json.loads(stdout) if stdout.strip().startswith("{")
+              else {"stderr": early_stderr + stderr})
     after = [m for s, m in samples if s >= 60.0]
     first = after[0] if after else float("nan")
     teach = subprocess.run(_lt("teach", str(session), "--robot", "er20", "--no-line", "-o",
@@ -124,6 +159,7 @@ def main() -> None:
               f"{result['cycle_us_median']:.0f} µs: ratio "
               f"{result['cycle_us_first'] / result['cycle_us_median']:.2f} (goal <= 2), "
               f"p99 {result['cycle_us_p99']:.0f} µs, max {result['cycle_us_max']:.0f} µs")
+        print(_attribution(emu_fields))
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
     print("emulator: " + " ".join(report.split()))

@@ -194,6 +194,12 @@ def test_late_answers_are_counted_then_rsi_stops(er20: Robot) -> None:
     assert delays[22] - delays[19] >= 3 and len(msgs) > 55
     assert report.stop_kind == "watchdog" and "late answers" in report.stop_reason
     assert len(msgs) < 70 and silent > 0.2  # the robot stopped sending after the timeout
+    # the answer timing names the three unanswered documents (msgs[19:22]: answer(k) sees
+    # the document counted), and not the run that ended the stream (silence from msgs[60])
+    events = " ".join(report.timing.events)
+    assert all(f"#{m.ipoc} never" in events for m in msgs[19:22]), events
+    assert not any(f"#{m.ipoc} " in events for m in msgs[60:]), events
+    assert report.timing.never >= 3 and report.timing.in_time > 50
 
 
 def test_correction_monitor_stops_rsi(er20: Robot) -> None:

@@ -6,7 +6,9 @@ limit checks, E-stop and protective stop (:mod:`leadthrough.sim.emulators`). Dig
 (enabling device, mark button) and faults are scripted with time windows ``START:END`` in
 seconds since the start (``END`` may be ``inf``). One line ``leadthrough: emulating ...`` on
 stdout says it is ready; on Ctrl-C (or SIGTERM) it prints its report: commands taken and
-refused, executed targets that broke a limit (always none), why the arm stopped.
+refused, executed targets that broke a limit (always none), why the arm stopped, and the
+answers timed against the actual sends (``timing.*``:
+:mod:`leadthrough.sim.emulators.answer_timing`).
 """
 
 from __future__ import annotations
@@ -178,5 +180,6 @@ def run(args: argparse.Namespace) -> int:
     gc.freeze()
     report = emulator.run(stop)
     for key, value in dataclasses.asdict(report).items():
-        print(f"{key}: {value}")
+        for name, item in (value.items() if isinstance(value, dict) else [("", value)]):
+            print(f"{key}{'.' if name else ''}{name}: {item}")  # timing.late: ...
     return 0

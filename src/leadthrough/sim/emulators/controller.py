@@ -15,18 +15,23 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
 from leadthrough.robot.description import Robot
+from leadthrough.sim.emulators.answer_timing import (
+    AnswerTiming,
+    TimingCounts,
+    enable_rx_stamps,
+    recv_stamped,
+)
 from leadthrough.sim.emulators.arm import ArmPhase, EmulatedArm, MotionLimits, StopKind
 from leadthrough.sim.emulators.operator import EmulatedOperator
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
 __all__ = ["EmulatedController", "EmulatorReport", "UdpController"]
-
 
 
 @dataclass(frozen=True)
@@ -53,6 +58,8 @@ class EmulatorReport:
         operator_start: Simulated time the operator's script started [s] (None: no operator,
             or not yet).
         operator_end: Simulated time the script ends [s] (None: as above).
+        timing: The answers timed against the actual sends, the client's lateness apart from
+            the emulator's own lag (:mod:`~leadthrough.sim.emulators.answer_timing`).
     """
 
     kind: str
@@ -71,6 +78,7 @@ class EmulatorReport:
     missed_cycles: int = 0
     operator_start: float | None = None
     operator_end: float | None = None
+    timing: TimingCounts = field(default_factory=TimingCounts)
 
 
 class EmulatedController(ABC):
@@ -95,12 +103,15 @@ class EmulatedController(ABC):
         self.arm = EmulatedArm(robot, seed, cycle_ms * 1e-3, self.motion_limits(robot), q0,
                                operator=self.operator)
         self.rng = np.random.default_rng([seed, 7])
-        self._outbox: list[tuple[float, socket.socket, bytes, tuple[str, int] | None]] = []
+        self._outbox: list[tuple[float, socket.socket, bytes, tuple[str, int] | None,
+                                 int | None]] = []
         self.sent = self.dropped = self.delayed = 0
         self.max_lag, self.resyncs = 0.0, 0
         self.missed_cycles = 0  # see EmulatorReport; counted by the protocol (cycle_answered)
         self._missed_run = 0     # missed cycles since the last fresh command
         self._sent_at = -math.inf  # wall-clock time of the last cycle's packet [s]
+        self.timing = AnswerTiming(self.arm.cycle, tolerance=self.arm.dt)
+        self._due = time.monotonic()  # when the current 1 ms step was due (monotonic) [s]
         self.closed = False
         self._ticks = 0
         self._estopped = self._protective = False
@@ -145,21 +156,29 @@ class EmulatedController(ABC):
             state = {name: state[name] or hands.get(name, False) for name in state}
         return state
 
-    def datagrams(self, sock: socket.socket | None) -> Iterator[tuple[bytes, tuple[str, int]]]:
-        """Every datagram queued on a non-blocking UDP socket (none if it is closed)."""
+    def datagrams(self, sock: socket.socket | None
+                  ) -> Iterator[tuple[bytes, tuple[str, int], float, bool]]:
+        """Every datagram queued on a non-blocking UDP socket (none if it is closed): data,
+        sender, the kernel's receive time [s, ``CLOCK_REALTIME``] and whether it is the
+        kernel's (:func:`~leadthrough.sim.emulators.answer_timing.recv_stamped`)."""
         while sock is not None:
             try:
-                yield sock.recvfrom(4096)
+                data, addr, rx, exact = recv_stamped(sock, 4096)
             except (BlockingIOError, ConnectionRefusedError):
                 return
+            assert addr is not None
+            yield data, addr, rx, exact
 
-    def transmit(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None) -> None:
+    def transmit(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None,
+                 key: int | None = None) -> None:
         """Send a packet through the fault plan (dropped, delayed, or sent now).
 
         Args:
             sock: Socket to send on.
             data: The packet.
             addr: Destination (UDP), or None for a connected stream socket.
+            key: A status whose answer is timed (:attr:`timing`): its sequence number, IPOC
+                or cycle index; None: not timed. A dropped status is not timed.
         """
         faults, t = self.options.faults, self.t
         self._sent_at = time.monotonic()  # the cycle's time, whatever the faults do to it
@@ -169,11 +188,13 @@ class EmulatedController(ABC):
         delay = faults.delay(t)
         if delay > 0:
             self.delayed += 1
-            self._outbox.append((time.monotonic() + delay, sock, data, addr))
+            self._outbox.append((time.monotonic() + delay, sock, data, addr, key))
             return
-        self._send_now(sock, data, addr)
+        self._send_now(sock, data, addr, key)
 
-    def _send_now(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None) -> None:
+    def _send_now(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None,
+                  key: int | None = None) -> None:
+        at, late = time.time(), time.monotonic() - self._due  # just before the system call
         try:
             if addr is None:
                 sock.sendall(data)
@@ -182,19 +203,25 @@ class EmulatedController(ABC):
             self.sent += 1
         except OSError:
             self.on_send_error(sock)
+            return
+        if key is not None:
+            self.timing.sent(key, at, late, label=self.t, done=time.time())
 
     def wait_for_reply(self) -> None:
         """No reply to the last cycle's packet yet: when this cycle runs early by the wall
         clock (the 1 ms loop catching up after a lag of its own), wait until the cycle's real
         time, a cycle after that packet went out, and read what has come in. A real
         controller's cycles are evenly spaced: a reply counts as missing only when it is
-        missing at that time. The protocols call it before counting a missed cycle."""
+        missing at that time. When the cycle runs late, read once more all the same: a reply
+        that came in while this step simulated the arm (after the step's first read) is no
+        missing reply (whether it came by the deadline is the answer timing's to say, from
+        its kernel stamp). The protocols call it before counting a missed cycle."""
         if not self.options.realtime:
             return
         remaining = self._sent_at + self.arm.cycle - time.monotonic()
         if remaining > 0:
             time.sleep(remaining)
-            self.poll(self.t)
+        self.poll(self.t)
 
     def cycle_answered(self, fresh: bool) -> None:
         """Count a streaming cycle: with a fresh command, or missed."""
@@ -209,6 +236,7 @@ class EmulatedController(ABC):
         before are the stop's, not missed cycles the stream recovered from."""
         self.missed_cycles -= self._missed_run
         self._missed_run = 0
+        self.timing.ended()
 
     def on_send_error(self, sock: socket.socket) -> None:  # noqa: B027 (optional hook)
         """A send failed (the peer went away); protocols may drop the connection."""
@@ -259,6 +287,7 @@ class EmulatedController(ABC):
         t0, k = time.monotonic(), 0
         try:
             while not stop.is_set() and not self.closed:
+                self._due = t0 + k * dt if self.options.realtime else time.monotonic()
                 self.tick()
                 k += 1
                 if not self.options.realtime:
@@ -268,6 +297,7 @@ class EmulatedController(ABC):
                     time.sleep(-lag)
                     continue
                 self.max_lag = max(self.max_lag, lag)
+                self._note_lag(lag)
                 if lag > self.arm.cycle:  # late by a cycle: carry on from now, no burst
                     self.resyncs += 1
                     t0 += lag
@@ -275,6 +305,16 @@ class EmulatedController(ABC):
             if not self.closed:
                 self.close_sockets()
         return self.report()
+
+    def _note_lag(self, lag: float) -> None:
+        """The loop is ``lag`` [s] behind its schedule: tell the answer timing."""
+        if lag <= self.timing.tolerance:
+            return
+        now = time.time()
+        if lag > self.arm.cycle:
+            self.timing.resynced(now - lag, lag)
+        else:
+            self.timing.lagged(now - lag, now)
 
     def report(self) -> EmulatorReport:
         """The session so far."""
@@ -287,7 +327,8 @@ class EmulatedController(ABC):
             sent=self.sent, dropped=self.dropped, delayed=self.delayed,
             max_lag=self.max_lag, resyncs=self.resyncs, missed_cycles=self.missed_cycles,
             operator_start=None if self.operator is None else self.operator.t0,
-            operator_end=None if self.operator is None else self.operator.finished_at)
+            operator_end=None if self.operator is None else self.operator.finished_at,
+            timing=self.timing.counts())
 
     @property
     def faulted(self) -> bool:
@@ -311,6 +352,7 @@ class UdpController(EmulatedController):
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((self.options.host, self.bind_port))
         sock.setblocking(False)
+        enable_rx_stamps(sock)
         self._sock = sock
 
     def close_sockets(self) -> None:

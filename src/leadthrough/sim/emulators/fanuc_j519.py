@@ -93,12 +93,14 @@ class FanucJ519Emulator(UdpController):
     # ---------------------------------------------------------------------------- input
     def poll(self, t: float) -> None:
         """Handle start, stop, command and limit-query packets."""
-        for data, addr in self.datagrams(self._sock):
+        for data, addr, rx, exact in self.datagrams(self._sock):
             try:
                 packet = decode_client_packet(data)
             except DataError:
                 self.malformed += 1
                 continue
+            if isinstance(packet, CommandPacket) and self.streaming and addr == self.client:
+                self.timing.answer(rx, key=packet.sequence, exact=exact)
             self._handle(packet, addr, t)
 
     def _handle(self, packet: StartPacket | StopPacket | CommandPacket | LimitQuery,
@@ -150,7 +152,8 @@ class FanucJ519Emulator(UdpController):
             else:
                 self.arm.hold(extrapolate=True)
         self.sequence = (self.sequence + 1) & 0xFFFFFFFF
-        self.transmit(self._sock, self._status(t, received).encode(), self.client)
+        self.transmit(self._sock, self._status(t, received).encode(), self.client,
+                      key=self.sequence)
 
     def _take(self, cmd: CommandPacket, t: float) -> None:
         self._io = (cmd.read_io_type, cmd.read_io_index, cmd.read_io_mask)

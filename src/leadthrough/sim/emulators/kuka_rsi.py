@@ -97,12 +97,13 @@ class KukaRsiEmulator(UdpController):
 
     def poll(self, t: float) -> None:
         """Take the answers that arrived; keep the one for the awaited IPOC."""
-        for data, _ in self.datagrams(self._sock):
+        for data, _, rx, exact in self.datagrams(self._sock):
             try:
                 answer = SensorMessage.decode(data)
             except DataError:
                 self.malformed += 1
                 continue
+            self.timing.answer(rx, key=answer.ipoc, exact=exact)
             if answer.ipoc == self._awaiting:
                 self._answer = answer
             else:
@@ -135,7 +136,8 @@ class KukaRsiEmulator(UdpController):
         self.ipoc += self.cycle_ms
         self._awaiting = self.ipoc
         data = self._message(t).encode(self.context.precision)
-        self.transmit(self._sock, data, (self.options.host, self.requested_port))
+        self.transmit(self._sock, data, (self.options.host, self.requested_port),
+                      key=self.ipoc)
 
     def _apply(self, ak: np.ndarray, t: float) -> None:
         ctx = self.context

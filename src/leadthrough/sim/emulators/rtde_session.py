@@ -30,6 +30,7 @@ from leadthrough.drivers.ur_rtde.protocol import (
     frame,
 )
 from leadthrough.errors import DataError
+from leadthrough.sim.emulators.answer_timing import recv_stamped
 
 __all__ = ["RtdeSession"]
 
@@ -43,12 +44,14 @@ class RtdeSession:
         rate: The controller's cycle rate [Hz] (500 e-Series, 125 CB3).
         produced: Output variables the controller can fill, {name: type}.
         owners: Input variable -> owning session, shared by all sessions.
-        write: Called with {input name: value} for each input data package.
+        write: Called with {input name: value}, the package's receive time [s,
+            ``CLOCK_REALTIME``] and whether that time is its own (see
+            :mod:`~leadthrough.sim.emulators.answer_timing`) for each input data package.
     """
 
     def __init__(self, sock: socket.socket, version: ControllerVersion, rate: float,
                  produced: Mapping[str, str], owners: dict[str, RtdeSession],
-                 write: Callable[[dict[str, Any]], None]) -> None:
+                 write: Callable[[dict[str, Any], float, bool], None]) -> None:
         self.sock, self.version, self.rate = sock, version, rate
         self.produced, self.owners, self.write = produced, owners, write
         self.reader = FrameReader()
@@ -76,11 +79,15 @@ class RtdeSession:
 
     def receive(self) -> None:
         """Read what arrived and answer every complete request (the requests that arrived
-        before the client closed the connection included)."""
+        before the client closed the connection included).
+
+        Each read carries the kernel's receive time of its newest segment (TCP merges the
+        segments that wait unread): the last frame it completes has that time as its own,
+        the earlier ones only as an upper bound."""
         gone = False
         while self.open:
             try:
-                data = self.sock.recv(65536)
+                data, _, rx, exact = recv_stamped(self.sock)
             except BlockingIOError:
                 break
             except OSError:
@@ -90,13 +97,22 @@ class RtdeSession:
                 gone = True
                 break
             self.reader.feed(data)
+            self._handle_complete(rx, exact)
+        if gone:
+            self.close()
+
+    def _handle_complete(self, rx: float, exact: bool) -> None:
+        """Answer the frames the last read completed."""
         try:
-            while self.open and (msg := self.reader.next()) is not None:
-                self._handle(*msg)
+            frames = []
+            while (msg := self.reader.next()) is not None:
+                frames.append(msg)
+            for i, (mtype, payload) in enumerate(frames):
+                if not self.open:
+                    break
+                self._handle(mtype, payload, rx, exact and i == len(frames) - 1)
         except DataError as e:
             self._text(f"protocol error: {e}", level=0)
-            self.close()
-        if gone:
             self.close()
 
     def _reply(self, mtype: int, payload: bytes = b"") -> None:
@@ -109,7 +125,7 @@ class RtdeSession:
         self._reply(MessageType.TEXT_MESSAGE, TextMessage(message, "leadthrough emulator",
                                                           level).encode())
 
-    def _handle(self, mtype: int, payload: bytes) -> None:
+    def _handle(self, mtype: int, payload: bytes, rx: float = 0.0, exact: bool = False) -> None:
         if mtype == MessageType.REQUEST_PROTOCOL_VERSION:
             self._reply(mtype, encode_accepted(decode_version_request(payload)
                                                == PROTOCOL_VERSION))
@@ -130,7 +146,7 @@ class RtdeSession:
             if recipe is None:
                 self._text(f"unknown input recipe id {payload[0]}")
             elif self.started:
-                self.write(recipe.decode(payload))
+                self.write(recipe.decode(payload), rx, exact)
         elif mtype != MessageType.TEXT_MESSAGE:
             self._text(f"unknown message type {mtype}")
 

@@ -37,6 +37,7 @@ import numpy as np
 from leadthrough.drivers.ur_rtde.protocol import DEFAULT_PORT, OUTPUT_TYPES, ControllerVersion
 from leadthrough.drivers.ur_rtde.script import Mode, ScriptState, ServoScriptParameters
 from leadthrough.robot.description import Robot
+from leadthrough.sim.emulators.answer_timing import enable_rx_stamps
 from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
 from leadthrough.sim.emulators.controller import EmulatedController
 from leadthrough.sim.emulators.rtde_session import RtdeSession
@@ -174,6 +175,7 @@ class UrRtdeEmulator(EmulatedController):
                 break
             conn.setblocking(False)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            enable_rx_stamps(conn)
             self.sessions.append(RtdeSession(conn, self.version, self.rate, PRODUCED_OUTPUTS,
                                               self._owners, self._write))
         for s in self.sessions:
@@ -183,7 +185,13 @@ class UrRtdeEmulator(EmulatedController):
             for program in self._secondary.poll():
                 self._start_program(program)
 
-    def _write(self, values: dict[str, Any]) -> None:
+    def _write(self, values: dict[str, Any], rx: float, exact: bool) -> None:
+        """Input registers written at ``rx``: a changed watchdog counter answers the latest
+        data package sent before it (``AnswerTiming.answer`` without a key)."""
+        counter = f"input_int_register_{self.offset}"
+        if (self.program is ScriptState.RUNNING and counter in values
+                and values[counter] != self.registers.get(counter)):
+            self.timing.answer(rx, exact=exact)
         self.registers.update(values)
 
     def _start_program(self, program: ReceivedProgram) -> None:
@@ -212,10 +220,13 @@ class UrRtdeEmulator(EmulatedController):
         if self.faulted and self.program is ScriptState.RUNNING:
             self._halt(ScriptState.STOPPED, write=False)  # the controller stopped it
         values: dict[str, Any] | None = None
+        # the package the servo program's client answers is timed (once a cycle)
+        key = self._cycles if self._armed and self.program is ScriptState.RUNNING else None
         for s in self.sessions:
             if s.started and s.output is not None and self._cycles % s.divider == 0:
                 values = values if values is not None else self._outputs(t)
-                self.transmit(s.sock, s.output_package(values), None)
+                self.transmit(s.sock, s.output_package(values), None, key=key)
+                key = None
         self._cycles += 1
 
     def _register(self, kind: str, i: int, default: float = 0) -> Any:
