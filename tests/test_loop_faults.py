@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -224,3 +225,42 @@ def test_a_blocked_exchange_is_aborted_by_the_watchdog(er20: Robot,
     end = out[0].end
     assert end.cause is EndCause.LINK_LOST and end.fault is Fault.DRIVER_TIMEOUT
     assert 1.5 <= end.t < 1.511 and "aborted" in end.detail
+
+
+class TimingOut(WrappedDriver):
+    """A real controller gone silent: while no sample comes, each step waits ``wait_s`` (a
+    driver's receive timeout, several periods) before it returns empty-handed."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver, wait_s: float) -> None:
+        super().__init__(driver)
+        self.wait_s, self.fresh = wait_s, True
+
+    def step(self) -> None:
+        if not self.fresh:
+            time.sleep(self.wait_s)
+        self._driver.step()
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        self.fresh = self._driver.read(fb)
+        return self.fresh
+
+
+def test_feedback_silent_beyond_the_stale_limit_is_stale_on_the_wall_clock(
+        er20: Robot, nominal_params: ParamsFile) -> None:
+    """No sample from 1.5 s for 0.2 s, each empty step lasting 3 periods (the driver's
+    timeout): STALE_FEEDBACK once 3 controller cycles (30 ms) went by on the wall clock, 10
+    such periods, not 3 cycles of them (90 ms: the fault would come at 1.53 s on the loop's
+    clock)."""
+    sim = SimDriver(SimRobot(er20, SimConfig(seed=1), q0=guide_start_pose(er20)))
+    sim.inject(InjectedFault(InjectedFaultKind.STALE, 1.5, 1.7))
+    parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
+    r = run_session(TimingOut(sim, 3 * sim.dt), *parts, 2.0,
+                    options=LoopOptions(enable_input=0, watchdog_s=0.05))
+    assert r.log is not None
+    t_fault, fault = _fault_at(r.log)
+    assert fault is Fault.STALE_FEEDBACK and 1.5 < t_fault < 1.5 + 0.012, t_fault
+    label, detail = _notes(r.log)[0]
+    assert label == "stale feedback" and "limit 30 ms" in detail
+    assert int(detail.split("for ")[1].split(" ms")[0]) >= 30

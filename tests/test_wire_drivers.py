@@ -231,6 +231,10 @@ def test_late_replies_leave_the_feedback_stale(kind: str, robots: dict[str, Robo
         report = _report(emu)
     assert trace.error is None and driver.stats.timeouts >= 3 and trace.stale >= 3
     assert report.violations == () and not _limit_refusals(emu)
+    # never a step back in time: a late packet behind a newer one is dropped (UDP); a TCP
+    # stream delivers in order (the emulator holds the packets after a late one behind it)
+    assert np.all(np.diff(trace.sequence) > 0), trace.sequence
+    assert (driver.out_of_order == 0) if kind == "ur-rtde" else (driver.out_of_order > 0)
     if kind == "kuka-rsi":  # answers to late documents carry stale IPOCs: counted as late
         assert trace.flags(after=0.5) & ControllerState.COMMAND_REJECTED
         assert report.stop_kind is None

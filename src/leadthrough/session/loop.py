@@ -27,6 +27,10 @@ A stop releases the controller (a stop at the acceleration limit) and the loop e
 commanded motion is at rest. Faults stop the same way and latch until ``reset_fault``:
 
 * the controller's own (non-finite, stale or out-of-range feedback, following error, ...);
+  on a real controller, feedback is also stale when no sample came for the safety layer's
+  ``stale_cycles`` controller cycles on the wall clock (a period without a sample lasts the
+  driver's receive timeout, several periods: counted in periods, the rule would wait as many
+  times longer);
 * the robot controller's state (``Fault.CONTROLLER_STATE``: E-stop, protective stop, not
   ready, a command refused);
 * a driver exception (``Fault.DRIVER_ERROR``) or an exchange longer than the watchdog's timeout

@@ -153,6 +153,12 @@ class ServoLoop:
         #: controller caught up with the controller's clock when cycles went by unseen.
         self.t = math.nan
         self.follow_clock = not driver.simulated
+        #: A real controller's feedback is stale when no new sample came for this long [s]:
+        #: the safety layer's ``stale_cycles`` controller cycles, on the wall clock (a period
+        #: without a sample lasts the driver's timeout, several controller periods).
+        self.stale_s = math.inf if driver.simulated else cfg.safety.stale_cycles * cfg.dt
+        self.fresh_at = math.inf       # time.perf_counter() of the newest sample
+        self.stale = False
         # the session's events
         self.events: list[SessionEvent] = []
         self.marks: list[Mark] = []
@@ -201,6 +207,7 @@ class ServoLoop:
         if self.watch is not None:
             self.watch.start()
         self.t = fb.t
+        self.fresh_at = time.perf_counter()
         return fb.t
 
     def _dry_period(self, q0: Array, t: float) -> None:
@@ -319,6 +326,10 @@ class ServoLoop:
             t_loop = fb.t       # a real controller's cycles that went by without a packet
         self.t = t_loop
         if fresh:
+            self.fresh_at, self.stale = t0, False
+        elif t0 - self.fresh_at > self.stale_s and not self.stale:
+            self._stale(t_loop, t0 - self.fresh_at)
+        if fresh:
             self.e_in.t = fb.t
             self.estimator.update(self.e_in, self.e_out)
             if fb.inputs_read:
@@ -385,6 +396,15 @@ class ServoLoop:
         else:
             self.link = Link.SUSPECT
             self.note(t, fault.name.lower().replace("_", " "), detail)
+
+    def _stale(self, t: float, age: float) -> None:
+        """No sample from a real controller for longer than ``stale_s``: the safety layer's
+        stale feedback, on the wall clock (its own count of controller cycles would wait for
+        as many stretched periods)."""
+        self.stale = True
+        self.controller.trip(t, Fault.STALE_FEEDBACK, float(self.fb.sequence))
+        self.note(t, "stale feedback", f"no sample for {age * 1e3:.0f} ms (limit "
+                                       f"{self.stale_s * 1e3:.0f} ms)")
 
     def _controller_fault(self, t: float) -> None:
         code = int(self.fb.state)
