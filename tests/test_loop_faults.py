@@ -9,6 +9,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +21,9 @@ from leadthrough.robot import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
-from leadthrough.session.record import SessionLog
+from leadthrough.session.record import SessionLog, load_session
 from leadthrough.session.requests import LoopRequests
+from leadthrough.session.session_file import SessionFileSink
 from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
@@ -264,3 +266,87 @@ def test_feedback_silent_beyond_the_stale_limit_is_stale_on_the_wall_clock(
     label, detail = _notes(r.log)[0]
     assert label == "stale feedback" and "limit 30 ms" in detail
     assert int(detail.split("for ")[1].split(" ms")[0]) >= 30
+
+
+class Closable(WrappedDriver):
+    """The simulated robot as a real controller's driver with a ``close`` (the stream's own
+    stop) that may fail; the sink's ``finish`` notes whether the driver was closed then."""
+
+    simulated = False  # type: ignore[assignment]
+    stop_method = "the test's stop"
+
+    def __init__(self, driver: Driver, fail: bool = False, interrupt_at: float = math.inf,
+                 ) -> None:
+        super().__init__(driver)
+        self.fail, self.interrupt_at, self.closed, self.t = fail, interrupt_at, 0, 0.0
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = self._driver.read(fb)
+        self.t = fb.t
+        if self.t >= self.interrupt_at:
+            raise KeyboardInterrupt       # a second Ctrl-C: escapes the loop
+        return fresh
+
+    def close(self) -> None:
+        self.closed += 1
+        if self.fail:
+            raise OSError("the controller went away")
+
+
+def _closing_session(robot: Robot, params: ParamsFile, path: Path, driver: Closable,
+                     requests: LoopRequests | None = None) -> tuple[SessionLog, list[int]]:
+    """A 1 s session on ``driver`` recorded to ``path``; the file, and ``driver.closed`` when
+    the sink was finished."""
+    sink = SessionFileSink(path, robot.n)
+    at_finish: list[int] = []
+    finish = sink.finish
+
+    def finish_after_close(*args, **kwargs):  # type: ignore[no-untyped-def]
+        at_finish.append(driver.closed)
+        return finish(*args, **kwargs)
+
+    sink.finish = finish_after_close  # type: ignore[method-assign]
+    parts = build_loop(robot, params, LoopConfig(), driver.dt)
+    try:
+        run_session(driver, *parts, 1.0, options=LoopOptions(enable_input=0, watchdog_s=0.5),
+                    requests=requests, sink=sink)
+    finally:
+        out = load_session(path)
+    return out, at_finish
+
+
+def _sim(robot: Robot) -> SimDriver:
+    return SimDriver(SimRobot(robot, SimConfig(seed=1), q0=guide_start_pose(robot)))
+
+
+def test_every_way_out_stops_the_driver_before_the_file_is_finished(
+        er20: Robot, nominal_params: ParamsFile, tmp_path: Path) -> None:
+    """The end of the duration, a stop request, an exception escaping the loop (a second
+    Ctrl-C): each closes the driver (its stream's own stop) once, before the recording is
+    finished, and the file logs it with how the session ended."""
+    driver = Closable(_sim(er20))
+    log, at_finish = _closing_session(er20, nominal_params, tmp_path / "a.parquet", driver)
+    assert at_finish == [1] and driver.closed == 1
+    assert _notes(log)[-1] == ("driver stopped", "after duration; the test's stop")
+
+    req = LoopRequests()
+    driver = Closable(Scripted(_sim(er20), [(0.5, req.stop)]))
+    log, at_finish = _closing_session(er20, nominal_params, tmp_path / "b.parquet", driver,
+                                      req)
+    assert at_finish == [1] and _notes(log)[-1][1].startswith("after stop requested")
+
+    driver = Closable(_sim(er20), interrupt_at=0.5)
+    with pytest.raises(KeyboardInterrupt):
+        _closing_session(er20, nominal_params, tmp_path / "c.parquet", driver)
+    log = load_session(tmp_path / "c.parquet")
+    assert driver.closed == 1 and log.time[-1] < 0.51
+    assert _notes(log)[-1] == ("driver stopped", "after KeyboardInterrupt; the test's stop")
+
+
+def test_a_failing_driver_stop_is_logged_and_the_file_is_complete(
+        er20: Robot, nominal_params: ParamsFile, tmp_path: Path) -> None:
+    driver = Closable(_sim(er20), fail=True)
+    log, at_finish = _closing_session(er20, nominal_params, tmp_path / "s.parquet", driver)
+    assert at_finish == [1] and log.time.size == 1000          # every period, then the events
+    assert _notes(log)[-1] == ("driver stop failed",
+                               "after duration; OSError: the controller went away")

@@ -74,6 +74,9 @@ class StreamingDriver(ABC, Generic[S]):
     controller = ""
     """Name of the controller interface, for messages."""
 
+    stop_method = ""
+    """How :meth:`close` ends the stream, in words (the loop logs it)."""
+
     client: Transport
     """The protocol's transport (set by the subclass)."""
 
