@@ -252,9 +252,9 @@ class TimingOut(WrappedDriver):
 def test_feedback_silent_beyond_the_stale_limit_is_stale_on_the_wall_clock(
         er20: Robot, nominal_params: ParamsFile) -> None:
     """No sample from 1.5 s for 0.2 s, each empty step lasting 3 periods (the driver's
-    timeout): STALE_FEEDBACK once 3 controller cycles (30 ms) went by on the wall clock, 10
-    such periods, not 3 cycles of them (90 ms: the fault would come at 1.53 s on the loop's
-    clock)."""
+    timeout): STALE_FEEDBACK once 3 controller cycles and a period of jitter (31 ms) went by
+    on the wall clock, 11 such periods, not 3 cycles of them (90 ms: the fault would come at
+    1.53 s on the loop's clock)."""
     sim = SimDriver(SimRobot(er20, SimConfig(seed=1), q0=guide_start_pose(er20)))
     sim.inject(InjectedFault(InjectedFaultKind.STALE, 1.5, 1.7))
     parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
@@ -262,10 +262,10 @@ def test_feedback_silent_beyond_the_stale_limit_is_stale_on_the_wall_clock(
                     options=LoopOptions(enable_input=0, watchdog_s=0.05))
     assert r.log is not None
     t_fault, fault = _fault_at(r.log)
-    assert fault is Fault.STALE_FEEDBACK and 1.5 < t_fault < 1.5 + 0.012, t_fault
+    assert fault is Fault.STALE_FEEDBACK and 1.5 < t_fault < 1.52, t_fault    # 1.511-1.512
     label, detail = _notes(r.log)[0]
-    assert label == "stale feedback" and "limit 30 ms" in detail
-    assert int(detail.split("for ")[1].split(" ms")[0]) >= 30
+    assert label == "stale feedback" and "limit 31 ms" in detail
+    assert int(detail.split("for ")[1].split(" ms")[0]) >= 31
 
 
 class Closable(WrappedDriver):

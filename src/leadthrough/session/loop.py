@@ -34,9 +34,9 @@ Faults stop the same way as a stop and latch until ``reset_fault``:
 
 * the controller's own (non-finite, stale or out-of-range feedback, following error, ...);
   on a real controller, feedback is also stale when no sample came for the safety layer's
-  ``stale_cycles`` controller cycles on the wall clock (a period without a sample lasts the
-  driver's receive timeout, several periods: counted in periods, the rule would wait as many
-  times longer);
+  ``stale_cycles`` controller cycles (plus a servo period of jitter) on the wall clock (a
+  period without a sample lasts the driver's receive timeout, several periods: counted in
+  periods, the rule would wait as many times longer);
 * the robot controller's state (``Fault.CONTROLLER_STATE``: E-stop, protective stop, not
   ready, a command refused);
 * a driver exception (``Fault.DRIVER_ERROR``) or an exchange longer than the watchdog's timeout

@@ -154,11 +154,15 @@ class ServoLoop:
         self.t = math.nan
         self.follow_clock = not driver.simulated
         #: A real controller's feedback is stale when no new sample came for this long [s]:
-        #: the safety layer's ``stale_cycles`` controller cycles, on the wall clock (a period
-        #: without a sample lasts the driver's timeout, several controller periods).
-        self.stale_s = math.inf if driver.simulated else cfg.safety.stale_cycles * cfg.dt
+        #: the safety layer's ``stale_cycles`` controller cycles on the wall clock (a period
+        #: without a sample lasts the driver's timeout, several servo periods), plus one servo
+        #: period for the packets' jitter (the sample of the last of those cycles arriving a
+        #: little late is not a third cycle missed). Checked after each exchange: at the
+        #: driver's timeout's granularity.
+        self.stale_s = (math.inf if driver.simulated
+                        else cfg.safety.stale_cycles * cfg.dt + driver.dt)
         self.fresh_at = math.inf       # time.perf_counter() of the newest sample
-        self.stale = False
+        self.stale = False             # latched (and logged) once until a fault reset
         # the session's events
         self.events: list[SessionEvent] = []
         self.marks: list[Mark] = []
@@ -305,7 +309,7 @@ class ServoLoop:
         self.cmd.q[:] = q
         self.cmd.qd[:] = 0.0
         self.enabling.reset()
-        self.controller_tripped = False
+        self.controller_tripped = self.stale = False
         if self.link is Link.SUSPECT:
             self.link = Link.OK
 
@@ -326,7 +330,7 @@ class ServoLoop:
             t_loop = fb.t       # a real controller's cycles that went by without a packet
         self.t = t_loop
         if fresh:
-            self.fresh_at, self.stale = t0, False
+            self.fresh_at = t0
         elif t0 - self.fresh_at > self.stale_s and not self.stale:
             self._stale(t_loop, t0 - self.fresh_at)
         if fresh:
