@@ -350,3 +350,50 @@ def test_a_failing_driver_stop_is_logged_and_the_file_is_complete(
     assert at_finish == [1] and log.time.size == 1000          # every period, then the events
     assert _notes(log)[-1] == ("driver stop failed",
                                "after duration; OSError: the controller went away")
+
+
+class Stalling(WrappedDriver):
+    """A real controller whose sample of 1.5 s comes 40 ms late: ``behind`` samples (the
+    controller's own, consecutive) or, ``jump``, with 39 newer ones queued behind it (the
+    loop's process stalled; the newest is read)."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver, jump: bool) -> None:
+        super().__init__(driver)
+        self.jump, self.t, self.done = jump, 0.0, False
+
+    def step(self) -> None:
+        if self.t >= 1.5 and not self.done:
+            self.done = True
+            time.sleep(0.04)
+            for _ in range(39 if self.jump else 0):
+                self._driver.step()
+                self._driver.read(self._driver.make_feedback())
+        self._driver.step()
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = self._driver.read(fb)
+        self.t = fb.t
+        return fresh
+
+
+@pytest.mark.parametrize("jump", [False, True])
+def test_a_sample_that_comes_late_is_stale_feedback(er20: Robot, nominal_params: ParamsFile,
+                                                    jump: bool) -> None:
+    """The sample after 1.5 s comes 40 ms late (over the 31 ms limit) within one exchange:
+    the controller's packets were late (the next in sequence): STALE_FEEDBACK when it comes.
+    The same wait with newer samples queued behind it is the loop's own lateness (the
+    controller sent on time; it reports missed answers its own way): no fault."""
+    sim = _sim(er20)
+    parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
+    r = run_session(Stalling(sim, jump), *parts, 2.0,
+                    options=LoopOptions(enable_input=0, watchdog_s=0.2))
+    assert r.log is not None
+    if jump:
+        assert not np.any(r.log.state == int(State.FAULT)), _notes(r.log)
+        return
+    t_fault, fault = _fault_at(r.log)
+    assert fault is Fault.STALE_FEEDBACK and 1.5 <= t_fault < 1.503, t_fault
+    label, detail = _notes(r.log)[0]
+    assert label == "stale feedback" and detail.endswith("(limit 31 ms); then a late one")

@@ -123,6 +123,9 @@ def test_shipped_controller_files_agree() -> None:
     assert ctx.timeout == 100 and ctx.precision == 6 and ctx.max_correction == (90.0,) * 6
     rsix = shipped_file("leadthrough_rsi.rsix").read_text()
     assert 'ParamValue="leadthrough_rsi_ethernet.xml"' in rsix
+    stop = rsix.split('ObjType="Stop"')[1].split("</RsiObject>")[0]   # Stop <- output 6
+    assert '<Input InIdx="0" OutObjId="RSI" OutIdx="6" />' in stop
+    assert [e.index for e in cfg.receive if e.tag == "Stop"] == [7]   # ETHERNET output 6
     krl = shipped_file("leadthrough_rsi.src").read_text()
     assert 'RSI_CREATE("leadthrough_rsi"' in krl and "RSI_ON(#ABSOLUTE)" in krl
     assert "RSI_MOVECORR()" in krl

@@ -162,6 +162,7 @@ class ServoLoop:
         self.stale_s = (math.inf if driver.simulated
                         else cfg.safety.stale_cycles * cfg.dt + driver.dt)
         self.fresh_at = math.inf       # time.perf_counter() of the newest sample
+        self.fresh_sequence = -1       # and its sequence number
         self.stale = False             # latched (and logged) once until a fault reset
         # the session's events
         self.events: list[SessionEvent] = []
@@ -211,7 +212,7 @@ class ServoLoop:
         if self.watch is not None:
             self.watch.start()
         self.t = fb.t
-        self.fresh_at = time.perf_counter()
+        self.fresh_at, self.fresh_sequence = time.perf_counter(), fb.sequence
         return fb.t
 
     def _dry_period(self, q0: Array, t: float) -> None:
@@ -329,11 +330,10 @@ class ServoLoop:
         if fresh and self.follow_clock and fb.t > t_loop:
             t_loop = fb.t       # a real controller's cycles that went by without a packet
         self.t = t_loop
+        if t0 - self.fresh_at > self.stale_s:
+            self._stale(fresh, t_loop, t0 - self.fresh_at)
         if fresh:
-            self.fresh_at = t0
-        elif t0 - self.fresh_at > self.stale_s and not self.stale:
-            self._stale(t_loop, t0 - self.fresh_at)
-        if fresh:
+            self.fresh_at, self.fresh_sequence = t0, fb.sequence
             self.e_in.t = fb.t
             self.estimator.update(self.e_in, self.e_out)
             if fb.inputs_read:
@@ -401,14 +401,20 @@ class ServoLoop:
             self.link = Link.SUSPECT
             self.note(t, fault.name.lower().replace("_", " "), detail)
 
-    def _stale(self, t: float, age: float) -> None:
-        """No sample from a real controller for longer than ``stale_s``: the safety layer's
-        stale feedback, on the wall clock (its own count of controller cycles would wait for
-        as many stretched periods)."""
+    def _stale(self, fresh: bool, t: float, age: float) -> None:
+        """No sample from a real controller for longer than ``stale_s`` (``age`` [s]): the
+        safety layer's stale feedback, on the wall clock (its own count of controller cycles
+        would wait for as many stretched periods); seen when a period goes by without one,
+        or when a sample comes that late with none newer behind it (the controller's packets
+        came late; a sample with newer ones queued behind it means the loop itself was late,
+        which the controller reports its own way). Latched and logged once until a reset."""
+        if self.stale or (fresh and self.fb.sequence - self.fresh_sequence > 1):
+            return
         self.stale = True
         self.controller.trip(t, Fault.STALE_FEEDBACK, float(self.fb.sequence))
         self.note(t, "stale feedback", f"no sample for {age * 1e3:.0f} ms (limit "
-                                       f"{self.stale_s * 1e3:.0f} ms)")
+                                       f"{self.stale_s * 1e3:.0f} ms)"
+                                       + ("; then a late one" if fresh else ""))
 
     def _controller_fault(self, t: float) -> None:
         code = int(self.fb.state)
