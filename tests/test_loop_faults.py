@@ -5,6 +5,7 @@ re-arms without restarting."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -23,6 +24,7 @@ from leadthrough.session.loop import EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
 from leadthrough.session.record import SessionLog, load_session
 from leadthrough.session.requests import LoopRequests
+from leadthrough.session.servo_loop import ServoLoop
 from leadthrough.session.session_file import SessionFileSink
 from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
@@ -394,6 +396,75 @@ def test_a_sample_that_comes_late_is_stale_feedback(er20: Robot, nominal_params:
         assert not np.any(r.log.state == int(State.FAULT)), _notes(r.log)
         return
     t_fault, fault = _fault_at(r.log)
-    assert fault is Fault.STALE_FEEDBACK and 1.5 <= t_fault < 1.503, t_fault
+    assert fault is Fault.STALE_FEEDBACK and 1.5 <= t_fault < 1.51, t_fault   # that sample
     label, detail = _notes(r.log)[0]
     assert label == "stale feedback" and detail.endswith("(limit 31 ms); then a late one")
+
+
+class Paced(WrappedDriver):
+    """A real controller's packets on the wall clock, one every 8 ms, the first 0.9 cycle
+    before the loop's first step; ``step`` returns the newest one that has come, at once when
+    one is waiting, else waits for the next. The robot stands still (each packet repeats the
+    simulator's first sample, with its own time and sequence number). Kept: for each answer,
+    whether its packet had been waiting when the step that returned it began (it may have
+    come up to a cycle before: its answer may be late)."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver) -> None:
+        super().__init__(driver)
+        self.sample = driver.make_feedback()
+        driver.step()
+        driver.read(self.sample)
+        self.t0 = math.nan
+        self.k, self.answered, self.new, self.waiting = -1, -1, False, False
+        self.answers: list[tuple[int, bool]] = []
+
+    @property
+    def dt(self) -> float:
+        return 0.008
+
+    def step(self) -> None:
+        if math.isnan(self.t0):
+            self.t0 = time.perf_counter() - 0.9 * self.dt
+        due = math.floor((time.perf_counter() - self.t0) / self.dt)
+        self.waiting = due > self.k
+        if not self.waiting:
+            due = self.k + 1
+            time.sleep(max(0.0, self.t0 + due * self.dt - time.perf_counter()))
+        self.k, self.new = due, True
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        if not self.new:
+            return False
+        self.new = False
+        fb.q[:], fb.current[:] = self.sample.q, self.sample.current
+        fb.t, fb.sequence = self.k * self.dt, self.k
+        return True
+
+    def write(self, cmd: JointCommand) -> None:
+        if self.answered != self.k:
+            self.answered = self.k
+            self.answers.append((self.k, self.waiting))
+
+
+def test_the_first_answers_go_out_a_whole_cycle_ahead(
+        er20: Robot, nominal_params: ParamsFile, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A controller at 8 ms whose first packet has been waiting 0.9 cycle when the loop
+    starts, and a set-up compute of 1.9 cycles: the hold answered at once and the first
+    period's answer each answer a packet waited for, not one that was waiting (come up to a
+    cycle before, its answer may reach the controller late: J519 refuses it and reports it,
+    a CONTROLLER_STATE fault at the stream's start)."""
+    dry = ServoLoop._dry_period
+
+    def slow_dry(self: ServoLoop, q0: np.ndarray, t: float) -> None:
+        dry(self, q0, t)
+        time.sleep(1.9 * 0.008)
+
+    monkeypatch.setattr(ServoLoop, "_dry_period", slow_dry)
+    driver = Paced(_sim(er20))
+    config = LoopConfig(guiding=dataclasses.replace(LoopConfig().guiding, dt=0.008))
+    parts = build_loop(er20, nominal_params, config, driver.dt)
+    r = run_session(driver, *parts, 0.1, options=LoopOptions(enable_input=0, watchdog_s=0.5))
+    assert r.end.cause is EndCause.DURATION
+    assert [waiting for _, waiting in driver.answers[:2]] == [False, False], driver.answers

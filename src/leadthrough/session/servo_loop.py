@@ -34,7 +34,8 @@ from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
 from leadthrough.session.watchdog import DriverWatchdog
 
-__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "sleep_until", "transition_event",
+__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "fresh_packet", "sleep_until",
+           "transition_event",
            "zero_velocity_update"]
 
 Array = NDArray[np.float64]
@@ -189,6 +190,8 @@ class ServoLoop:
                                "position to start from)", field="driver",
                                value=type(driver).__name__,
                                expected="a fresh sample on the first read")
+        if not driver.simulated:   # that one may have been waiting: the next, just come,
+            fresh_packet(driver, fb, drained=True)      # is the one answered at once
         q0 = fb.q.copy()
         if not driver.simulated:  # answered at once (a hold where it stands): the compute
             # below may outlast the cycle, and a packet seen and not answered in time is a
@@ -205,10 +208,9 @@ class ServoLoop:
         if self.board is not None:
             self.board.attach(driver.n)
             operator_link.publish_settings(self)
-        if not driver.simulated:  # the newest packet, for the first period to answer (those
-            # that came during the compute went unanswered and unseen, as lost ones)
-            driver.step()
-            driver.read(fb)
+        if not driver.simulated:  # a packet that has just come, for the first period to
+            # answer (those that came during the compute go unanswered, as lost ones)
+            fresh_packet(driver, fb)
         if self.watch is not None:
             self.watch.start()
         self.t = fb.t
@@ -486,6 +488,23 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
     if options.software_enable and requests is not None:
         return lambda t: requests.enable_held
     return None
+
+
+def fresh_packet(driver: Driver, fb: DriverFeedback, drained: bool = False) -> None:
+    """Read a real controller's packet that has just come: a whole cycle ahead to answer it.
+
+    ``step`` returns the newest packet waiting, which may have come up to a cycle ago (during
+    a compute): answered then, the answer may reach the controller after its next cycle, a
+    late answer (J519 refuses it and reports it, a fault at the stream's start; RSI counts
+    it). So the packets waiting are taken and left unanswered, as lost ones (``drained``:
+    the caller has just taken them), and the next one, waited for, is read: the answer
+    written at once goes out within the cycle. (RSI counts an isolated late answer for a
+    packet left unanswered, J519 and the UR program hold a cycle.)"""
+    if not drained:
+        driver.step()
+        driver.read(fb)
+    driver.step()
+    driver.read(fb)
 
 
 def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
