@@ -24,8 +24,7 @@ answer: the controller counts a late answer).
 Columns: the first fault latched; its time on the script's clock [s]; the commanded TCP speed
 when it latched (no fault: at the injection) [m/s]; the largest commanded Cartesian
 acceleration from one cycle before it on, of the controller's cycles (acc), of the interpolated
-joint command averaged over a cycle (cmd) and at the servo period (peak: within a cycle the
-cubic interpolation swings between 4 and -2 times the cycle's acceleration) [m/s²]
+joint command averaged over a cycle (cmd) and at the servo period (peak: inside a cycle) [m/s²]
 (:mod:`leadthrough.session.stop_figures`), against the limit; the commanded stop distance [mm]
 and time [s]; how the session ended; whether the fault was latched to the end and logged with
 its cause; the answers the controller counted late (the driver's count); from the emulator's

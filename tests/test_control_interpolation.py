@@ -1,4 +1,5 @@
-"""10 ms → 1 ms joint commands: cubic Hermite (C¹, exact at rest) and the optional Ruckig one."""
+"""10 ms → 1 ms joint commands: the setpoints' quadratic B-spline (C¹, the setpoints'
+acceleration within each cycle, exact at rest) and the optional Ruckig one."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from scipy.interpolate import CubicHermiteSpline
+from scipy.interpolate import BSpline
 
 from leadthrough.control import (
     HermiteInterpolator,
@@ -42,26 +43,81 @@ def _interpolate(interp: HermiteInterpolator | JerkLimitedInterpolator, q: np.nd
     return np.array(qs), np.array(qds), status
 
 
-def test_hermite_hits_the_setpoints_and_is_c1() -> None:
+def _bspline(q0: np.ndarray, q: np.ndarray) -> BSpline:
+    """SciPy's uniform quadratic B-spline with the setpoints as control points (the reset
+    position twice first), timed so that it passes m_k = (q_{k-1} + q_k)/2 at t = k·T."""
+    c = np.vstack([q0, q0, q])
+    knots = T * (np.arange(c.shape[0] + 3) - 2.0)
+    return BSpline(knots, c, 2)
+
+
+def test_the_command_is_the_quadratic_bspline_of_the_setpoints() -> None:
     q, qd = _setpoints(200, seed=0)
     interp = HermiteInterpolator(3, T, SUB)
     interp.reset(np.zeros(3))
     qs, qds, status = _interpolate(interp, q, qd)
-    # every 10th command is the setpoint itself, bit for bit
-    assert np.array_equal(qs[SUB - 1::SUB], q) and np.array_equal(qds[SUB - 1::SUB], qd)
     assert status[SUB - 1::SUB] == [InterpolatorStatus.FINISHED] * 200
-    # the same curve as SciPy's cubic Hermite spline through the setpoints
-    knots = T * np.arange(201)
-    spline = CubicHermiteSpline(knots, np.vstack([np.zeros(3), q]),
-                                np.vstack([np.zeros(3), qd]))
+    # every 10th command is the midpoint of the last two setpoints, moving at their difference
+    prev = np.vstack([np.zeros(3), q[:-1]])
+    np.testing.assert_allclose(qs[SUB - 1::SUB], (prev + q) / 2, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(qds[SUB - 1::SUB], qd, rtol=0, atol=1e-12)
+    # the same curve as SciPy's B-spline
+    spline = _bspline(np.zeros(3), q)
     t = TS * np.arange(1, 2001)
     np.testing.assert_allclose(qs, spline(t), rtol=0, atol=1e-14)
     np.testing.assert_allclose(qds, spline(t, 1), rtol=0, atol=1e-11)
-    # no steps: consecutive commands differ by at most one servo period of the speed
-    assert np.max(np.abs(np.diff(qs, axis=0))) <= np.max(np.abs(qds)) * TS * 1.01
-    # C¹, no velocity steps: |q̈| ≤ 4·|v₀ − v₁|/T on a segment, so per servo period
-    dv = np.abs(np.diff(np.vstack([np.zeros(3), qd]), axis=0)).max()
-    assert np.max(np.abs(np.diff(qds, axis=0))) <= 4 * dv / T * TS * (1 + 1e-9)
+
+
+def test_inside_a_cycle_the_command_accelerates_at_the_setpoints_rate() -> None:
+    """The point of the midpoint spline: the command's acceleration at the servo period is the
+    setpoints' per-cycle change of velocity, not 4× and −2× of it (cubics ending at the
+    setpoints with their mean velocity)."""
+    q, qd = _setpoints(300, seed=1)
+    interp = HermiteInterpolator(3, T, SUB)
+    interp.reset(np.zeros(3))
+    qs, qds, _ = _interpolate(interp, q, qd)
+    acc_set = np.diff(np.vstack([np.zeros(3), qd]), axis=0) / T        # per cycle, (300, 3)
+    # second difference of positions inside each cycle (both neighbours in the same segment)
+    seg = np.vstack([np.zeros(3), qs]).reshape(-1, 3)
+    acc = (seg[2:] - 2 * seg[1:-1] + seg[:-2]) / TS**2                # centred at 1..2999
+    k = np.arange(1, seg.shape[0] - 1)
+    inside = (k % SUB) != 0                                           # not at a knot
+    cycle = (k - 1) // SUB
+    np.testing.assert_allclose(acc[inside], acc_set[cycle[inside]], rtol=0, atol=1e-6)
+    # the velocity is continuous: changes by one servo period of that acceleration
+    np.testing.assert_allclose(np.diff(np.vstack([np.zeros(3), qds]), axis=0),
+                               np.repeat(acc_set, SUB, axis=0) * TS, rtol=0, atol=1e-12)
+
+
+def test_the_command_stays_in_the_hull_of_three_setpoints() -> None:
+    q, qd = _setpoints(300, seed=2)
+    interp = HermiteInterpolator(3, T, SUB)
+    interp.reset(np.zeros(3))
+    qs, _, _ = _interpolate(interp, q, qd)
+    c = np.vstack([np.zeros(3), np.zeros(3), q])
+    window = np.stack([c[:-2], c[1:-1], c[2:]])                       # (3, 300, 3)
+    lo, hi = window.min(axis=0), window.max(axis=0)
+    cmd = qs.reshape(300, SUB, 3)
+    assert np.all(cmd >= lo[:, None, :] - 1e-15) and np.all(cmd <= hi[:, None, :] + 1e-15)
+
+
+def test_a_stop_at_the_limit_is_at_the_limit_every_servo_period() -> None:
+    """Setpoints braking from 0.5 rad/s at a = 2 rad/s² to rest: the command never exceeds a,
+    and rests exactly on the last setpoint one cycle after the setpoints stop."""
+    a = 2.0
+    v = np.concatenate([np.full(20, 0.5), np.maximum(0.5 - a * T * np.arange(1, 40), 0.0),
+                        np.zeros(20)])
+    qd = np.column_stack([v, -v])
+    q = np.cumsum(qd * T, axis=0)
+    interp = HermiteInterpolator(2, T, SUB)
+    interp.reset(np.zeros(2))
+    qs, qds, _ = _interpolate(interp, q, qd)
+    acc = np.diff(np.vstack([np.zeros(2), qds]), axis=0)[20 * SUB:] / TS
+    assert np.max(np.abs(acc)) <= a * (1 + 1e-9)
+    last_move = int(np.flatnonzero(v > 0)[-1])
+    rest = (last_move + 2) * SUB - 1                 # end of the cycle after the last change
+    assert np.all(qs[rest:] == q[-1]) and np.all(qds[rest:] == 0.0)
+    assert np.any(qs[rest - 1] != q[-1])
 
 
 def test_hermite_holds_exactly_at_rest() -> None:
@@ -72,22 +128,6 @@ def test_hermite_holds_exactly_at_rest() -> None:
     assert np.all(qs == q0) and np.all(qds == 0.0)
 
 
-def test_hermite_stays_within_the_bound_of_the_docstring() -> None:
-    """Departure from the straight segment ≤ 4/27·T·|v₀ − v₁| (with v₁ the segment's mean
-    velocity, as the IK makes them)."""
-    q, qd = _setpoints(300, seed=1)
-    interp = HermiteInterpolator(3, T, SUB)
-    interp.reset(np.zeros(3))
-    qs, _, _ = _interpolate(interp, q, qd)
-    prev_q = np.vstack([np.zeros(3), q[:-1]])
-    prev_v = np.vstack([np.zeros(3), qd[:-1]])
-    s = (np.arange(1, SUB + 1) / SUB)[None, :, None]
-    line = prev_q[:, None, :] + s * (q - prev_q)[:, None, :]
-    dev = np.abs(qs.reshape(300, SUB, 3) - line)
-    bound = 4 / 27 * T * np.abs(prev_v - qd)[:, None, :]
-    assert np.all(dev <= bound + 1e-15)
-
-
 def test_hermite_starved_holds_at_rest() -> None:
     interp = HermiteInterpolator(2, T, SUB)
     interp.reset(np.zeros(2))
@@ -95,8 +135,9 @@ def test_hermite_starved_holds_at_rest() -> None:
     cmd = interp.make_command()
     for _ in range(SUB):
         interp.update(cmd)
+    assert np.array_equal(cmd.q, [0.0005, 0.0]) and np.array_equal(cmd.qd, [0.1, 0.0])
     assert interp.update(cmd) == InterpolatorStatus.STARVED
-    assert np.array_equal(cmd.q, [0.001, 0.0]) and np.all(cmd.qd == 0.0)
+    assert np.array_equal(cmd.q, [0.0005, 0.0]) and np.all(cmd.qd == 0.0)
     with pytest.raises(ControlError, match="substeps"):
         HermiteInterpolator(2, T, 0)
 
@@ -104,7 +145,8 @@ def test_hermite_starved_holds_at_rest() -> None:
 @pytest.mark.parametrize("bad", ["nan q", "inf qd", "short q"])
 def test_hermite_ignores_a_bad_setpoint_like_a_missed_one(bad: str) -> None:
     """A non-finite or wrong-size setpoint never reaches the commands: the running segment
-    ends at its own setpoint, then the end is held (STARVED), and a valid setpoint resumes."""
+    ends at its own end point, then the end is held (STARVED), and a valid setpoint resumes
+    from there."""
     interp = HermiteInterpolator(2, T, SUB)
     interp.reset(np.zeros(2))
     cmd = interp.make_command()
@@ -122,9 +164,12 @@ def test_hermite_ignores_a_bad_setpoint_like_a_missed_one(bad: str) -> None:
     statuses = [interp.update(cmd) for _ in range(SUB)]
     assert statuses[SUB // 2 - 1] == InterpolatorStatus.FINISHED
     assert statuses[-1] == InterpolatorStatus.STARVED
-    assert np.array_equal(cmd.q, [0.001, 0.0]) and np.all(cmd.qd == 0.0)
+    assert np.array_equal(cmd.q, [0.0005, 0.0]) and np.all(cmd.qd == 0.0)
     interp.set_target(np.array([0.0015, 0.0]), np.zeros(2))
     assert interp.update(cmd) == InterpolatorStatus.WORKING and np.all(np.isfinite(cmd.q))
+    for _ in range(SUB - 1):
+        interp.update(cmd)
+    assert np.array_equal(cmd.q, [0.00125, 0.0])     # midpoint of 0.001 and 0.0015
 
 
 def test_jerk_limited_needs_ruckig_with_a_clear_error(er20: Robot,

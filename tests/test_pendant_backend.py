@@ -312,13 +312,13 @@ def test_after_a_release_the_tool_stays_at_rest(er20: Robot, hand_release: bool)
     drifts at rest after the release (the servo's integral against the gears' static friction,
     3-8 N/s on this instance); before rest_drift.py the tool moved again from 11-14 s on, with
     and without the stop after letting go. At rest: from the settle time (the first cycle at
-    rest after the release, plus ``settle_s``) to the end of a 16 s session the commanded twist
+    rest after the release, plus ``settle_s``) to the end of a 17 s session the commanded twist
     is exactly 0 and the commanded TCP moves by less than 1 mm."""
     guiding = light_guiding()
     if hand_release:
         guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
     push = run_sim_session(er20, shipped_guiding_params(er20), SimSessionConfig(
-        operator="push-x", duration_s=16.0, loop=LoopConfig(guiding=guiding)))
+        operator="push-x", duration_s=17.0, loop=LoopConfig(guiding=guiding)))
     log = push.log
     release = push_x().pushes[0].t_end
     moving = np.any(log.twist_cmd_base != 0.0, axis=1)

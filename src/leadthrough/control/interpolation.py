@@ -1,17 +1,31 @@
 """From 10 ms joint setpoints to 1 ms position-mode commands (position and velocity, no steps).
 
 The guiding controller produces, every controller cycle T (10 ms), the joint position q_k it
-wants at the end of the cycle and the joint velocity q̇_k it moves with. The servo wants a command
-every 1 ms. :class:`HermiteInterpolator` joins consecutive setpoints by cubic Hermite segments:
+wants at the end of the cycle and the joint velocity q̇_k it moves with; the IK advances
+q_k = q_{k−1} + T·q̇_k, so q̇_k is the cycle's *mean* velocity. The servo wants a command every
+1 ms. :class:`HermiteInterpolator` commands the **uniform quadratic B-spline of the setpoints**:
+it joins the setpoints' midpoints m_k = (q_{k−1} + q_k)/2 by cubic Hermite segments
 
     q(s) = p₀ + h₀₁(s)·(p₁ − p₀) + T·(h₁₀(s)·v₀ + h₁₁(s)·v₁),  s = (t − t_k)/T ∈ [0, 1]
     h₀₁ = 3s² − 2s³,  h₁₀ = s³ − 2s² + s,  h₁₁ = s³ − s²
 
-from the last command (p₀, v₀) to the new setpoint (p₁, v₁): position and velocity are continuous
-at every 1 ms sample (C¹), and a held setpoint (p₁ = p₀, v = 0) gives exactly constant commands and
-exactly zero velocity. With v₁ the segment's own mean velocity (the IK's q̇, which moves p₀ to p₁)
-the path departs from the straight segment by at most 4/27·T·|v₀ − v₁|, a fraction of a
-milliradian at the joint acceleration limits, well inside the IK's joint-limit margin.
+from the last command (p₀, v₀) = (m_{k−1}, (q_{k−1} − q_{k−2})/T) to
+(p₁, v₁) = (m_k, (q_k − q_{k−1})/T). The chord p₁ − p₀ = T·(v₀ + v₁)/2 is the mean of the end
+velocities, for which the cubic is the quadratic of constant acceleration (v₁ − v₀)/T: **inside
+each cycle the command accelerates at exactly the setpoints' per-cycle change**, so a stop at
+the controller's acceleration limit is one at the servo period too, and the command stays in
+the convex hull of three consecutive setpoints (never beyond a joint limit the setpoints
+respect). The price is half a cycle of delay (the command reaches m_k, not q_k, at t_k + T).
+Position and velocity are continuous at every 1 ms sample (C¹); a held setpoint gives, one
+cycle later, exactly constant commands and exactly zero velocity.
+
+(Segments ending at the setpoints themselves, with v₁ = q̇_k, were used before: their end
+velocity is the segment's mean, which makes the cubic accelerate at 4(v₁ − v₀)/T at its start
+and −2(v₁ − v₀)/T at its end, 4× and −2× a ramp's acceleration within each cycle.) The setpoint's
+q̇ is checked (finite) but not used: the velocities come from the setpoints' differences, which
+is what keeps every segment a constant-acceleration one whatever the caller's q̇.
+(Uniform quadratic B-splines: de Boor, *A Practical Guide to Splines*, ch. IX; the midpoint form
+is the Chaikin/Riesenfeld construction.)
 
 :class:`leadthrough.control.jerk_limit.JerkLimitedInterpolator` has the same interface and adds
 jerk limits (``ruckig``, optional). Both take the setpoint once per cycle (``set_target``) and
@@ -94,7 +108,7 @@ class JointInterpolator(Protocol):
         ...
 
     def set_target(self, q: Array, qd: Array) -> None:
-        """Start a new segment toward setpoint (q, q̇), reached one controller cycle later."""
+        """Start a new segment toward setpoint (q, q̇), once per controller cycle."""
         ...
 
     def update(self, out: CommandBuffer) -> InterpolatorStatus:
@@ -116,9 +130,12 @@ def interpolator_dtype(n: int, substeps: int) -> np.dtype[Any]:
         ("h01", f8, (substeps,)), ("h10", f8, (substeps,)), ("h11", f8, (substeps,)),
         ("dh01", f8, (substeps,)), ("dh10", f8, (substeps,)), ("dh11", f8, (substeps,)),
         # the segment: start position and velocity (the last command), end position and
-        # velocity (the setpoint), end − start [rad, rad/s]
+        # velocity (the midpoint of the last two setpoints, their difference / T), end − start
+        # [rad, rad/s]
         ("p0", f8, (n,)), ("v0", f8, (n,)), ("p1", f8, (n,)), ("v1", f8, (n,)),
         ("dp", f8, (n,)),
+        # the last setpoint [rad] and 1/T [1/s]
+        ("setpoint", f8, (n,)), ("rate", f8),
         # the last command [rad, rad/s] and the next substep
         ("q", f8, (n,)), ("qd", f8, (n,)), ("k", np.int64),
     ])
@@ -126,13 +143,14 @@ def interpolator_dtype(n: int, substeps: int) -> np.dtype[Any]:
 
 @njit(cache=True, nogil=True)
 def start_segment(segment: NDArray[np.void], q: Array, qd: Array) -> bool:
-    """A new segment from the last command to the setpoint (q, q̇).
+    """A new segment from the last command to the midpoint of the last setpoint and (q, q̇).
 
     Args:
         segment: The interpolator's record (:func:`interpolator_dtype`, one element), in
             place.
         q: Setpoint [rad], shape (n,).
-        qd: Velocity at the setpoint [rad/s], shape (n,).
+        qd: Velocity at the setpoint [rad/s], shape (n,): only checked (finite); the segment's
+            end velocity is (q − last setpoint)/T.
 
     Returns:
         False, with nothing changed, for a setpoint of the wrong size or not finite.
@@ -147,9 +165,10 @@ def start_segment(segment: NDArray[np.void], q: Array, qd: Array) -> bool:
     for j in range(n):
         seg.p0[j] = seg.q[j]
         seg.v0[j] = seg.qd[j]
-        seg.p1[j] = q[j]
-        seg.v1[j] = qd[j]
-        seg.dp[j] = q[j] - seg.q[j]
+        seg.p1[j] = 0.5 * (seg.setpoint[j] + q[j])
+        seg.v1[j] = (q[j] - seg.setpoint[j]) * seg.rate
+        seg.dp[j] = seg.p1[j] - seg.q[j]
+        seg.setpoint[j] = q[j]
     seg.k = 0
     return True
 
@@ -157,8 +176,8 @@ def start_segment(segment: NDArray[np.void], q: Array, qd: Array) -> bool:
 @njit(cache=True, nogil=True)
 def next_command(segment: NDArray[np.void], q_out: Array, qd_out: Array) -> int:
     """The segment's next command: q = p0 + h01·Δp + T·h10·v0 + T·h11·v1,
-    q̇ = h01'/T·Δp + h10'·v0 + h11'·v1; the last one is the setpoint itself; past it, the end
-    position is held at rest.
+    q̇ = h01'/T·Δp + h10'·v0 + h11'·v1; the last one is the segment's end (p1, v1) itself;
+    past it, the end position is held at rest.
 
     Args:
         segment: The interpolator's record (:func:`interpolator_dtype`, one element); the last
@@ -194,7 +213,8 @@ def next_command(segment: NDArray[np.void], q_out: Array, qd_out: Array) -> int:
 
 
 class HermiteInterpolator:
-    """Cubic Hermite interpolation of controller setpoints (C¹, no steps).
+    """The quadratic B-spline of the controller's setpoints, as C¹ Hermite segments between
+    their midpoints (no steps; constant acceleration within a cycle; see the module doc).
 
     Args:
         n: Number of joints.
@@ -222,6 +242,7 @@ class HermiteInterpolator:
         seg.h01, seg.h10 = 3 * s**2 - 2 * s**3, period * (s**3 - 2 * s**2 + s)
         seg.h11, seg.dh01 = period * (s**3 - s**2), (6 * s - 6 * s**2) / period
         seg.dh10, seg.dh11 = 3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s
+        seg.rate = 1.0 / period
         seg.k = substeps
 
     def make_command(self) -> JointCommand:
@@ -235,10 +256,12 @@ class HermiteInterpolator:
             getattr(seg, name)[:] = 0.0
         seg.q = q
         seg.p1 = q
+        seg.setpoint = q
         seg.k = self.substeps
 
     def set_target(self, q: Array, qd: Array) -> None:
-        """New segment from the last command to (q, q̇) [rad, rad/s], shape (n,) each.
+        """New segment from the last command toward setpoint (q, q̇) [rad, rad/s], shape (n,)
+        each: to the midpoint of the last setpoint and q, reached one cycle later.
 
         A setpoint of the wrong size or not finite is ignored, like a missed one: the current
         segment runs to its end, then the end is held (``STARVED``); no command is ever NaN.

@@ -10,13 +10,11 @@ the robot's response):
   each servo period), second-differenced with a lag of one controller cycle at every servo
   period: the command's acceleration averaged over a cycle;
 * ``command_peak``: the same second-differenced at the servo period: the peak within a cycle.
-  The interpolator (:class:`~leadthrough.control.interpolation.HermiteInterpolator`) joins the
-  setpoints with cubic segments whose end velocity is the segment's mean velocity (the IK
-  advances q by q̇·T); a cubic from v₀ to that v₁ accelerates at 4(v₁ − v₀)/T at its start
-  and −2(v₁ − v₀)/T at its end: within each cycle of a ramp at the limit a the command's
-  acceleration swings between 4a and −2a (mean a). With one servo period per cycle (J519 at
-  8 ms) the samples are the setpoints and the peak is not seen; at 2 ms (UR, 5 per cycle) the
-  second difference shows it up to about 2.8a.
+  The interpolator (:class:`~leadthrough.control.interpolation.HermiteInterpolator`) commands
+  the setpoints' quadratic B-spline: within each cycle the command accelerates at the
+  setpoints' per-cycle rate, so at the limit a the peak is a too (it was up to 2.8a at 2 ms
+  with cubics ending at the setpoints, before 2026-11-27). With one servo period per cycle
+  (J519 at 8 ms) the samples are the setpoints' midpoints and all three coincide.
 
 Both start one controller cycle before the fault (the last guided cycle's setpoint is where the
 stop starts from) and run to the end of the recording.
