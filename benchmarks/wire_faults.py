@@ -34,7 +34,7 @@ stop; ``request``: the driver's stop at the session's end, the stream's clean en
 attempts: on this loaded machine a late answer of ours (J519 refuses it) or a
 scheduling stall sometimes latches a fault before the injected one, or the push has not reached
 0.1 m/s; such an attempt says nothing of the case and is run again, up to three times (the
-count is shown).
+count is shown; each spoilt attempt's fault and time are printed above its row).
 """
 
 from __future__ import annotations
@@ -252,6 +252,10 @@ def main() -> None:
                 time.sleep(0.5)
                 if not case.spoilt:
                     break
+                f = case.figures     # what spoilt it, for the record
+                print(f"  (attempt {attempt} spoilt: {f.fault.name} at "
+                      f"{clock(f.t_fault):.3f} s, {case.speed_at_injection:.3f} m/s at the "
+                      "injection)", flush=True)
             print(_row(case), flush=True)
 
 
