@@ -30,10 +30,11 @@ and time [s]; how the session ended; whether the fault was latched to the end an
 its cause; the answers the controller counted late (the driver's count); from the emulator's
 own record: commands refused, executed targets non-finite or beyond its limits (``viol``, must
 be 0), and why its arm stopped (``watchdog``, ``estop``, ``protective``: the controller's own
-stop); the attempts: on this loaded machine a late answer of ours (J519 refuses it) or a
+stop; ``request``: the driver's stop at the session's end, the stream's clean end); the
+attempts: on this loaded machine a late answer of ours (J519 refuses it) or a
 scheduling stall sometimes latches a fault before the injected one, or the push has not reached
 0.1 m/s; such an attempt says nothing of the case and is run again, up to three times (the
-count is shown).
+count is shown; each spoilt attempt's fault and time are printed above its row).
 """
 
 from __future__ import annotations
@@ -202,6 +203,8 @@ def run_case(protocol: str, fault: str) -> Case:
             result: LoopResult = run_session(_link(driver, fault), *parts, END_AT,
                                              options=options)
     finally:
+        if emu is not None:   # the driver's stop taken at the controller's next cycle
+            time.sleep(0.05)
         report = emulator_report(stop_emulator(emu)) if emu is not None else {}
     assert result.log is not None
     figures = stop_figures(result.log, robot, parts.controller.config.dt)
@@ -249,6 +252,10 @@ def main() -> None:
                 time.sleep(0.5)
                 if not case.spoilt:
                     break
+                f = case.figures     # what spoilt it, for the record
+                print(f"  (attempt {attempt} spoilt: {f.fault.name} at "
+                      f"{clock(f.t_fault):.3f} s, {case.speed_at_injection:.3f} m/s at the "
+                      "injection)", flush=True)
             print(_row(case), flush=True)
 
 

@@ -5,7 +5,8 @@ The emulator presses the enabling device (its input 0) for 1 s every 2 s and the
 once in each press, from 1 s after its start: whenever the guide command's loop becomes ready,
 presses begin after it. Checked: guiding starts only inside a press (a fresh press) and ends
 after each release; the marks are in the recording streamed to disk; SIGINT (Ctrl-C) ends the
-session with a commanded stop at rest, then the driver disconnects; the emulator's own record
+session with a commanded stop at rest, then the driver's clean stop of the stream (logged in the
+file, so made before it was finished; the emulator saw a requested stop); the emulator's own record
 has no refused command and nothing non-finite or beyond its limits; ``teach`` reads the marks.
 The watchdog is 0.5 s: a machine as loaded as a shared runner stalls a process for a few
 hundred ms now and then (a 50 ms watchdog's fault is tested in tests/test_loop_faults.py).
@@ -135,8 +136,13 @@ def test_guide_against_the_emulator_until_ctrl_c(kind: str, tmp_path: Path) -> N
     assert len(marks) >= 2 and [m.label for m in marks[:2]] == ["P1", "P2"]
     for m in marks:
         assert any(a + 0.4 - slack <= m.t <= a + 0.5 + slack for a, _ in PRESSES), m
-    # Ctrl-C: a stop request, the commanded motion at rest at the end, then the disconnect
+    # Ctrl-C: a stop request, the commanded motion at rest at the end, then the stream's own
+    # clean stop (J519's stop packet, the UR program's stop mode, RSI's Stop), logged in the
+    # file: made before the file was finished; the controller saw a requested stop
     assert log.state[-1] != int(State.GUIDING) and not log.qd_cmd[-1].any()
+    label, cause = [(e.label, e.cause) for e in log.events if e.kind == "loop"][-1]
+    assert label == "driver stopped" and cause.startswith("after stop requested"), cause
+    assert "stop_kind: request" in report, report
     assert "violations: ()" in report and "refused: 0" in report, report
     taught = subprocess.run([sys.executable, "-m", "leadthrough", "teach", str(out), "-o",
                              str(tmp_path / "path.json")], capture_output=True, text=True,

@@ -5,9 +5,12 @@ re-arms without restarting."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
+import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +22,10 @@ from leadthrough.robot import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
-from leadthrough.session.record import SessionLog
+from leadthrough.session.record import SessionLog, load_session
 from leadthrough.session.requests import LoopRequests
+from leadthrough.session.servo_loop import ServoLoop
+from leadthrough.session.session_file import SessionFileSink
 from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
@@ -224,3 +229,242 @@ def test_a_blocked_exchange_is_aborted_by_the_watchdog(er20: Robot,
     end = out[0].end
     assert end.cause is EndCause.LINK_LOST and end.fault is Fault.DRIVER_TIMEOUT
     assert 1.5 <= end.t < 1.511 and "aborted" in end.detail
+
+
+class TimingOut(WrappedDriver):
+    """A real controller gone silent: while no sample comes, each step waits ``wait_s`` (a
+    driver's receive timeout, several periods) before it returns empty-handed."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver, wait_s: float) -> None:
+        super().__init__(driver)
+        self.wait_s, self.fresh = wait_s, True
+
+    def step(self) -> None:
+        if not self.fresh:
+            time.sleep(self.wait_s)
+        self._driver.step()
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        self.fresh = self._driver.read(fb)
+        return self.fresh
+
+
+def test_feedback_silent_beyond_the_stale_limit_is_stale_on_the_wall_clock(
+        er20: Robot, nominal_params: ParamsFile) -> None:
+    """No sample from 1.5 s for 0.2 s, each empty step lasting 3 periods (the driver's
+    timeout): STALE_FEEDBACK once 3 controller cycles and a period of jitter (31 ms) went by
+    on the wall clock, 11 such periods, not 3 cycles of them (90 ms: the fault would come at
+    1.53 s on the loop's clock)."""
+    sim = SimDriver(SimRobot(er20, SimConfig(seed=1), q0=guide_start_pose(er20)))
+    sim.inject(InjectedFault(InjectedFaultKind.STALE, 1.5, 1.7))
+    parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
+    r = run_session(TimingOut(sim, 3 * sim.dt), *parts, 2.0,
+                    options=LoopOptions(enable_input=0, watchdog_s=0.05))
+    assert r.log is not None
+    t_fault, fault = _fault_at(r.log)
+    assert fault is Fault.STALE_FEEDBACK and 1.5 < t_fault < 1.52, t_fault    # 1.511-1.512
+    label, detail = _notes(r.log)[0]
+    assert label == "stale feedback" and "limit 31 ms" in detail
+    assert int(detail.split("for ")[1].split(" ms")[0]) >= 31
+
+
+class Closable(WrappedDriver):
+    """The simulated robot as a real controller's driver with a ``close`` (the stream's own
+    stop) that may fail; the sink's ``finish`` notes whether the driver was closed then."""
+
+    simulated = False  # type: ignore[assignment]
+    stop_method = "the test's stop"
+
+    def __init__(self, driver: Driver, fail: bool = False, interrupt_at: float = math.inf,
+                 ) -> None:
+        super().__init__(driver)
+        self.fail, self.interrupt_at, self.closed, self.t = fail, interrupt_at, 0, 0.0
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = self._driver.read(fb)
+        self.t = fb.t
+        if self.t >= self.interrupt_at:
+            raise KeyboardInterrupt       # a second Ctrl-C: escapes the loop
+        return fresh
+
+    def close(self) -> None:
+        self.closed += 1
+        if self.fail:
+            raise OSError("the controller went away")
+
+
+def _closing_session(robot: Robot, params: ParamsFile, path: Path, driver: Closable,
+                     requests: LoopRequests | None = None) -> tuple[SessionLog, list[int]]:
+    """A 1 s session on ``driver`` recorded to ``path``; the file, and ``driver.closed`` when
+    the sink was finished."""
+    sink = SessionFileSink(path, robot.n)
+    at_finish: list[int] = []
+    finish = sink.finish
+
+    def finish_after_close(*args, **kwargs):  # type: ignore[no-untyped-def]
+        at_finish.append(driver.closed)
+        return finish(*args, **kwargs)
+
+    sink.finish = finish_after_close  # type: ignore[method-assign]
+    parts = build_loop(robot, params, LoopConfig(), driver.dt)
+    try:
+        run_session(driver, *parts, 1.0, options=LoopOptions(enable_input=0, watchdog_s=0.5),
+                    requests=requests, sink=sink)
+    finally:
+        out = load_session(path)
+    return out, at_finish
+
+
+def _sim(robot: Robot) -> SimDriver:
+    return SimDriver(SimRobot(robot, SimConfig(seed=1), q0=guide_start_pose(robot)))
+
+
+def test_every_way_out_stops_the_driver_before_the_file_is_finished(
+        er20: Robot, nominal_params: ParamsFile, tmp_path: Path) -> None:
+    """The end of the duration, a stop request, an exception escaping the loop (a second
+    Ctrl-C): each closes the driver (its stream's own stop) once, before the recording is
+    finished, and the file logs it with how the session ended."""
+    driver = Closable(_sim(er20))
+    log, at_finish = _closing_session(er20, nominal_params, tmp_path / "a.parquet", driver)
+    assert at_finish == [1] and driver.closed == 1
+    assert _notes(log)[-1] == ("driver stopped", "after duration; the test's stop")
+
+    req = LoopRequests()
+    driver = Closable(Scripted(_sim(er20), [(0.5, req.stop)]))
+    log, at_finish = _closing_session(er20, nominal_params, tmp_path / "b.parquet", driver,
+                                      req)
+    assert at_finish == [1] and _notes(log)[-1][1].startswith("after stop requested")
+
+    driver = Closable(_sim(er20), interrupt_at=0.5)
+    with pytest.raises(KeyboardInterrupt):
+        _closing_session(er20, nominal_params, tmp_path / "c.parquet", driver)
+    log = load_session(tmp_path / "c.parquet")
+    assert driver.closed == 1 and log.time[-1] < 0.51
+    assert _notes(log)[-1] == ("driver stopped", "after KeyboardInterrupt; the test's stop")
+
+
+def test_a_failing_driver_stop_is_logged_and_the_file_is_complete(
+        er20: Robot, nominal_params: ParamsFile, tmp_path: Path) -> None:
+    driver = Closable(_sim(er20), fail=True)
+    log, at_finish = _closing_session(er20, nominal_params, tmp_path / "s.parquet", driver)
+    assert at_finish == [1] and log.time.size == 1000          # every period, then the events
+    assert _notes(log)[-1] == ("driver stop failed",
+                               "after duration; OSError: the controller went away")
+
+
+class Stalling(WrappedDriver):
+    """A real controller whose sample of 1.5 s comes 40 ms late: ``behind`` samples (the
+    controller's own, consecutive) or, ``jump``, with 39 newer ones queued behind it (the
+    loop's process stalled; the newest is read)."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver, jump: bool) -> None:
+        super().__init__(driver)
+        self.jump, self.t, self.done = jump, 0.0, False
+
+    def step(self) -> None:
+        if self.t >= 1.5 and not self.done:
+            self.done = True
+            time.sleep(0.04)
+            for _ in range(39 if self.jump else 0):
+                self._driver.step()
+                self._driver.read(self._driver.make_feedback())
+        self._driver.step()
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = self._driver.read(fb)
+        self.t = fb.t
+        return fresh
+
+
+@pytest.mark.parametrize("jump", [False, True])
+def test_a_sample_that_comes_late_is_stale_feedback(er20: Robot, nominal_params: ParamsFile,
+                                                    jump: bool) -> None:
+    """The sample after 1.5 s comes 40 ms late (over the 31 ms limit) within one exchange:
+    the controller's packets were late (the next in sequence): STALE_FEEDBACK when it comes.
+    The same wait with newer samples queued behind it is the loop's own lateness (the
+    controller sent on time; it reports missed answers its own way): no fault."""
+    sim = _sim(er20)
+    parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
+    r = run_session(Stalling(sim, jump), *parts, 2.0,
+                    options=LoopOptions(enable_input=0, watchdog_s=0.2))
+    assert r.log is not None
+    if jump:
+        assert not np.any(r.log.state == int(State.FAULT)), _notes(r.log)
+        return
+    t_fault, fault = _fault_at(r.log)
+    assert fault is Fault.STALE_FEEDBACK and 1.5 <= t_fault < 1.51, t_fault   # that sample
+    label, detail = _notes(r.log)[0]
+    assert label == "stale feedback" and detail.endswith("(limit 31 ms); then a late one")
+
+
+class Paced(WrappedDriver):
+    """A real controller's packets on the wall clock, one every 8 ms, the first 0.9 cycle
+    before the loop's first step; ``step`` returns the newest one that has come, at once when
+    one is waiting, else waits for the next. The robot stands still (each packet repeats the
+    simulator's first sample, with its own time and sequence number). Kept: for each answer,
+    whether its packet had been waiting when the step that returned it began (it may have
+    come up to a cycle before: its answer may be late)."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver) -> None:
+        super().__init__(driver)
+        self.sample = driver.make_feedback()
+        driver.step()
+        driver.read(self.sample)
+        self.t0 = math.nan
+        self.k, self.answered, self.new, self.waiting = -1, -1, False, False
+        self.answers: list[tuple[int, bool]] = []
+
+    @property
+    def dt(self) -> float:
+        return 0.008
+
+    def step(self) -> None:
+        if math.isnan(self.t0):
+            self.t0 = time.perf_counter() - 0.9 * self.dt
+        due = math.floor((time.perf_counter() - self.t0) / self.dt)
+        self.waiting = due > self.k
+        if not self.waiting:
+            due = self.k + 1
+            time.sleep(max(0.0, self.t0 + due * self.dt - time.perf_counter()))
+        self.k, self.new = due, True
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        if not self.new:
+            return False
+        self.new = False
+        fb.q[:], fb.current[:] = self.sample.q, self.sample.current
+        fb.t, fb.sequence = self.k * self.dt, self.k
+        return True
+
+    def write(self, cmd: JointCommand) -> None:
+        if self.answered != self.k:
+            self.answered = self.k
+            self.answers.append((self.k, self.waiting))
+
+
+def test_the_first_answers_go_out_a_whole_cycle_ahead(
+        er20: Robot, nominal_params: ParamsFile, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A controller at 8 ms whose first packet has been waiting 0.9 cycle when the loop
+    starts, and a set-up compute of 1.9 cycles: the hold answered at once and the first
+    period's answer each answer a packet waited for, not one that was waiting (come up to a
+    cycle before, its answer may reach the controller late: J519 refuses it and reports it,
+    a CONTROLLER_STATE fault at the stream's start)."""
+    dry = ServoLoop._dry_period
+
+    def slow_dry(self: ServoLoop, q0: np.ndarray, t: float) -> None:
+        dry(self, q0, t)
+        time.sleep(1.9 * 0.008)
+
+    monkeypatch.setattr(ServoLoop, "_dry_period", slow_dry)
+    driver = Paced(_sim(er20))
+    config = LoopConfig(guiding=dataclasses.replace(LoopConfig().guiding, dt=0.008))
+    parts = build_loop(er20, nominal_params, config, driver.dt)
+    r = run_session(driver, *parts, 0.1, options=LoopOptions(enable_input=0, watchdog_s=0.5))
+    assert r.end.cause is EndCause.DURATION
+    assert [waiting for _, waiting in driver.answers[:2]] == [False, False], driver.answers

@@ -31,6 +31,7 @@ from leadthrough.sim.emulators import (
     Window,
     start,
 )
+from leadthrough.sim.emulators.arm import StopKind
 from leadthrough.sim.emulators.kuka_rsi import IPOC_START
 from wire_helpers import (
     DIRECTION,
@@ -231,6 +232,10 @@ def test_late_replies_leave_the_feedback_stale(kind: str, robots: dict[str, Robo
         report = _report(emu)
     assert trace.error is None and driver.stats.timeouts >= 3 and trace.stale >= 3
     assert report.violations == () and not _limit_refusals(emu)
+    # never a step back in time: a late packet behind a newer one is dropped (UDP); a TCP
+    # stream delivers in order (the emulator holds the packets after a late one behind it)
+    assert np.all(np.diff(trace.sequence) > 0), trace.sequence
+    assert (driver.out_of_order == 0) if kind == "ur-rtde" else (driver.out_of_order > 0)
     if kind == "kuka-rsi":  # answers to late documents carry stale IPOCs: counted as late
         assert trace.flags(after=0.5) & ControllerState.COMMAND_REJECTED
         assert report.stop_kind is None
@@ -356,3 +361,20 @@ def test_leadthrough_emulate_in_its_own_process(kind: str, robots: dict[str, Rob
     assert np.abs(trace.q[-1] - (np.array(POSE) + delta)).max() < 2e-4
     assert trace.inputs[-1] & 1  # the enabling device, held from 0.5 s
     assert "violations: ()" in printed and "refused: 0" in printed
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_close_ends_the_stream_the_controllers_own_way(kind: str,
+                                                       robots: dict[str, Robot]) -> None:
+    """``close`` is the stream's clean end, seen by the controller as a requested stop:
+    J519's stop packet, the UR program's stop mode, RSI's answer with Stop (not RSI's count
+    of late answers running out, nor a watchdog)."""
+    with _session(kind, robots[ROBOT[kind]], None) as (driver, emu):
+        trace = _stream(kind, driver, 0.3, _hold)
+        driver.close()
+        arm = emu.emulator.arm
+        deadline = time.monotonic() + 1.0
+        while arm.stop_kind is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert trace.error is None and arm.stop_kind is StopKind.REQUEST, arm.stop_reason
+        driver.close()                                     # again: nothing more

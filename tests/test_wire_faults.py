@@ -216,3 +216,23 @@ def test_rsi_isolated_late_answers_are_tolerated_a_run_is_a_fault(er20: Robot) -
     assert _clean(r, f) and f.fault is Fault.CONTROLLER_STATE, f
     assert abs(_clock(f.t_fault) - AT) < 0.012 * (LATE_RUN + 3), f
     _check_stop(f, report)
+
+
+def test_ur_late_replies_in_motion_latch_stale_feedback(er20: Robot) -> None:
+    """UR RTDE: 100 ms of the controller's packages 50 ms late: 50 ms without a sample, then
+    the late ones (TCP: in order, those after them behind them). The loop latches what
+    happened, stale feedback (30 ms without a sample on the wall clock), before the late
+    samples reach the estimator (they once tripped the collision check, stepping back in
+    time), and stops from speed."""
+    for _ in range(3):
+        r, f, report, _ = _session("ur-rtde", er20, ["--late", f"{AT}:{AT + 0.1}",
+                                                     "--late-by", "0.05"])
+        if _clean(r, f):
+            break
+    log = r.log
+    assert log is not None and _clean(r, f), f
+    assert f.fault is Fault.STALE_FEEDBACK, (f, [(round(e.t, 3), e.label, e.cause)
+                                                  for e in log.events])
+    assert AT <= _clock(f.t_fault) < AT + 0.05, f
+    assert ("stale feedback" in [e.label for e in log.events if e.kind == "loop"])
+    _check_stop(f, report, interpolated=True)

@@ -78,6 +78,16 @@ def test_sensor_document_golden_both_directions() -> None:
     assert SensorMessage.decode(ros) == msg
 
 
+def test_the_last_answer_sets_stop() -> None:
+    """The Stop flag of the session's last answer, an element with the value 1 (a BOOL
+    ``TAG="Stop"`` of the RECEIVE list, as in KUKA's kuka-external-control-sdk
+    rsi_ethernet.xml), before the IPOC; absent from every other answer."""
+    last = SensorMessage(123645634563, (0.1, -0.2, 0.0, 1.5, -1.5, 0.01), stop=True)
+    assert last.encode(precision=4) == SEN.replace(b"<IPOC>", b"<Stop>1</Stop><IPOC>")
+    assert SensorMessage.decode(last.encode()) == last
+    assert b"Stop" not in SensorMessage(1, (0.0,) * 6).encode()
+
+
 @pytest.mark.parametrize(("text", "field", "value"), [
     ("<Rob TYPE='KUKA'><IPOC>5</IPOC></Rob>", "AIPos", None),
     ('<Rob><AIPos A1="1" A2="2" A3="3" A4="4" A5="5" /><IPOC>5</IPOC></Rob>', "AIPos.A6", None),
@@ -108,11 +118,14 @@ def test_shipped_controller_files_agree() -> None:
     assert {"DEF_AIPos", "DEF_ASPos", "DEF_Delay", "DiL"} <= cfg.send_tags
     assert [e.tag for e in cfg.send if e.tag.startswith("GearTorque")] == [
         f"GearTorque.A{i}" for i in range(1, 7)]
-    assert [e.tag for e in cfg.receive] == [f"AK.A{i}" for i in range(1, 7)]
-    assert all(e.hold_on for e in cfg.receive)
+    assert [e.tag for e in cfg.receive] == [*(f"AK.A{i}" for i in range(1, 7)), "Stop"]
+    assert [e.hold_on for e in cfg.receive] == [True] * 6 + [False]
     assert ctx.timeout == 100 and ctx.precision == 6 and ctx.max_correction == (90.0,) * 6
     rsix = shipped_file("leadthrough_rsi.rsix").read_text()
     assert 'ParamValue="leadthrough_rsi_ethernet.xml"' in rsix
+    stop = rsix.split('ObjType="Stop"')[1].split("</RsiObject>")[0]   # Stop <- output 6
+    assert '<Input InIdx="0" OutObjId="RSI" OutIdx="6" />' in stop
+    assert [e.index for e in cfg.receive if e.tag == "Stop"] == [7]   # ETHERNET output 6
     krl = shipped_file("leadthrough_rsi.src").read_text()
     assert 'RSI_CREATE("leadthrough_rsi"' in krl and "RSI_ON(#ABSOLUTE)" in krl
     assert "RSI_MOVECORR()" in krl

@@ -35,6 +35,12 @@ then stops the robot). A driver whose calls can block may also provide ``abort()
 another thread, which makes a blocked ``step`` or ``read`` return by raising: the loop's watchdog
 calls it when a call has blocked beyond its timeout.
 
+Ending: a real controller's driver provides ``close()``: the stream's own clean end (the UR
+servo program's stop mode, J519's stop packet, RSI's ``Stop`` flag), then the disconnect; it
+never raises for what the link does, may be called again (a no-op) and says what it did in
+``stop_method``. The loop calls it once it has ended, whatever ended it, before it finishes
+the recording (:func:`~leadthrough.session.loop.run_session`).
+
 Pacing: :meth:`Driver.step` is where the loop waits for the next servo period. A simulated
 driver (``simulated`` true) advances its physics by one period and returns at once, so a
 simulated session runs as fast as the CPU allows (pace it with the wall clock only to watch
@@ -234,3 +240,14 @@ class WrappedDriver:
         abort = getattr(self._driver, "abort", None)
         if abort is not None:
             abort()
+
+    @property
+    def stop_method(self) -> str:
+        """How the wrapped driver's ``close`` ends the stream ("" if it has none)."""
+        return str(getattr(self._driver, "stop_method", ""))
+
+    def close(self) -> None:
+        """Close the wrapped driver, if it can (see the module doc)."""
+        close = getattr(self._driver, "close", None)
+        if close is not None:
+            close()

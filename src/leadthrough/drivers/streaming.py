@@ -6,7 +6,10 @@ UR RTDE data package, KUKA RSI ``<Rob>`` document) and takes the answer to it as
 cycle's target. A :class:`StreamingDriver` maps the loop's calls onto that:
 
 * :meth:`~StreamingDriver.step` waits (at most ``timeout``) for the next packet; none in time
-  leaves the feedback stale (``read`` returns False, ``stats.timeouts`` counts it); a broken
+  leaves the feedback stale (``read`` returns False, ``stats.timeouts`` counts it), and so
+  does a packet whose cycle number is not newer than one already taken (``out_of_order``
+  counts it: delivered late, behind a newer one; its cycle has gone by, and fed to the
+  estimator it would be a step back in time); a broken
   link (closed connection or port, socket error, the controller refusing the exchange) raises
   :class:`~leadthrough.errors.DriverError`, naming the cause;
 * :meth:`~StreamingDriver.read` converts the packet into SI units and fills the feedback,
@@ -71,6 +74,9 @@ class StreamingDriver(ABC, Generic[S]):
     controller = ""
     """Name of the controller interface, for messages."""
 
+    stop_method = ""
+    """How :meth:`close` ends the stream, in words (the loop logs it)."""
+
     client: Transport
     """The protocol's transport (set by the subclass)."""
 
@@ -87,6 +93,7 @@ class StreamingDriver(ABC, Generic[S]):
         self.unanswered = 0
         self.skipped_cycles = 0  # controller cycles that went by without our target
         self.late_answers = 0    # answers the controller reported as not taken in time
+        self.out_of_order = 0    # packets not newer than one already taken (dropped)
         self._sample_late = False
         self._sample: S | None = None   # received, not yet read
         self._newest: S | None = None   # the packet the next write answers
@@ -136,6 +143,9 @@ class StreamingDriver(ABC, Generic[S]):
         if sample is None:
             self._raise_if_broken()
             return
+        if self._newest is not None and self._sequence(sample) <= self._sequence(self._newest):
+            self.out_of_order += 1   # not newer than one taken: stale, neither read nor
+            return                   # answered (its controller cycle has gone by)
         late = self._answer_late(sample)
         if late and self.limiter is not None:
             self._after_late_answer()
@@ -202,6 +212,7 @@ class StreamingDriver(ABC, Generic[S]):
             self._disconnect()
             raise
         self.opened, self.unanswered, self.skipped_cycles, self.late_answers = True, 0, 0, 0
+        self.out_of_order = 0
         self._sample, self._newest, self._answer_due = None, first, False
 
     def close(self) -> None:

@@ -24,9 +24,19 @@ be released and pressed again; with no enabling input the loop never guides.
 
 **Ways out.** The loop runs until a stop: ``LoopRequests.stop``, or the end of ``duration_s``.
 A stop releases the controller (a stop at the acceleration limit) and the loop ends once the
-commanded motion is at rest. Faults stop the same way and latch until ``reset_fault``:
+commanded motion is at rest. However it ended (a stop, a fault's stop, a lost link, a stop
+that timed out, an exception escaping the loop such as a second Ctrl-C), a real controller's
+stream then ends its own clean way (the driver's ``close()``: :func:`stop_driver`), logged
+with how the session ended, before the recording is finished: the file is complete and
+holds that event, also when the driver's stop fails.
+
+Faults stop the same way as a stop and latch until ``reset_fault``:
 
 * the controller's own (non-finite, stale or out-of-range feedback, following error, ...);
+  on a real controller, feedback is also stale when no sample came for the safety layer's
+  ``stale_cycles`` controller cycles (plus a servo period of jitter) on the wall clock (a
+  period without a sample lasts the driver's receive timeout, several periods: counted in
+  periods, the rule would wait as many times longer);
 * the robot controller's state (``Fault.CONTROLLER_STATE``: E-stop, protective stop, not
   ready, a command refused);
 * a driver exception (``Fault.DRIVER_ERROR``) or an exchange longer than the watchdog's timeout
@@ -81,7 +91,7 @@ from leadthrough.session.servo_loop import EndCause, LoopEnd, ServoLoop, transit
 from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
 
 __all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers",
-           "run_session", "transition_event"]
+           "run_session", "stop_driver", "transition_event"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
@@ -175,15 +185,22 @@ def run_session(
     gc.disable()
     switch_interval = sys.getswitchinterval()
     sys.setswitchinterval(GIL_SWITCH_S)
+    escaped: BaseException | None = None
     try:
         _run(loop, rec, t_start, steps, clock, applied_wrench, times)
+    except BaseException as e:   # a second Ctrl-C, or a bug: stopped and recorded, re-raised
+        escaped = e
+        raise
     finally:
         sys.setswitchinterval(switch_interval)
         if gc_was_enabled:
             gc.enable()
         loop.close()
-        events = loop.session_events()
-        session_log = rec.finish(controller.robot.name, events, settings or {})
+        try:
+            stop_driver(loop, escaped)
+        finally:    # the recording complete whatever the driver's stop did
+            events = loop.session_events()
+            session_log = rec.finish(controller.robot.name, events, settings or {})
     assert loop.end is not None
     if clock.late:
         log.warning("%d servo periods late (%d slots skipped, none caught up)", clock.late,
@@ -192,6 +209,36 @@ def run_session(
     return LoopResult(log=session_log, end=loop.end, cycle_us=cycle_us, servo_us=servo_us,
                       late_periods=clock.late, skipped_periods=clock.skipped,
                       periods=times.count, cycles=-(-times.count // every))
+
+
+def stop_driver(loop: ServoLoop, escaped: BaseException | None = None) -> None:
+    """The session is over (at rest after its stop, or the link lost, or ``escaped`` raised in
+    the loop): a real controller's stream ends its own way (``driver.close()``: the protocol's
+    clean stop, then the disconnect) before the recording is finished, logged as a ``loop``
+    event with how the session ended; a failure of it is logged, never raised (the recording
+    is still finished). A simulated driver has nothing to stop."""
+    driver = loop.driver
+    if driver.simulated:
+        return
+    end = loop.end
+    t = end.t if end is not None else loop.t
+    if escaped is not None or end is None:
+        how = f"after {type(escaped).__name__}"
+    else:
+        how = f"after {end.cause}: {end.detail}" if end.detail else f"after {end.cause}"
+    close = getattr(driver, "close", None)
+    if close is None:
+        loop.note(t, "driver not stopped", f"{how}; the driver has no close(): the "
+                                           "controller's watchdog ends the stream")
+        return
+    try:
+        close()
+    except Exception as e:
+        log.error("the driver's stop failed: %s: %s", type(e).__name__, e)
+        loop.note(t, "driver stop failed", f"{how}; {type(e).__name__}: {e}")
+        return
+    method = getattr(driver, "stop_method", "")
+    loop.note(t, "driver stopped", f"{how}; {method}" if method else how)
 
 
 def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | None,

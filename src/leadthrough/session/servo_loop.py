@@ -34,7 +34,8 @@ from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
 from leadthrough.session.watchdog import DriverWatchdog
 
-__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "sleep_until", "transition_event",
+__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "fresh_packet", "sleep_until",
+           "transition_event",
            "zero_velocity_update"]
 
 Array = NDArray[np.float64]
@@ -153,6 +154,17 @@ class ServoLoop:
         #: controller caught up with the controller's clock when cycles went by unseen.
         self.t = math.nan
         self.follow_clock = not driver.simulated
+        #: A real controller's feedback is stale when no new sample came for this long [s]:
+        #: the safety layer's ``stale_cycles`` controller cycles on the wall clock (a period
+        #: without a sample lasts the driver's timeout, several servo periods), plus one servo
+        #: period for the packets' jitter (the sample of the last of those cycles arriving a
+        #: little late is not a third cycle missed). Checked after each exchange: at the
+        #: driver's timeout's granularity.
+        self.stale_s = (math.inf if driver.simulated
+                        else cfg.safety.stale_cycles * cfg.dt + driver.dt)
+        self.fresh_at = math.inf       # time.perf_counter() of the newest sample
+        self.fresh_sequence = -1       # and its sequence number
+        self.stale = False             # latched (and logged) once until a fault reset
         # the session's events
         self.events: list[SessionEvent] = []
         self.marks: list[Mark] = []
@@ -178,6 +190,8 @@ class ServoLoop:
                                "position to start from)", field="driver",
                                value=type(driver).__name__,
                                expected="a fresh sample on the first read")
+        if not driver.simulated:   # that one may have been waiting: the next, just come,
+            fresh_packet(driver, fb, drained=True)      # is the one answered at once
         q0 = fb.q.copy()
         if not driver.simulated:  # answered at once (a hold where it stands): the compute
             # below may outlast the cycle, and a packet seen and not answered in time is a
@@ -194,13 +208,13 @@ class ServoLoop:
         if self.board is not None:
             self.board.attach(driver.n)
             operator_link.publish_settings(self)
-        if not driver.simulated:  # the newest packet, for the first period to answer (those
-            # that came during the compute went unanswered and unseen, as lost ones)
-            driver.step()
-            driver.read(fb)
+        if not driver.simulated:  # a packet that has just come, for the first period to
+            # answer (those that came during the compute go unanswered, as lost ones)
+            fresh_packet(driver, fb)
         if self.watch is not None:
             self.watch.start()
         self.t = fb.t
+        self.fresh_at, self.fresh_sequence = time.perf_counter(), fb.sequence
         return fb.t
 
     def _dry_period(self, q0: Array, t: float) -> None:
@@ -298,7 +312,7 @@ class ServoLoop:
         self.cmd.q[:] = q
         self.cmd.qd[:] = 0.0
         self.enabling.reset()
-        self.controller_tripped = False
+        self.controller_tripped = self.stale = False
         if self.link is Link.SUSPECT:
             self.link = Link.OK
 
@@ -318,7 +332,10 @@ class ServoLoop:
         if fresh and self.follow_clock and fb.t > t_loop:
             t_loop = fb.t       # a real controller's cycles that went by without a packet
         self.t = t_loop
+        if t0 - self.fresh_at > self.stale_s:
+            self._stale(fresh, t_loop, t0 - self.fresh_at)
         if fresh:
+            self.fresh_at, self.fresh_sequence = t0, fb.sequence
             self.e_in.t = fb.t
             self.estimator.update(self.e_in, self.e_out)
             if fb.inputs_read:
@@ -385,6 +402,21 @@ class ServoLoop:
         else:
             self.link = Link.SUSPECT
             self.note(t, fault.name.lower().replace("_", " "), detail)
+
+    def _stale(self, fresh: bool, t: float, age: float) -> None:
+        """No sample from a real controller for longer than ``stale_s`` (``age`` [s]): the
+        safety layer's stale feedback, on the wall clock (its own count of controller cycles
+        would wait for as many stretched periods); seen when a period goes by without one,
+        or when a sample comes that late with none newer behind it (the controller's packets
+        came late; a sample with newer ones queued behind it means the loop itself was late,
+        which the controller reports its own way). Latched and logged once until a reset."""
+        if self.stale or (fresh and self.fb.sequence - self.fresh_sequence > 1):
+            return
+        self.stale = True
+        self.controller.trip(t, Fault.STALE_FEEDBACK, float(self.fb.sequence))
+        self.note(t, "stale feedback", f"no sample for {age * 1e3:.0f} ms (limit "
+                                       f"{self.stale_s * 1e3:.0f} ms)"
+                                       + ("; then a late one" if fresh else ""))
 
     def _controller_fault(self, t: float) -> None:
         code = int(self.fb.state)
@@ -456,6 +488,23 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
     if options.software_enable and requests is not None:
         return lambda t: requests.enable_held
     return None
+
+
+def fresh_packet(driver: Driver, fb: DriverFeedback, drained: bool = False) -> None:
+    """Read a real controller's packet that has just come: a whole cycle ahead to answer it.
+
+    ``step`` returns the newest packet waiting, which may have come up to a cycle ago (during
+    a compute): answered then, the answer may reach the controller after its next cycle, a
+    late answer (J519 refuses it and reports it, a fault at the stream's start; RSI counts
+    it). So the packets waiting are taken and left unanswered, as lost ones (``drained``:
+    the caller has just taken them), and the next one, waited for, is read: the answer
+    written at once goes out within the cycle. (RSI counts an isolated late answer for a
+    packet left unanswered, J519 and the UR program hold a cycle.)"""
+    if not drained:
+        driver.step()
+        driver.read(fb)
+    driver.step()
+    driver.read(fb)
 
 
 def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,

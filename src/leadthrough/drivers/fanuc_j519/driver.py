@@ -69,6 +69,7 @@ class FanucJ519Driver(StreamingDriver[StatusPacket]):
     """
 
     controller = "FANUC J519"
+    stop_method = "J519's stop packet: the controller ends Stream Motion"
     client: StreamMotionClient
     extrapolates = True  # missed cycles go on at the last velocity (the emulator's assumption)
 

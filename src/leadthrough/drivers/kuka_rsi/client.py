@@ -140,8 +140,9 @@ class RsiClient(Transport):
                                expected="receive() the first <Rob> document first")
         return tuple(float(t) - r for t, r in zip(target_deg, self.reference, strict=True))
 
-    def send(self, correction_deg: Sequence[float]) -> bool:
-        """Answer the newest document with corrections AK [deg] and its IPOC.
+    def send(self, correction_deg: Sequence[float], stop: bool = False) -> bool:
+        """Answer the newest document with corrections AK [deg] and its IPOC (``stop``: with
+        ``<Stop>1</Stop>``, the session's last answer).
 
         Returns:
             True if sent; False if nothing to answer yet or the link failed.
@@ -155,8 +156,8 @@ class RsiClient(Transport):
                                expected="open() first")
         if self._last is None or self._robot is None or self._link.error is not None:
             return False
-        data = SensorMessage(self._last.ipoc, tuple(correction_deg), self.sentype).encode(
-            self.precision)
+        data = SensorMessage(self._last.ipoc, tuple(correction_deg), self.sentype,
+                             stop).encode(self.precision)
         try:
             self._sock.sendto(data, self._robot)
         except OSError as e:

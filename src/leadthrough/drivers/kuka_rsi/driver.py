@@ -36,6 +36,12 @@ answer into a lag of millimetres that takes a fifth of a second to make up), the
 corrections are clipped to the context's AXISCORR range and within ``margin`` of
 AXISCORRMON's maximum (a larger correction stops RSI).
 
+:meth:`~KukaRsiDriver.close` ends the session the way KUKA's own client SDK does: the document
+waiting for an answer (or the next) is answered with the last target held and
+``<Stop>1</Stop>``, which the shipped context wires to its STOP object: ``RSI_MOVECORR()``
+returns and the KRL program goes on to ``RSI_OFF`` (without it the robot counts ``Timeout``
+late answers before RSI stops).
+
 Message format and sources: :mod:`leadthrough.drivers.kuka_rsi.messages`.
 """
 
@@ -74,6 +80,8 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     """
 
     controller = "KUKA RSI"
+    stop_method = ("an answer with Stop = 1: the context's STOP object ends RSI_MOVECORR (the "
+                   "KRL program goes on to RSI_OFF)")
     client: RsiClient
     reports_torque = True
 
@@ -140,7 +148,20 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         self._delay = None
 
     def _disconnect(self) -> None:
-        self.client.close()  # the robot counts late answers, then RSI stops
+        if self.opened and self.client.error is None and self.limiter is not None:
+            self._answer_stop()
+        self.client.close()
+
+    def _answer_stop(self) -> None:
+        """The session's last answer: the document waiting for one (else the next, within the
+        timeout) answered with the last target held and ``<Stop>1</Stop>``. Without it (or on
+        a robot whose configuration lacks ``Stop``) the robot counts ``Timeout`` late answers,
+        then RSI stops."""
+        if not self._answer_due and self.client.receive(self.timeout) is None:
+            return
+        assert self.limiter is not None
+        self.client.send(self._correction(self.limiter.position), stop=True)
+        self._answer_due = False
 
     def _receive(self, timeout: float) -> RobotMessage | None:
         return self.client.receive(timeout)
@@ -199,11 +220,15 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         fb.inputs = sample.digital_inputs or 0
 
     def _send(self, q: Array) -> None:
+        self.client.send(self._correction(q))
+
+    def _correction(self, q: Array) -> list[float]:
+        """AK [deg] for target ``q`` [rad], clipped to the context's range (counted)."""
         ak = np.array(self.client.correction_for(np.degrees(q).tolist()))
         clipped = np.clip(ak, self._ak_lo, self._ak_hi)
         if np.any(clipped != ak):
             self.corrections_clipped += 1
-        self.client.send(clipped.tolist())
+        return list(clipped.tolist())
 
     def _no_data_hint(self) -> str:
         return ("a <Rob> document: is leadthrough_rsi.src running, and does the Ethernet "

@@ -20,10 +20,14 @@ Robot → sensor, with the elements our shipped configuration
       <IPOC>..</IPOC>                                        time stamp [ms]
     </Rob>
 
-Sensor → robot (``<RECEIVE>``: ``AK.A1`` .. ``AK.A6``, ``HOLDON="1"``)::
+Sensor → robot (``<RECEIVE>``: ``AK.A1`` .. ``AK.A6``, ``HOLDON="1"``; ``Stop``, ``HOLDON="0"``)::
 
     <Sen Type="ImFree"><AK A1=".." A2=".." A3=".." A4=".." A5=".." A6=".."/>
     <IPOC>..</IPOC></Sen>
+
+and, to end the session, one last answer with ``<Stop>1</Stop>`` (before ``<IPOC>``): the
+configuration wires ``Stop`` to the context's STOP object, which ends ``RSI_MOVECORR()`` (the
+KRL program goes on to ``RSI_OFF``) instead of RSI counting ``Timeout`` late answers.
 
 ``AK`` are axis corrections [deg]. With ``RSI_ON(#ABSOLUTE)`` (our KRL program) they are
 offsets from the axis positions at ``RSI_ON``, i.e. target = start + AK; ``ASPos`` reports the
@@ -40,6 +44,12 @@ Sources:
       ETHERNET inputs and sent as ``GearTorque.A1..A6``, the ``Delay``, ``ProgStatus`` and
       ``OvPro`` elements, and a parser test with a full ``<Rob>`` document (IPOC
       123645634563).
+    * KUKA Hungaria's ``kuka-external-control-sdk`` (Apache-2.0, github.com/kroshu): the
+      ``Stop`` element (``<ELEMENT TAG="Stop" TYPE="BOOL" INDX="1" HOLDON="0"/>`` in
+      ``krc_setup/kss/Config/User/Common/SensorInterface/rsi_ethernet.xml``, wired to a
+      ``Stop`` RSI object, ObjTypeId 18, in ``rsi_joint_pos.rsix``) and the client's clean
+      end (``Robot::StopControlling`` in ``kss/src/rsi/robot_interface.cc``: receive the
+      next document if none is waiting, answer its IPOC with the stop flag set).
     * KUKA.RobotSensorInterface manual's Ethernet example as quoted by the above (tag
       ``DiL`` for a LONG of digital inputs; ``TYPE`` attribute on ``Rob``, ``Type`` on
       ``Sen``).
@@ -206,11 +216,13 @@ class SensorMessage:
         ipoc: The IPOC of the ``<Rob>`` document answered.
         correction: ``AK`` A1-A6 axis corrections [deg], finite.
         sentype: The ``Type`` attribute (the configuration's ``SENTYPE``).
+        stop: ``<Stop>1</Stop>``: the session's last answer (RSI_MOVECORR ends).
     """
 
     ipoc: int
     correction: tuple[float, ...]
     sentype: str = "ImFree"
+    stop: bool = False
 
     def encode(self, precision: int = 4) -> bytes:
         """The document as sent (no whitespace between elements).
@@ -228,8 +240,9 @@ class SensorMessage:
         if self.ipoc < 0:
             raise DataError("negative", source=src, field="IPOC", value=self.ipoc,
                             expected=">= 0")
+        stop = "<Stop>1</Stop>" if self.stop else ""
         return (f'<Sen Type="{self.sentype}"><AK {_attrs(AXES, self.correction, precision)}'
-                f" /><IPOC>{self.ipoc}</IPOC></Sen>").encode("ascii")
+                f" />{stop}<IPOC>{self.ipoc}</IPOC></Sen>").encode("ascii")
 
     @classmethod
     def decode(cls, data: bytes | str) -> SensorMessage:
@@ -243,4 +256,4 @@ class SensorMessage:
         return cls(
             ipoc=_need(_integer(root, "IPOC", src), src, "IPOC", "<IPOC>integer</IPOC>"),
             correction=_need(_vector(root, "AK", AXES, src), src, "AK", "<AK A1=.. A6=../>"),
-            sentype=root.get("Type", ""))
+            sentype=root.get("Type", ""), stop=bool(_integer(root, "Stop", src)))

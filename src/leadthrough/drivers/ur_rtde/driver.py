@@ -109,6 +109,8 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
     """
 
     controller = "UR RTDE"
+    stop_method = ("mode 2 in the input registers: the servo program stops the arm (stopj) "
+                   "and halts; RTDE paused")
     client: RtdeClient
 
     def __init__(self, robot: Robot, host: str, port: int = DEFAULT_PORT, *,

@@ -171,7 +171,8 @@ class EmulatedController(ABC):
 
     def transmit(self, sock: socket.socket, data: bytes, addr: tuple[str, int] | None,
                  key: int | None = None) -> None:
-        """Send a packet through the fault plan (dropped, delayed, or sent now).
+        """Send a packet through the fault plan (dropped, delayed, or sent now; on a stream
+        socket never before a packet delayed before it: TCP delivers in order).
 
         Args:
             sock: Socket to send on.
@@ -186,9 +187,12 @@ class EmulatedController(ABC):
             self.dropped += 1
             return
         delay = faults.delay(t)
-        if delay > 0:
+        # a stream (TCP) delivers in order: a packet leaves after those delayed before it
+        queued = [item[0] for item in self._outbox if addr is None and item[1] is sock]
+        if delay > 0 or queued:
             self.delayed += 1
-            self._outbox.append((time.monotonic() + delay, sock, data, addr, key))
+            self._outbox.append((max([time.monotonic() + delay, *queued]), sock, data, addr,
+                                 key))
             return
         self._send_now(sock, data, addr, key)
 

@@ -14,6 +14,9 @@ cycle. Its behaviour, read from the shipped context (``leadthrough_rsi.rsix``):
   ``<Delay D>``; after ``Timeout`` (100) late answers in a row RSI stops: the arm makes a
   controlled stop at its deceleration and the robot sends nothing more, as the KRL program
   ends. Any stop (also E-stop, protective stop) ends the exchange the same way;
+* an answer with ``<Stop>1</Stop>`` (the configuration's ``Stop`` element, wired to the
+  context's STOP object) is the client's end: its correction is applied, then the arm makes
+  the same controlled stop (a requested stop, not a fault) and the exchange ends;
 * ``<GearTorque>``: what the GEARTORQUE object reports is the controller's joint torque at
   the gear output, derived from the motor current (KUKA's manual, not public, describes its
   ``TorqueSource`` / ``LocationOnJoint`` options; the shipped context takes 0 / 0 as FZI's
@@ -80,6 +83,8 @@ class KukaRsiEmulator(UdpController):
         self._awaiting: int | None = None
         self._answer: SensorMessage | None = None
         self._tpa = robot.torque_per_amp
+        #: The configuration wires the answers' ``Stop`` to a STOP object.
+        self.stop_element = any(el.tag == "Stop" for el in self.config.receive)
 
     def motion_limits(self, robot: Robot) -> MotionLimits:
         """Joint speed (the robot's monitoring); corrections are checked separately."""
@@ -120,6 +125,10 @@ class KukaRsiEmulator(UdpController):
             if self._answer is not None:
                 self.late_run = 0
                 self._apply(np.array(self._answer.correction, dtype=float), t)
+                if self._answer.stop and self.stop_element:
+                    self.arm.stop(StopKind.REQUEST, "RSI: Stop from the sensor "
+                                                    "(RSI_MOVECORR ends)")
+                    self.stream_ended()
             else:
                 self.late_total += 1
                 self.late_run += 1
