@@ -10,12 +10,13 @@ protocols.
 
 Tolerances: the controller's commanded Cartesian acceleration is bounded exactly (the stop's
 ramp is the limit times the cycle, up to rounding: 1e-9 relative). With one servo period per
-controller cycle (J519 at 8 ms, RSI at 12 ms) the joint command is the midpoints of the cycles' setpoints, the
-IK's Euler steps of that ramp: their TCP follows it up to the kinematics' curvature over one
-cycle's travel (under 2 mm at 0.2 m/s): 2 % of the limit. At 2 ms (UR, five periods per
-cycle) the interpolated command is the setpoints' quadratic B-spline, whose acceleration inside
-a cycle is the cycle's own (:mod:`leadthrough.control.interpolation`): the same bound holds at
-every servo period (the cubics used before 2026-11-27 peaked at 2.8 times the limit there).
+controller cycle (J519 at 8 ms, RSI at 12 ms) the joint command is the midpoints of the cycles'
+setpoints, the IK's Euler steps of that ramp: their TCP follows it up to the kinematics'
+curvature over one cycle's travel (under 2 mm at 0.2 m/s): 2 % of the limit. At 2 ms (UR, five
+periods per cycle) the interpolated command is the setpoints' quadratic B-spline, whose
+acceleration inside a cycle is the cycle's own (:mod:`leadthrough.control.interpolation`): the
+same bound holds at every servo period (the cubics used before 2026-11-27 peaked at 2.8 times
+the limit there).
 """
 
 from __future__ import annotations
