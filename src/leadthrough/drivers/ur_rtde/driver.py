@@ -246,14 +246,15 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
     def _answer_late(self, sample: RtdeState) -> bool:
         """Our last command missed the program's cycle: the package's echo (the counter of
         the targets servoj took) is not its counter (once per command: a client that is
-        slow to answer sees several packages before its next one). Only while the program
-        runs: once it halts (a protective stop, an E-stop, its watchdog) no package echoes a
-        newer counter, and that is the controller's state (:func:`controller_state`), not a
-        late answer per package."""
+        slow to answer sees several packages before its next one). Only while the controller
+        is in a normal state with the program running: once a protective stop, an E-stop or
+        the program's watchdog halts it (its state register keeps the last value the program
+        wrote) no package echoes a newer counter, and that is the controller's state
+        (:func:`controller_state`), not a late answer per package."""
         echo = sample.values.get(self._echo)
         if echo is None or self._answered is None:
             return False
-        if sample.values.get(self._register) != ScriptState.RUNNING:
+        if controller_state(sample.values, self._register) != ControllerState.NORMAL:
             return False
         if self._echoed is None and int(echo) not in self._sent:
             return False  # no echo of ours yet (a program that does not echo: never)
