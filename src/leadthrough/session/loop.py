@@ -222,8 +222,10 @@ def stop_driver(loop: ServoLoop, escaped: BaseException | None = None) -> None:
         return
     end = loop.end
     t = end.t if end is not None else loop.t
-    if escaped is not None or end is None:
+    if escaped is not None:
         how = f"after {type(escaped).__name__}"
+    elif end is None:
+        how = "after the loop left without an end"
     else:
         how = f"after {end.cause}: {end.detail}" if end.detail else f"after {end.cause}"
     close = getattr(driver, "close", None)
