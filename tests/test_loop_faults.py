@@ -468,3 +468,50 @@ def test_the_first_answers_go_out_a_whole_cycle_ahead(
     r = run_session(driver, *parts, 0.1, options=LoopOptions(enable_input=0, watchdog_s=0.5))
     assert r.end.cause is EndCause.DURATION
     assert [waiting for _, waiting in driver.answers[:2]] == [False, False], driver.answers
+
+
+class AnswerLog(WrappedDriver):
+    """The simulated robot as a real controller's driver that notes which samples got an
+    answer (a write before the next step)."""
+
+    simulated = False  # type: ignore[assignment]
+
+    def __init__(self, driver: Driver) -> None:
+        super().__init__(driver)
+        self.taken: list[int] = []
+        self.answered: set[int] = set()
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = self._driver.read(fb)
+        if fresh:
+            self.taken.append(fb.sequence)
+        return fresh
+
+    def write(self, cmd: JointCommand) -> None:
+        if self.taken:
+            self.answered.add(self.taken[-1])
+        self._driver.write(cmd)
+
+
+class RsiLike(AnswerLog):
+    answer_late_packets = True  # type: ignore[assignment]
+
+
+@pytest.mark.parametrize("answer_late", [False, True])
+def test_the_start_answers_the_packets_that_waited_only_where_the_controller_wants_it(
+        answer_late: bool, er20: Robot, nominal_params: ParamsFile) -> None:
+    """The start takes four samples before the first period's: the first one (it may have
+    waited since the driver opened), the next (waited for: answered at once), one that came
+    during the set-up's compute, and the next (the first period answers it). A controller
+    that counts an unanswered packet late (RSI) gets a hold for each; otherwise (J519 refuses
+    a late answer) the two that may have waited go unanswered."""
+    sim = SimDriver(SimRobot(er20, SimConfig(seed=1), q0=guide_start_pose(er20)))
+    driver = (RsiLike if answer_late else AnswerLog)(sim)
+    parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
+    r = run_session(driver, *parts, 0.05, options=LoopOptions(enable_input=0, watchdog_s=0.05))
+    assert r.end.cause is EndCause.DURATION
+    first = driver.taken[:4]
+    assert first == sorted(set(first)) and len(first) == 4
+    unanswered = [s for s in first if s not in driver.answered]
+    assert unanswered == ([] if answer_late else [first[0], first[2]]), (first, unanswered)
+    assert all(s in driver.answered for s in driver.taken[4:-1])   # the periods answer each

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from leadthrough.errors import DataError
 from leadthrough.identification.params_file import ParamsFile
@@ -16,7 +17,7 @@ from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
 from leadthrough.session.record import SessionLog, load_session
-from leadthrough.session.recorder import RecordChunk
+from leadthrough.session.recorder import QUATERNION_SLICE_ROWS, RecordChunk
 from leadthrough.session.session_file import SessionFileSink
 from leadthrough.sim.driver import InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
@@ -73,3 +74,16 @@ def test_chunks_are_recycled_not_accumulated(tmp_path: Path) -> None:
     sink.finish("er20", [], {})
     assert len(seen) <= 5 + sink.extra_chunks
     assert load_session(tmp_path / "s.parquet").time.size == 200 * 50
+
+
+def test_chunk_orientations_convert_slice_by_slice_as_in_one_call() -> None:
+    """The writer converts a chunk's orientations a slice at a time (the interpreter lock is
+    offered between slices): the same quaternions as SciPy in one call, over a partial last
+    slice and an empty chunk."""
+    rows = 2 * QUATERNION_SLICE_ROWS + 117
+    chunk = RecordChunk(rows + 10, 6, False)
+    chunk.rot[:rows] = Rotation.random(rows, rng=3).as_matrix()
+    chunk.rows = rows
+    np.testing.assert_array_equal(chunk.quaternions(),
+                                  Rotation.from_matrix(chunk.rot[:rows]).as_quat())
+    assert RecordChunk(5, 6, False).quaternions().shape == (0, 4)

@@ -41,6 +41,11 @@ never raises for what the link does, may be called again (a no-op) and says what
 ``stop_method``. The loop calls it once it has ended, whatever ended it, before it finishes
 the recording (:func:`~leadthrough.session.loop.run_session`).
 
+Start: a real controller's driver may say ``answer_late_packets`` (RSI): a packet left
+unanswered counts as late as one answered late, so the loop answers at its start (with a hold)
+the packets that waited during its set-up too; otherwise it answers only those it waited for
+(J519 refuses a late answer).
+
 Pacing: :meth:`Driver.step` is where the loop waits for the next servo period. A simulated
 driver (``simulated`` true) advances its physics by one period and returns at once, so a
 simulated session runs as fast as the CPU allows (pace it with the wall clock only to watch
@@ -240,6 +245,11 @@ class WrappedDriver:
         abort = getattr(self._driver, "abort", None)
         if abort is not None:
             abort()
+
+    @property
+    def answer_late_packets(self) -> bool:
+        """That of the wrapped driver (False if it has none)."""
+        return bool(getattr(self._driver, "answer_late_packets", False))
 
     @property
     def stop_method(self) -> str:

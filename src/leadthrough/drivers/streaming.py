@@ -124,6 +124,13 @@ class StreamingDriver(ABC, Generic[S]):
     """Whether the controller reports joint torque (``make_feedback`` then has a torque
     array)."""
 
+    answer_late_packets = False
+    """Whether a packet that may have waited is best answered anyway: the controller counts a
+    packet left unanswered as late just as one answered late (RSI), so an answer can only
+    help. Else a late answer is worse than none (J519 refuses it; the UR program holds a
+    cycle either way): the loop answers at its start only packets it waited for
+    (:func:`~leadthrough.session.servo_loop.fresh_packet`)."""
+
     def make_feedback(self) -> DriverFeedback:
         """A feedback for this robot, holding no sample yet."""
         return DriverFeedback.empty(self._n, torque=self.reports_torque)

@@ -162,11 +162,13 @@ def save_session(log: SessionLog, path: str | Path) -> Path:
 
 
 def session_columns(log: SessionLog) -> dict[str, Array]:
-    """The session file's columns of ``log``'s rows (``t``, ``q_1``..., ``state``, ...)."""
+    """The session file's columns of ``log``'s rows (``t``, ``q_1``..., ``state``, ...), each
+    contiguous (a strided column is copied here, one short call per column, not inside
+    ``pyarrow.table`` in one call holding the interpreter lock for all of them)."""
     columns: dict[str, Array] = {"t": log.time}
     for prefix, (arr, names) in _blocks(log).items():
         for k, name in enumerate(names):
-            columns[f"{prefix}_{name}"] = arr[:, k]
+            columns[f"{prefix}_{name}"] = np.ascontiguousarray(arr[:, k])
     columns["state"] = log.state.astype(np.int8)
     columns["fault"] = log.fault.astype(np.int8)
     return columns

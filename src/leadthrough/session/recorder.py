@@ -9,6 +9,7 @@ memory grows by one chunk at a time, with the session's length.
 
 from __future__ import annotations
 
+import time
 from typing import Any, Protocol
 
 import numpy as np
@@ -17,12 +18,19 @@ from scipy.spatial.transform import Rotation
 
 from leadthrough.session.record import SessionEvent, SessionLog
 
-__all__ = ["DEFAULT_CHUNK_ROWS", "ChunkSink", "MemorySink", "RecordChunk", "SessionRecorder",
+__all__ = ["DEFAULT_CHUNK_ROWS", "QUATERNION_SLICE_ROWS", "ChunkSink", "MemorySink", "RecordChunk",
+           "SessionRecorder",
            "chunks_to_log"]
 
 Array = NDArray[np.float64]
 #: Rows per chunk: 10 s at 1 kHz (about 4.5 MB for six joints).
 DEFAULT_CHUNK_ROWS = 10_000
+#: Rows converted per call into SciPy when a chunk's orientations become quaternions. A call
+#: holds the interpreter lock throughout: 10 000 rows in one call held it 3-4 ms, and a
+#: streamed session's writer thread converts a chunk every 10 s while the loop runs (a thread
+#: waking from a 1 ms sleep waited up to 4 ms, ``benchmarks/gil_hold.py``). 500 rows hold it
+#: about 0.2 ms, and the lock is offered to a waiting thread between two calls.
+QUATERNION_SLICE_ROWS = 500
 
 
 class RecordChunk:
@@ -57,10 +65,14 @@ class RecordChunk:
         return self.rows == self.time.size
 
     def quaternions(self) -> Array:
-        """The commanded TCP orientations of the filled rows, (x, y, z, w), shape (rows, 4)."""
-        if self.rows == 0:
-            return np.zeros((0, 4))
-        return Rotation.from_matrix(self.rot[:self.rows]).as_quat()
+        """The commanded TCP orientations of the filled rows, (x, y, z, w), shape (rows, 4),
+        converted :data:`QUATERNION_SLICE_ROWS` rows at a time."""
+        quat = np.zeros((self.rows, 4))
+        for start in range(0, self.rows, QUATERNION_SLICE_ROWS):
+            end = min(start + QUATERNION_SLICE_ROWS, self.rows)
+            quat[start:end] = Rotation.from_matrix(self.rot[start:end]).as_quat()
+            time.sleep(0)   # the lock to a waiting thread (the loop's), if there is one
+        return quat
 
 
 class ChunkSink(Protocol):

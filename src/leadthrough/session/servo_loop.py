@@ -40,6 +40,10 @@ __all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "fresh_packet", "sleep_un
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
+#: Periods computed on the first sample at the start, before every part is reset (see
+#: :meth:`ServoLoop._dry_period`); a real controller's packets that come meanwhile are
+#: answered by :func:`fresh_packet`.
+DRY_PERIODS = 3
 
 
 class Link(IntEnum):
@@ -190,8 +194,11 @@ class ServoLoop:
                                "position to start from)", field="driver",
                                value=type(driver).__name__,
                                expected="a fresh sample on the first read")
+        answer_all = bool(getattr(driver, "answer_late_packets", False))
         if not driver.simulated:   # that one may have been waiting: the next, just come,
-            fresh_packet(driver, fb, drained=True)      # is the one answered at once
+            self.cmd.q[:] = fb.q   # is the one answered at once (that one too: a hold, if
+            self.cmd.qd[:] = 0.0   # the controller counts an unanswered packet late)
+            fresh_packet(driver, fb, self.cmd if answer_all else None, drained=True)
         q0 = fb.q.copy()
         if not driver.simulated:  # answered at once (a hold where it stands): the compute
             # below may outlast the cycle, and a packet seen and not answered in time is a
@@ -209,8 +216,8 @@ class ServoLoop:
             self.board.attach(driver.n)
             operator_link.publish_settings(self)
         if not driver.simulated:  # a packet that has just come, for the first period to
-            # answer (those that came during the compute go unanswered, as lost ones)
-            fresh_packet(driver, fb)
+            # answer (one that came during the compute: a hold, or unanswered as a lost one)
+            fresh_packet(driver, fb, self.cmd if answer_all else None)
         if self.watch is not None:
             self.watch.start()
         self.t = fb.t
@@ -218,28 +225,30 @@ class ServoLoop:
         return fb.t
 
     def _dry_period(self, q0: Array, t: float) -> None:
-        """One period's compute on the first sample with the enabling device released, then
-        every part reset by the caller: the session's first period then runs on code and state
-        already touched. (Each part's ``warm_up`` loads its compiled code on copies of its
-        state; the first update of the state itself still took 2-3 times the steady-state
-        median, on every driver.) Its transitions are not the session's."""
+        """:data:`DRY_PERIODS` periods' compute on the first sample with the enabling device
+        released, then every part reset by the caller: the session's first period then runs on
+        code and state already touched. (Each part's ``warm_up`` loads its compiled code on
+        copies of its state; the first update of the state itself still took 2-3 times the
+        steady-state median, on every driver; the interpreter specialises a function's code
+        only after it has run a few times.) Its transitions are not the session's."""
         estimator, controller, interpolator = self.estimator, self.controller, self.interpolator
         estimator.reset(q0)
         controller.reset(q0, t)
         interpolator.reset(q0)
         for part in (estimator, controller, interpolator):
             part.warm_up()
-        self.e_in.t = t
-        estimator.update(self.e_in, self.e_out)
         c_in = self.c_in
-        c_in.t, c_in.sequence, c_in.deadman = t, self.fb.sequence, False
-        c_in.q[:] = self.fb.q
-        c_in.current[:] = self.fb.current
-        c_in.wrench_base[:] = self.e_out.wrench
-        c_in.estimator_status = int(self.e_out.status)
-        controller.update(c_in, self.c_out)
-        interpolator.set_target(self.c_out.q, self.c_out.qd)
-        interpolator.update(self.cmd)
+        for _ in range(DRY_PERIODS):
+            self.e_in.t = t
+            estimator.update(self.e_in, self.e_out)
+            c_in.t, c_in.sequence, c_in.deadman = t, self.fb.sequence, False
+            c_in.q[:] = self.fb.q
+            c_in.current[:] = self.fb.current
+            c_in.wrench_base[:] = self.e_out.wrench
+            c_in.estimator_status = int(self.e_out.status)
+            controller.update(c_in, self.c_out)
+            interpolator.set_target(self.c_out.q, self.c_out.qd)
+            interpolator.update(self.cmd)
         self.cmd.q[:] = q0
         self.cmd.qd[:] = 0.0
         self.seen = controller.event_count
@@ -490,19 +499,23 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
     return None
 
 
-def fresh_packet(driver: Driver, fb: DriverFeedback, drained: bool = False) -> None:
+def fresh_packet(driver: Driver, fb: DriverFeedback, hold: JointCommand | None = None,
+                 drained: bool = False) -> None:
     """Read a real controller's packet that has just come: a whole cycle ahead to answer it.
 
     ``step`` returns the newest packet waiting, which may have come up to a cycle ago (during
     a compute): answered then, the answer may reach the controller after its next cycle, a
-    late answer (J519 refuses it and reports it, a fault at the stream's start; RSI counts
-    it). So the packets waiting are taken and left unanswered, as lost ones (``drained``:
-    the caller has just taken them), and the next one, waited for, is read: the answer
-    written at once goes out within the cycle. (RSI counts an isolated late answer for a
-    packet left unanswered, J519 and the UR program hold a cycle.)"""
+    late answer (J519 refuses it and reports it, a fault at the stream's start). So the
+    packets waiting are taken (``drained``: the caller has just taken them) and left
+    unanswered, as lost ones (J519 and the UR program hold a cycle), or answered with ``hold``
+    when given (RSI counts an unanswered packet late as well: the answer may still be in
+    time); then the next one, waited for, is read: the answer written at once goes out within
+    the cycle."""
     if not drained:
         driver.step()
         driver.read(fb)
+    if hold is not None:
+        driver.write(hold)
     driver.step()
     driver.read(fb)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
 from pathlib import Path
 
 import pyarrow as pa
@@ -118,8 +119,16 @@ class SessionFileSink:
             self._spare.put(chunk)
 
     def _write(self, chunk: RecordChunk) -> None:
-        columns = session_columns(chunks_to_log([chunk], self._truth, "", [], {}))
+        """One chunk as one row group. Each step holds the interpreter lock briefly and offers
+        it between steps (``sleep(0)``): the loop's thread, waking for a packet, waits for
+        the lock while this thread runs Python code (see
+        :data:`~leadthrough.session.recorder.QUATERNION_SLICE_ROWS`)."""
+        log = chunks_to_log([chunk], self._truth, "", [], {})
+        time.sleep(0)
+        columns = session_columns(log)
+        time.sleep(0)
         table = pa.table(columns)
+        time.sleep(0)
         if self._writer is None:
             self._writer = pq.ParquetWriter(self.partial, table.schema)
         self._writer.write_table(table)

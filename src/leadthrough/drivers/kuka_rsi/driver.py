@@ -84,6 +84,7 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
                    "KRL program goes on to RSI_OFF)")
     client: RsiClient
     reports_torque = True
+    answer_late_packets = True  # RSI counts a missing answer as late as a late one
 
     def __init__(self, robot: Robot, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
                  cycle: float = 0.004, context: RsiContext | None = None,
