@@ -14,6 +14,10 @@ Per servo period (``driver.dt``):
 4. the row is recorded (:mod:`~leadthrough.session.recorder`) and the compute time of steps
    2–3 measured.
 
+**Start.** The first sample: each part's compiled code loaded and a few periods computed on
+it, then every part reset there; on a real controller the packets of the start answered as the
+controller wants them (:mod:`~leadthrough.session.loop_start`).
+
 **Enabling.** The enabling device (a digital input of the driver, ``LoopOptions.enable_input``;
 a ``deadman`` function; or, on a simulated driver, ``LoopRequests.set_enable``) starts guiding
 only on a fresh press seen while the loop is ready: the estimator reports OK (after its warm-up
@@ -59,10 +63,13 @@ pausing it costs no memory.
 The interpreter's thread switch interval is shortened to :data:`GIL_SWITCH_S` while the loop
 runs (and restored after). Other threads of the process (the session file's writer, the
 watchdog) run Python code; when the loop's thread wakes with a sample, it waits for the
-interpreter lock until the running thread yields it, at most one switch interval: Python's
-default 5 ms made the loop answer a 2 ms controller two cycles late every 10 s, when the writer
-converted a chunk, with no late period on the loop's own clock (measured with an emulated UR
-controller; ``benchmarks/long_session.py``).
+interpreter lock until the running thread yields it: one switch interval while that thread
+runs Python code (Python's default 5 ms made the loop answer a 2 ms controller two cycles late
+every 10 s, when the writer converted a chunk, with no late period on the loop's own clock:
+measured with an emulated UR controller, ``benchmarks/long_session.py``), or the whole of a call
+into C that keeps the lock. The writer keeps its calls short
+(:data:`~leadthrough.session.recorder.QUATERNION_SLICE_ROWS`) and offers the lock between its
+steps; ``benchmarks/gil_hold.py`` measures the wait.
 """
 
 from __future__ import annotations
@@ -83,11 +90,12 @@ from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import ExternalForceEstimator
 from leadthrough.session.loop_config import LoopOptions
+from leadthrough.session.loop_end import EndCause, LoopEnd
 from leadthrough.session.pacing import ComputeTimes, PeriodClock
 from leadthrough.session.record import SessionLog
 from leadthrough.session.recorder import ChunkSink, SessionRecorder
 from leadthrough.session.requests import LoopRequests
-from leadthrough.session.servo_loop import EndCause, LoopEnd, ServoLoop, transition_event
+from leadthrough.session.servo_loop import ServoLoop, transition_event
 from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
 
 __all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers",

@@ -13,8 +13,6 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
-from enum import IntEnum, StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,70 +22,21 @@ from leadthrough.control.interpolation import InterpolatorStatus, JointInterpola
 from leadthrough.control.safety import Event
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.drivers.protocol import ControllerState, Driver, DriverFeedback, JointCommand
-from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
 from leadthrough.session import operator_link
 from leadthrough.session.loop_config import LoopOptions
+from leadthrough.session.loop_end import EndCause, Link, LoopEnd
+from leadthrough.session.loop_start import start_loop
 from leadthrough.session.operator_inputs import EnablingDevice, MarkButton, input_bit
 from leadthrough.session.pacing import PeriodClock
 from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
 from leadthrough.session.watchdog import DriverWatchdog
 
-__all__ = ["EndCause", "Link", "LoopEnd", "ServoLoop", "fresh_packet", "sleep_until",
-           "transition_event",
-           "zero_velocity_update"]
+__all__ = ["ServoLoop", "sleep_until", "transition_event", "zero_velocity_update"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
-#: Periods computed on the first sample at the start, before every part is reset (see
-#: :meth:`ServoLoop._dry_period`); a real controller's packets that come meanwhile are
-#: answered by :func:`fresh_packet`.
-DRY_PERIODS = 3
-
-
-class Link(IntEnum):
-    """The state of the link to the driver."""
-
-    #: The driver's calls succeed.
-    OK = 0
-    #: One failed (an exception, or an exchange beyond the watchdog's timeout): a fault is
-    #: latched and the stop is commanded.
-    SUSPECT = 1
-    #: A second failure, or a blocked call aborted: nothing more is sent.
-    LOST = 2
-
-
-class EndCause(StrEnum):
-    """Why a loop ended."""
-
-    #: ``duration_s`` ran out, and the commanded motion came to rest.
-    DURATION = "duration"
-    #: ``LoopRequests.stop``, and the commanded motion came to rest.
-    STOP_REQUESTED = "stop requested"
-    #: The driver failed twice (or a blocked call was aborted): no more commands were sent.
-    LINK_LOST = "link lost"
-    #: A stop did not bring the commanded motion to rest within ``stop_timeout_s``.
-    STOP_TIMEOUT = "stop timeout"
-
-
-@dataclass(frozen=True)
-class LoopEnd:
-    """How a loop ended.
-
-    Attributes:
-        cause: Why.
-        t: The loop's time at the end [s].
-        state: The controller's safety state at the end.
-        fault: The latched fault (``Fault.NONE`` if none).
-        detail: More, in words (the driver's error, ...).
-    """
-
-    cause: EndCause
-    t: float
-    state: State
-    fault: Fault
-    detail: str = ""
 
 
 class ServoLoop:
@@ -179,79 +128,8 @@ class ServoLoop:
     # ------------------------------------------------------------------ start and end
     def start(self) -> float:
         """The first sample: every part reset there, their compiled code loaded; returns the
-        sample's time [s]."""
-        driver, fb = self.driver, self.fb
-        # a real controller: its next packet within a second (a step waits a few cycles)
-        tries = 1 if driver.simulated else max(1, math.ceil(1.0 / driver.dt))
-        fresh = False
-        for _ in range(tries):
-            driver.step()
-            fresh = driver.read(fb)
-            if fresh:
-                break
-        if not fresh:
-            raise ControlError("no feedback on the first read (the robot must report a "
-                               "position to start from)", field="driver",
-                               value=type(driver).__name__,
-                               expected="a fresh sample on the first read")
-        answer_all = bool(getattr(driver, "answer_late_packets", False))
-        if not driver.simulated:   # that one may have been waiting: the next, just come,
-            self.cmd.q[:] = fb.q   # is the one answered at once (that one too: a hold, if
-            self.cmd.qd[:] = 0.0   # the controller counts an unanswered packet late)
-            fresh_packet(driver, fb, self.cmd if answer_all else None, drained=True)
-        q0 = fb.q.copy()
-        if not driver.simulated:  # answered at once (a hold where it stands): the compute
-            # below may outlast the cycle, and a packet seen and not answered in time is a
-            # late answer to the controller (RSI counts it, the loop faults on it)
-            self.cmd.q[:] = q0
-            self.cmd.qd[:] = 0.0
-            driver.write(self.cmd)
-        self._dry_period(q0, fb.t)
-        self.estimator.reset(q0)
-        self.controller.reset(q0, fb.t)
-        self.interpolator.reset(q0)
-        self.interp_status = self.interpolator.update(self.cmd)
-        self._drain()  # the reset's transition: the session's, taken now, not in a period
-        if self.board is not None:
-            self.board.attach(driver.n)
-            operator_link.publish_settings(self)
-        if not driver.simulated:  # a packet that has just come, for the first period to
-            # answer (one that came during the compute: a hold, or unanswered as a lost one)
-            fresh_packet(driver, fb, self.cmd if answer_all else None)
-        if self.watch is not None:
-            self.watch.start()
-        self.t = fb.t
-        self.fresh_at, self.fresh_sequence = time.perf_counter(), fb.sequence
-        return fb.t
-
-    def _dry_period(self, q0: Array, t: float) -> None:
-        """:data:`DRY_PERIODS` periods' compute on the first sample with the enabling device
-        released, then every part reset by the caller: the session's first period then runs on
-        code and state already touched. (Each part's ``warm_up`` loads its compiled code on
-        copies of its state; the first update of the state itself still took 2-3 times the
-        steady-state median, on every driver; the interpreter specialises a function's code
-        only after it has run a few times.) Its transitions are not the session's."""
-        estimator, controller, interpolator = self.estimator, self.controller, self.interpolator
-        estimator.reset(q0)
-        controller.reset(q0, t)
-        interpolator.reset(q0)
-        for part in (estimator, controller, interpolator):
-            part.warm_up()
-        c_in = self.c_in
-        for _ in range(DRY_PERIODS):
-            self.e_in.t = t
-            estimator.update(self.e_in, self.e_out)
-            c_in.t, c_in.sequence, c_in.deadman = t, self.fb.sequence, False
-            c_in.q[:] = self.fb.q
-            c_in.current[:] = self.fb.current
-            c_in.wrench_base[:] = self.e_out.wrench
-            c_in.estimator_status = int(self.e_out.status)
-            controller.update(c_in, self.c_out)
-            interpolator.set_target(self.c_out.q, self.c_out.qd)
-            interpolator.update(self.cmd)
-        self.cmd.q[:] = q0
-        self.cmd.qd[:] = 0.0
-        self.seen = controller.event_count
+        sample's time [s] (:func:`~leadthrough.session.loop_start.start_loop`)."""
+        return start_loop(self)
 
     def begin_end(self, cause: EndCause, t: float) -> None:
         """Stop, then end: the controller is released (a stop at the acceleration limit) and
@@ -282,7 +160,7 @@ class ServoLoop:
         for request in self.deferred:
             self.note(t, f"{request.kind} not made", "the session ended before rest")
         self.deferred.clear()
-        self._drain()
+        self.drain()
         if self.board is not None and self.board.fields is not None:
             end = self.end
             self.board.end_cause = "" if end is None else f"{end.cause}: {end.detail}".rstrip(
@@ -293,7 +171,7 @@ class ServoLoop:
 
     def session_events(self) -> list[SessionEvent]:
         """Transitions, marks and the loop's notes, in time order."""
-        self._drain()
+        self.drain()
         return sorted(self.events, key=lambda e: e.t)
 
     def at_rest(self) -> bool:
@@ -454,7 +332,7 @@ class ServoLoop:
                                   self.rezero_samples)
         self.interpolator.set_target(c_out.q, c_out.qd)
         if self.controller.event_count != self.seen:
-            self._drain()
+            self.drain()
         if self.deferred and self.at_rest():
             operator_link.apply_deferred(self, t_loop)
         if self.board is not None:
@@ -476,7 +354,7 @@ class ServoLoop:
         if self.board is not None:
             self.board.marks = tuple(self.marks)
 
-    def _drain(self) -> None:
+    def drain(self) -> None:
         """The controller's new transitions into the session's events."""
         count = self.controller.event_count
         for e in self.controller.events_since(self.seen):
@@ -498,26 +376,6 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
         return lambda t: requests.enable_held
     return None
 
-
-def fresh_packet(driver: Driver, fb: DriverFeedback, hold: JointCommand | None = None,
-                 drained: bool = False) -> None:
-    """Read a real controller's packet that has just come: a whole cycle ahead to answer it.
-
-    ``step`` returns the newest packet waiting, which may have come up to a cycle ago (during
-    a compute): answered then, the answer may reach the controller after its next cycle, a
-    late answer (J519 refuses it and reports it, a fault at the stream's start). So the
-    packets waiting are taken (``drained``: the caller has just taken them) and left
-    unanswered, as lost ones (J519 and the UR program hold a cycle), or answered with ``hold``
-    when given (RSI counts an unanswered packet late as well: the answer may still be in
-    time); then the next one, waited for, is read: the answer written at once goes out within
-    the cycle."""
-    if not drained:
-        driver.step()
-        driver.read(fb)
-    if hold is not None:
-        driver.write(hold)
-    driver.step()
-    driver.read(fb)
 
 
 def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,

@@ -1,0 +1,141 @@
+"""The guiding loop's start (:meth:`ServoLoop.start
+<leadthrough.session.servo_loop.ServoLoop.start>`): the first sample, every part warmed up and
+reset on it, and a packet just come for the first period to answer.
+
+On a real controller the start is where packets are most easily answered late: the first one
+may have waited since the driver opened, and the set-up's compute (each part's ``warm_up``,
+:data:`DRY_PERIODS` periods' compute, the resets) may outlast a cycle. So the start answers
+at once a packet it waited for (a hold where the robot stands), and one that may have waited
+is answered only where the controller counts an unanswered packet late anyway (a driver's
+``answer_late_packets``, RSI); J519 refuses a late answer, the UR program holds a cycle
+(:func:`fresh_packet`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
+from leadthrough.errors import ControlError
+from leadthrough.session import operator_link
+
+if TYPE_CHECKING:
+    from leadthrough.session.servo_loop import ServoLoop
+
+__all__ = ["DRY_PERIODS", "dry_periods", "fresh_packet", "start_loop"]
+
+Array = NDArray[np.float64]
+#: Periods computed on the first sample at the start, before every part is reset
+#: (:func:`dry_periods`); a real controller's packets that come meanwhile are answered by
+#: :func:`fresh_packet`.
+DRY_PERIODS = 3
+
+
+def start_loop(loop: ServoLoop) -> float:
+    """The first sample: every part reset there, their compiled code loaded (see the module
+    doc); returns the sample's time [s].
+
+    Raises:
+        ControlError: No fresh sample within a second (a real controller) or on the first
+            read (the simulator).
+    """
+    driver, fb, cmd = loop.driver, loop.fb, loop.cmd
+    # a real controller: its next packet within a second (a step waits a few cycles)
+    tries = 1 if driver.simulated else max(1, math.ceil(1.0 / driver.dt))
+    fresh = False
+    for _ in range(tries):
+        driver.step()
+        fresh = driver.read(fb)
+        if fresh:
+            break
+    if not fresh:
+        raise ControlError("no feedback on the first read (the robot must report a "
+                           "position to start from)", field="driver",
+                           value=type(driver).__name__,
+                           expected="a fresh sample on the first read")
+    answer_all = bool(getattr(driver, "answer_late_packets", False))
+    if not driver.simulated:   # that one may have been waiting: the next, just come,
+        cmd.q[:] = fb.q        # is the one answered at once (that one too: a hold, if
+        cmd.qd[:] = 0.0        # the controller counts an unanswered packet late)
+        fresh_packet(driver, fb, cmd if answer_all else None, drained=True)
+    q0 = fb.q.copy()
+    if not driver.simulated:  # answered at once (a hold where it stands): the compute
+        # below may outlast the cycle, and a packet seen and not answered in time is a
+        # late answer to the controller (RSI counts it, the loop faults on it)
+        cmd.q[:] = q0
+        cmd.qd[:] = 0.0
+        driver.write(cmd)
+    dry_periods(loop, q0, fb.t)
+    loop.estimator.reset(q0)
+    loop.controller.reset(q0, fb.t)
+    loop.interpolator.reset(q0)
+    loop.interp_status = loop.interpolator.update(cmd)
+    loop.drain()  # the reset's transition: the session's, taken now, not in a period
+    if loop.board is not None:
+        loop.board.attach(driver.n)
+        operator_link.publish_settings(loop)
+    if not driver.simulated:  # a packet that has just come, for the first period to
+        # answer (one that came during the compute: a hold, or unanswered as a lost one)
+        fresh_packet(driver, fb, cmd if answer_all else None)
+    if loop.watch is not None:
+        loop.watch.start()
+    loop.t = fb.t
+    loop.fresh_at, loop.fresh_sequence = time.perf_counter(), fb.sequence
+    return fb.t
+
+
+def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
+    """:data:`DRY_PERIODS` periods' compute on the first sample with the enabling device
+    released, then every part reset by the caller: the session's first period then runs on
+    code and state already touched. (Each part's ``warm_up`` loads its compiled code on
+    copies of its state; the first update of the state itself still took 2-3 times the
+    steady-state median, on every driver; the interpreter specialises a function's code
+    only after it has run a few times.) Its transitions are not the session's."""
+    estimator, controller, interpolator = loop.estimator, loop.controller, loop.interpolator
+    cmd = loop.cmd
+    estimator.reset(q0)
+    controller.reset(q0, t)
+    interpolator.reset(q0)
+    for part in (estimator, controller, interpolator):
+        part.warm_up()
+    c_in = loop.c_in
+    for _ in range(DRY_PERIODS):
+        loop.e_in.t = t
+        estimator.update(loop.e_in, loop.e_out)
+        c_in.t, c_in.sequence, c_in.deadman = t, loop.fb.sequence, False
+        c_in.q[:] = loop.fb.q
+        c_in.current[:] = loop.fb.current
+        c_in.wrench_base[:] = loop.e_out.wrench
+        c_in.estimator_status = int(loop.e_out.status)
+        controller.update(c_in, loop.c_out)
+        interpolator.set_target(loop.c_out.q, loop.c_out.qd)
+        interpolator.update(cmd)
+    cmd.q[:] = q0
+    cmd.qd[:] = 0.0
+    loop.seen = controller.event_count
+
+
+def fresh_packet(driver: Driver, fb: DriverFeedback, hold: JointCommand | None = None,
+                 drained: bool = False) -> None:
+    """Read a real controller's packet that has just come: a whole cycle ahead to answer it.
+
+    ``step`` returns the newest packet waiting, which may have come up to a cycle ago (during
+    a compute): answered then, the answer may reach the controller after its next cycle, a
+    late answer (J519 refuses it and reports it, a fault at the stream's start). So the
+    packets waiting are taken (``drained``: the caller has just taken them) and left
+    unanswered, as lost ones (J519 and the UR program hold a cycle), or answered with ``hold``
+    when given (RSI counts an unanswered packet late as well: the answer may still be in
+    time); then the next one, waited for, is read: the answer written at once goes out within
+    the cycle."""
+    if not drained:
+        driver.step()
+        driver.read(fb)
+    if hold is not None:
+        driver.write(hold)
+    driver.step()
+    driver.read(fb)
