@@ -281,7 +281,9 @@ def test_a_command_is_within_a_cycle_of_every_target_the_arm_may_hold() -> None:
     driver = UrRtdeDriver(robot, "127.0.0.1")
     step = robot.velocity_limit * driver.margin * driver.dt
     held, late = np.asarray(POSE), np.asarray(POSE) + 0.9 * step * DIRECTION
-    driver._sent = {7: held, 8: late}
+    for counter, target in ((7, held), (8, late)):   # the ring of targets sent
+        row = counter % driver._sent.shape[0]
+        driver._sent[row], driver._sent_counter[row] = target, counter
     driver._counter, driver._echoed = 8, 7
     wanted = held + 1.5 * step * DIRECTION  # what the limiter allows from `late`
     sent = driver._within_reach(wanted)

@@ -134,9 +134,15 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self._register = outputs[-1]
         self._echo = outputs[-2]
         self._counter = 0
-        self._sent: dict[int, Array] = {}  # recent targets sent, by watchdog counter
+        # recent targets sent, by watchdog counter: row counter % _KEEP_SENT, preallocated
+        self._sent = np.zeros((_KEEP_SENT, 6))
+        self._sent_counter = np.full(_KEEP_SENT, -1, dtype=np.int64)
+        self._reach = np.zeros((4, 6))  # _within_reach's step, bounds and result
         self._late_counter: int | None = None
-        self._taken: Array | None = None
+        self._taken = np.zeros(6)   # the targets servoj took, at a late answer
+        self._taken_known = False
+        self._flags = ControllerState.NORMAL   # controller_state of the package _flags_of
+        self._flags_of: RtdeState | None = None
         self._echoed: int | None = None  # the newest echo of the program
         self._last: RtdeState | None = None
         self._t0: float | None = None
@@ -152,8 +158,9 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         if not self._fixed_timeout:
             self.timeout = 3.0 * self._dt
         self._counter, self._t0 = 0, None
-        self._sent.clear()
-        self._late_counter, self._taken, self._echoed = None, None, None
+        self._sent_counter[:] = -1
+        self._late_counter, self._taken_known, self._echoed = None, False, None
+        self._flags_of = None
         if self.script_port is None:
             return
         try:
@@ -211,15 +218,28 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         fb.sequence = self._sequence(sample)
         fb.q[:] = sample.q
         fb.current[:] = sample.current
-        fb.state = int(controller_state(v, self._register))
+        fb.state = int(self._state(sample))
         fb.inputs = int(v.get("actual_digital_input_bits", 0))
         fb.inputs_read = "actual_digital_input_bits" in v
+
+    def _state(self, sample: RtdeState) -> ControllerState:
+        """:func:`controller_state` of ``sample``, computed once per package (a step judges
+        its answer by it, the read reports it)."""
+        if sample is not self._flags_of:
+            self._flags, self._flags_of = controller_state(sample.values, self._register), sample
+        return self._flags
+
+    def _sent_target(self, counter: int) -> Array | None:
+        """The target sent with ``counter``, if among the last :data:`_KEEP_SENT` sent."""
+        row = counter % _KEEP_SENT
+        return self._sent[row] if self._sent_counter[row] == counter else None
 
     def _send(self, q: Array) -> None:
         q = self._within_reach(q)
         self._counter = (self._counter + 1) & 0x7FFFFFFF
-        self._sent[self._counter] = q.copy()
-        self._sent.pop(self._counter - _KEEP_SENT, None)
+        row = self._counter % _KEEP_SENT
+        self._sent[row] = q
+        self._sent_counter[row] = self._counter
         self.client.send(ServoCommand(tuple(q.tolist()), self._counter, Mode.SERVO))
 
     def _within_reach(self, q: Array) -> Array:
@@ -230,14 +250,16 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         the intersection is never empty."""
         if self._echoed is None:
             return q
-        step = self.robot.velocity_limit * self.margin * self._dt
-        lo, hi = np.full(self._n, -np.inf), np.full(self._n, np.inf)
+        step, lo, hi, out = self._reach
+        np.multiply(self.robot.velocity_limit, self.margin * self._dt, out=step)
+        lo[:], hi[:] = -np.inf, np.inf
         for c in range(max(self._echoed, self._counter - _KEEP_SENT + 1), self._counter + 1):
-            held = self._sent.get(c)
+            held = self._sent_target(c)
             if held is not None:
                 np.maximum(lo, held - step, out=lo)
                 np.minimum(hi, held + step, out=hi)
-        return np.clip(q, lo, np.maximum(lo, hi))
+        np.maximum(lo, hi, out=hi)
+        return np.clip(q, lo, hi, out=out)
 
     def _rejected(self, sample: RtdeState, late: bool) -> bool:
         """Never: the program's servoj repeats the last target, a held cycle, not a refusal."""
@@ -254,15 +276,18 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         echo = sample.values.get(self._echo)
         if echo is None or self._answered is None:
             return False
-        if controller_state(sample.values, self._register) != ControllerState.NORMAL:
+        if self._state(sample) != ControllerState.NORMAL:
             return False
-        if self._echoed is None and int(echo) not in self._sent:
+        if self._echoed is None and self._sent_target(int(echo)) is None:
             return False  # no echo of ours yet (a program that does not echo: never)
         self._echoed = int(echo)
         if self._echoed == self._counter or self._late_counter == self._counter:
             return False
         self._late_counter = self._counter
-        self._taken = self._sent.get(self._echoed)
+        taken = self._sent_target(self._echoed)
+        self._taken_known = taken is not None
+        if taken is not None:
+            self._taken[:] = taken
         return True
 
     def _after_late_answer(self) -> None:
@@ -270,7 +295,7 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         (a retract would assume the command before the late one; under a slow client that
         one may be late too)."""
         assert self.limiter is not None
-        if self._taken is not None:
+        if self._taken_known:
             self.limiter.reset(self._taken)
         else:
             self.limiter.retract(self.extrapolates)
