@@ -20,6 +20,7 @@ from leadthrough.drivers.protocol import ControllerState, Driver, JointCommand, 
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot import Robot
 from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session import loop_start
 from leadthrough.session.loop import EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
 from leadthrough.session.record import SessionLog, load_session
@@ -455,13 +456,13 @@ def test_the_first_answers_go_out_a_whole_cycle_ahead(
     period's answer each answer a packet waited for, not one that was waiting (come up to a
     cycle before, its answer may reach the controller late: J519 refuses it and reports it,
     a CONTROLLER_STATE fault at the stream's start)."""
-    dry = ServoLoop._dry_period
+    dry = loop_start.dry_periods
 
-    def slow_dry(self: ServoLoop, q0: np.ndarray, t: float) -> None:
-        dry(self, q0, t)
+    def slow_dry(loop: ServoLoop, q0: np.ndarray, t: float) -> None:
+        dry(loop, q0, t)
         time.sleep(1.9 * 0.008)
 
-    monkeypatch.setattr(ServoLoop, "_dry_period", slow_dry)
+    monkeypatch.setattr(loop_start, "dry_periods", slow_dry)
     driver = Paced(_sim(er20))
     config = LoopConfig(guiding=dataclasses.replace(LoopConfig().guiding, dt=0.008))
     parts = build_loop(er20, nominal_params, config, driver.dt)
