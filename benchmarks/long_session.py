@@ -41,7 +41,12 @@ import time
 from pathlib import Path
 
 from leadthrough.drivers.controllers import DEFAULT_PORTS
-from leadthrough.sim.emulators.process import emulator_report, spawn_emulator, stop_emulator
+from leadthrough.sim.emulators.process import (
+    emulator_report,
+    spawn_emulator,
+    stop_emulator,
+    timing_summary,
+)
 
 
 def _lt(*args: str) -> list[str]:
@@ -80,19 +85,6 @@ def _emulator(kind: str, port: int, minutes: float,
     if rt_priority is not None:
         os.sched_setscheduler(emu.pid, os.SCHED_FIFO, os.sched_param(rt_priority))
     return emu
-
-
-def _attribution(emu: dict[str, str]) -> str:
-    """The emulator's answer timing as one paragraph (see the module doc)."""
-    def f(name: str) -> str:
-        return emu.get(f"timing.{name}", "?")
-
-    return (f"attribution: {f('statuses')} statuses timed; answers in time {f('in_time')}, "
-            f"late {f('late')} (with the emulator's lag {f('late_with_lag')}), never "
-            f"{f('never')} (with its lag {f('never_with_lag')}); emulator: statuses sent late "
-            f"{f('sends_late')}, cycles skipped {f('cycles_skipped')} ({emu.get('resyncs', '?')} "
-            f"resyncs); stale answers {f('stale')}; worst answer {f('worst_answer_ms')} ms\n"
-            f"  late/missing answers: {f('events')}")
 
 
 def main() -> None:
@@ -159,7 +151,7 @@ def main() -> None:
               f"{result['cycle_us_median']:.0f} µs: ratio "
               f"{result['cycle_us_first'] / result['cycle_us_median']:.2f} (goal <= 2), "
               f"p99 {result['cycle_us_p99']:.0f} µs, max {result['cycle_us_max']:.0f} µs")
-        print(_attribution(emu_fields))
+        print(timing_summary(emu_fields))
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
     print("emulator: " + " ".join(report.split()))

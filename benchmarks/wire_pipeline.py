@@ -61,7 +61,7 @@ from typing import Any
 
 from leadthrough.drivers.controllers import DEFAULT_PORTS
 from leadthrough.errors import SimulationError
-from leadthrough.sim.emulators.process import emulator_report, spawn_emulator
+from leadthrough.sim.emulators.process import emulator_report, spawn_emulator, timing_summary
 
 KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
 HOST = "127.0.0.1"
@@ -324,8 +324,8 @@ def guide_section(kinds: list[str], seed: int, work: Path) -> None:
             _print_run(script, kind, f, _emulator_clean(emu)
                        + _guide_misses(script, f, f["taught"], ref))
             print(f"{'':<29} emulator: max lag {float(emu.get('max_lag', 'nan')):.3f} s, "
-                  f"resyncs {emu.get('resyncs')}, missed cycles {emu.get('missed_cycles')}",
-                  flush=True)
+                  f"resyncs {emu.get('resyncs')}, missed cycles {emu.get('missed_cycles')}; "
+                  f"{timing_summary(emu)}", flush=True)
 
 
 def _print_run(script: str, name: str, f: dict[str, Any], bad: list[str]) -> None:
@@ -398,7 +398,8 @@ def _calibrate(args: argparse.Namespace, work: Path, name: str, traj: Path,
               f"{info['approach_s']:.1f} s, {time.perf_counter() - t0:.0f} s wall; emulator: "
               f"commands {emu.get('commands')}, refused {emu.get('refused')}, violations "
               f"{emu.get('violations')}, max lag {emu.get('max_lag')}, resyncs "
-              f"{emu.get('resyncs')}, missed cycles {emu.get('missed_cycles')}", flush=True)
+              f"{emu.get('resyncs')}, missed cycles {emu.get('missed_cycles')}; "
+              f"{timing_summary(emu)}", flush=True)
     else:
         _run("record", "--robot", args.robot, "--seed", str(args.seed), "--trajectory",
              str(traj), "-o", str(rec))

@@ -14,7 +14,7 @@ import numpy as np
 from leadthrough.errors import SimulationError
 
 __all__ = ["READY_LINE", "emulator_report", "free_loopback_address", "spawn_emulator",
-           "stop_emulator", "wait_ready"]
+           "stop_emulator", "timing_summary", "wait_ready"]
 
 #: The first line ``leadthrough emulate`` prints once its sockets are open.
 READY_LINE = "leadthrough: emulating"
@@ -75,6 +75,22 @@ def stop_emulator(proc: subprocess.Popen[str], timeout: float = 20.0) -> str:
 def emulator_report(text: str) -> dict[str, str]:
     """The ``key: value`` lines of an emulator's printed report."""
     return dict(line.split(": ", 1) for line in text.splitlines() if ": " in line)
+
+
+def timing_summary(report: dict[str, str]) -> str:
+    """An emulator report's answer timing (its ``timing.*`` keys,
+    :mod:`~leadthrough.sim.emulators.answer_timing`) in one line: answers in time, late and
+    never, with the emulator's own lag apart, its late sends and skipped cycles, and the first
+    late or missing answers."""
+    def f(name: str) -> str:
+        return report.get(f"timing.{name}", "?")
+
+    return (f"attribution: {f('statuses')} statuses timed; answers in time {f('in_time')}, "
+            f"late {f('late')} (with the emulator's lag {f('late_with_lag')}), never "
+            f"{f('never')} (with its lag {f('never_with_lag')}); emulator: statuses sent late "
+            f"{f('sends_late')}, cycles skipped {f('cycles_skipped')} "
+            f"({report.get('resyncs', '?')} resyncs); stale answers {f('stale')}; worst answer "
+            f"{f('worst_answer_ms')} ms; late/missing answers: {f('events')}")
 
 
 def free_loopback_address(port: int) -> str:
