@@ -45,6 +45,10 @@ prints FAIL, a run that does not complete prints FAIL with its processes' stderr
 
     python benchmarks/wire_pipeline.py [--kinds fanuc-j519 ur-rtde kuka-rsi] [--seed 3]
         [--duration 20] [--method consistent] [--guide] [--no-identify] [--rt-priority P]
+        [--scripts rest push-x seam] [--repeat N]
+
+``--repeat N`` runs each guided session over the wire N times: the seam's path depends on
+which controller cycle each command lands in, so one run does not show its spread.
 """
 
 from __future__ import annotations
@@ -287,8 +291,10 @@ def _verdict(bad: list[str]) -> str:
     return "PASS" if not bad else "FAIL: " + "; ".join(bad)
 
 
-def guide_section(kinds: list[str], seed: int, work: Path) -> None:
-    """The guiding comparison (see the module doc)."""
+def guide_section(kinds: list[str], seed: int, work: Path, scripts: list[str] | None = None,
+                  repeat: int = 1) -> None:
+    """The guiding comparison (see the module doc): ``scripts`` (default all), each wire run
+    ``repeat`` times (its spread from run to run)."""
     from leadthrough.robot import load_robot
     from leadthrough.robot.poses import guide_start_pose
     from leadthrough.sim.guiding_params import shipped_params_path
@@ -298,7 +304,7 @@ def guide_section(kinds: list[str], seed: int, work: Path) -> None:
     print(f"\nguiding, shipped er20 parameters, robot instance {seed}, virtual mass 100 kg")
     print(f"{'script':<7} {'pipeline':<21} {'max speed':>10} {'travel':>9} {'overrun':>9} "
           "seam line / verdict")
-    for script in SCRIPT_S:
+    for script in scripts or list(SCRIPT_S):
         sim = work / f"guide_{script}_sim.parquet"
         done = subprocess.run(_lt("guide", "--robot", "er20", "--params", str(params),
                                   "--operator", script, "--mass", "100", "--seed", str(seed),
@@ -312,8 +318,8 @@ def guide_section(kinds: list[str], seed: int, work: Path) -> None:
                        _guide_misses(script, ref, ref["taught"], None))
         else:
             print(f"{script:<7} {'in-process simulator':<21} FAIL: {_tail(done.stderr)}")
-        for kind in kinds:
-            out = work / f"guide_{script}_{kind}.parquet"
+        for kind, k in ((kind, k) for kind in kinds for k in range(repeat)):
+            out = work / f"guide_{script}_{kind}{f'_{k}' if k else ''}.parquet"
             try:
                 emu = _guide_wire(kind, script, seed, params, q0, out)
             except (RuntimeError, SimulationError) as e:
@@ -347,6 +353,10 @@ def main() -> None:
     ap.add_argument("--no-identify", action="store_true", help="skip the calibration part")
     ap.add_argument("--work", type=Path, default=None,
                     help="working folder (kept; its trajectories are reused)")
+    ap.add_argument("--scripts", nargs="+", default=None, choices=list(SCRIPT_S),
+                    help="guiding scripts to compare (default: all)")
+    ap.add_argument("--repeat", type=int, default=1, metavar="N",
+                    help="run each guided session over the wire N times")
     ap.add_argument("--rt-priority", type=int, default=None, metavar="P",
                     help="run the emulators, record and guide with SCHED_FIFO priority P")
     args = ap.parse_args()
@@ -357,7 +367,7 @@ def main() -> None:
     if not args.no_identify:
         calibration_section(args, work)
     if args.guide or args.no_identify:
-        guide_section(args.kinds, 1, work)
+        guide_section(args.kinds, 1, work, args.scripts, max(1, args.repeat))
 
 
 def _rsi_sized(traj: Path, out: Path, robot: str) -> list[float]:
