@@ -19,8 +19,7 @@ from scipy.spatial.transform import Rotation
 from leadthrough.session.record import SessionEvent, SessionLog
 
 __all__ = ["DEFAULT_CHUNK_ROWS", "QUATERNION_SLICE_ROWS", "ChunkSink", "MemorySink", "RecordChunk",
-           "SessionRecorder",
-           "chunks_to_log"]
+           "SessionRecorder", "chunks_to_log"]
 
 Array = NDArray[np.float64]
 #: Rows per chunk: 10 s at 1 kHz (about 4.5 MB for six joints).

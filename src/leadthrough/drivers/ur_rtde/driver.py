@@ -139,8 +139,6 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         self._sent_counter = np.full(_KEEP_SENT, -1, dtype=np.int64)
         self._reach = np.zeros((4, 6))  # _within_reach's step, bounds and result
         self._late_counter: int | None = None
-        self._taken = np.zeros(6)   # the targets servoj took, at a late answer
-        self._taken_known = False
         self._flags = ControllerState.NORMAL   # controller_state of the package _flags_of
         self._flags_of: RtdeState | None = None
         self._echoed: int | None = None  # the newest echo of the program
@@ -159,7 +157,7 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
             self.timeout = 3.0 * self._dt
         self._counter, self._t0 = 0, None
         self._sent_counter[:] = -1
-        self._late_counter, self._taken_known, self._echoed = None, False, None
+        self._late_counter, self._echoed = None, None
         self._flags_of = None
         if self.script_port is None:
             return
@@ -284,19 +282,17 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         if self._echoed == self._counter or self._late_counter == self._counter:
             return False
         self._late_counter = self._counter
-        taken = self._sent_target(self._echoed)
-        self._taken_known = taken is not None
-        if taken is not None:
-            self._taken[:] = taken
         return True
 
     def _after_late_answer(self) -> None:
         """The arm holds the targets servoj last took: the next command is judged from them
         (a retract would assume the command before the late one; under a slow client that
-        one may be late too)."""
+        one may be late too). Called by the step that judged the answer late: nothing has been
+        sent since, the echoed target is still in the ring."""
         assert self.limiter is not None
-        if self._taken_known:
-            self.limiter.reset(self._taken)
+        taken = self._sent_target(self._echoed) if self._echoed is not None else None
+        if taken is not None:
+            self.limiter.reset(taken)
         else:
             self.limiter.retract(self.extrapolates)
 
