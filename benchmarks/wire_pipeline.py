@@ -45,10 +45,20 @@ prints FAIL, a run that does not complete prints FAIL with its processes' stderr
 
     python benchmarks/wire_pipeline.py [--kinds fanuc-j519 ur-rtde kuka-rsi] [--seed 3]
         [--duration 20] [--method consistent] [--guide] [--no-identify] [--rt-priority P]
-        [--scripts rest push-x seam] [--repeat N]
+        [--scripts rest push-x seam] [--repeat N] [--command-lag {measured,none}]
 
 ``--repeat N`` runs each guided session over the wire N times: the seam's path depends on
-which controller cycle each command lands in, so one run does not show its spread.
+which controller cycle each command lands in, so one run does not show its spread. It also
+runs the in-process session N times, sessions ``--run`` 500, 501, ... of the same robot
+(other sensor noise, nothing else): each later in-process run is judged against the first by
+the same tolerances, which shows how far the in-process pipeline meets them against itself,
+and the seam's spread per pipeline is printed (deviation median and range, runs with a fault).
+
+The wire runs' estimator takes the interface's command-to-position lag (``guide
+--command-lag``), measured as ``identify`` measures it on a wire recording (the calibration
+part's, else a 10 s excitation recorded for it): the shipped guiding parameters were
+identified in-process, where it is 0. ``--command-lag none`` guides as before the lag was
+measured (the friction follows the command the moment it is sent).
 """
 
 from __future__ import annotations
@@ -195,7 +205,9 @@ def _session_figures(path: Path) -> dict[str, Any]:
     faults = sorted({e.cause.split(":", 1)[1] for e in log.events
                      if e.kind == "transition" and ":" in e.cause})
     over = release_overruns(log, 0.4)  # None over the wire: the hand is the emulator's
-    return {"max_speed": float(speed.max()), "drift_mm": 1e3 * float(
+    return {"max_speed": float(speed.max()),
+            "max_force": float(np.max(np.linalg.norm(log.wrench_base[:, :3], axis=1))),
+            "drift_mm": 1e3 * float(
         np.max(np.linalg.norm(tcp - tcp[0], axis=1))), "faults": faults,
         "overrun_mm": float("nan") if over is None else 1e3 * float(max(over, default=0.0))}
 
@@ -214,15 +226,42 @@ def _teach(path: Path, work: Path) -> dict[str, float] | str:
             "dev_mm": float(line["max_deviation_mm"])}
 
 
+def _wire_lag(kind: str, seed: int, work: Path) -> float:
+    """The command-to-position lag of ``kind``'s interface [s], measured on a wire recording
+    as ``identify`` does: the calibration part's, else a short excitation recorded for it (the
+    shipped guiding params were identified in-process, where the lag is 0)."""
+    from leadthrough.data.io import load_recording
+    from leadthrough.identification.command_lag import measure_command_lag
+
+    rec = work / f"{kind}.parquet"
+    if not rec.exists():
+        traj, q0 = work / "lag_traj.csv", None
+        if not traj.exists():
+            _run("excite", "--robot", "er20", "--duration", "10", "--starts", "1", "--seed",
+                 "0", "-o", str(traj))
+        if kind == "kuka-rsi":
+            sized = work / "lag_traj_rsi.csv"
+            q0 = _rsi_sized(traj, sized, "er20")
+            traj = sized
+        _record_wire(kind, "er20", seed, traj, rec, q0)
+    lag = measure_command_lag(load_recording(rec))
+    if lag is None:
+        raise RuntimeError(f"no command lag measurable on {rec}")
+    print(f"{'':<7} {kind:<21} command lag {1e3 * lag.lag_s:.2f} ms on {rec.name} "
+          f"(joints {', '.join(f'{1e3 * x:.2f}' for x in lag.joints_s)} ms)", flush=True)
+    return lag.lag_s
+
+
 def _guide_wire(kind: str, script: str, seed: int, params: Path, q0: list[float],
-                out: Path) -> dict[str, str]:
-    """One guided session over the wire; returns the emulator's report."""
+                out: Path, lag: float) -> dict[str, str]:
+    """One guided session over the wire (``lag``: the interface's command lag [s]); returns
+    the emulator's report."""
     port = DEFAULT_PORTS[kind] + 300
     duration = OPERATOR_DELAY_S + SCRIPT_S[script] + 1.0
     guide = _lt("guide", "--driver", kind, "--host", HOST, "--port", str(port), "--robot",
                 "er20", "--params", str(params), "--enable-input", "0", "--mark-input", "1",
                 "--mass", "100", "--watchdog", "0.5", "--duration", str(duration), "-o",
-                str(out), "--json")
+                str(out), "--command-lag", repr(lag), "--json")
     emu_args = ("--seed", str(seed), "--q0", *map(str, q0), "--operator", script,
                 "--operator-delay", str(OPERATOR_DELAY_S))
     emu: subprocess.Popen[str] | None = None
@@ -292,9 +331,10 @@ def _verdict(bad: list[str]) -> str:
 
 
 def guide_section(kinds: list[str], seed: int, work: Path, scripts: list[str] | None = None,
-                  repeat: int = 1) -> None:
+                  repeat: int = 1, measured_lag: bool = True) -> None:
     """The guiding comparison (see the module doc): ``scripts`` (default all), each wire run
-    ``repeat`` times (its spread from run to run)."""
+    ``repeat`` times (its spread from run to run); ``measured_lag``: the estimator's friction
+    follows the command after the interface's measured lag (else at once, as before)."""
     from leadthrough.robot import load_robot
     from leadthrough.robot.poses import guide_start_pose
     from leadthrough.sim.guiding_params import shipped_params_path
@@ -302,44 +342,84 @@ def guide_section(kinds: list[str], seed: int, work: Path, scripts: list[str] | 
     params = shipped_params_path("er20")
     q0 = [float(x) for x in guide_start_pose(load_robot("er20"))]
     print(f"\nguiding, shipped er20 parameters, robot instance {seed}, virtual mass 100 kg")
-    print(f"{'script':<7} {'pipeline':<21} {'max speed':>10} {'travel':>9} {'overrun':>9} "
-          "seam line / verdict")
+    lags = {kind: _wire_lag(kind, seed, work) if measured_lag else 0.0 for kind in kinds}
+    print(f"{'script':<7} {'pipeline':<21} {'max speed':>10} {'max F̂':>7} {'travel':>9} "
+          f"{'overrun':>9} seam line / verdict")
     for script in scripts or list(SCRIPT_S):
-        sim = work / f"guide_{script}_sim.parquet"
-        done = subprocess.run(_lt("guide", "--robot", "er20", "--params", str(params),
-                                  "--operator", script, "--mass", "100", "--seed", str(seed),
-                                  "-o", str(sim), "--json"),
-                              capture_output=True, text=True, check=False)
+        runs: dict[str, list[dict[str, Any]]] = {}
         ref: dict[str, Any] | None = None
-        if done.returncode in (0, 1) and sim.exists():
-            ref = _session_figures(sim)
-            ref["taught"] = _teach(sim, work) if script == "seam" else None
-            _print_run(script, "in-process simulator", ref,
-                       _guide_misses(script, ref, ref["taught"], None))
-        else:
-            print(f"{script:<7} {'in-process simulator':<21} FAIL: {_tail(done.stderr)}")
+        for k in range(repeat):  # the in-process runs: the same robot, other sensor noise
+            f = _guide_in_process(script, seed, params, work, SIM_RUN + k)
+            if f is not None:
+                ref = ref or f
+                runs.setdefault("in-process simulator", []).append(f)
+                _print_run(script, f"in-process, run {SIM_RUN + k}", f,
+                           _guide_misses(script, f, f["taught"], None if f is ref else ref))
         for kind, k in ((kind, k) for kind in kinds for k in range(repeat)):
             out = work / f"guide_{script}_{kind}{f'_{k}' if k else ''}.parquet"
             try:
-                emu = _guide_wire(kind, script, seed, params, q0, out)
+                emu = _guide_wire(kind, script, seed, params, q0, out, lags[kind])
             except (RuntimeError, SimulationError) as e:
                 print(f"{script:<7} {kind:<21} FAIL: {e}", flush=True)
                 continue
             f = _session_figures(out)
             f["taught"] = _teach(out, work) if script == "seam" else None
+            runs.setdefault(kind, []).append(f)
             _print_run(script, kind, f, _emulator_clean(emu)
                        + _guide_misses(script, f, f["taught"], ref))
             print(f"{'':<29} emulator: max lag {float(emu.get('max_lag', 'nan')):.3f} s, "
                   f"resyncs {emu.get('resyncs')}, missed cycles {emu.get('missed_cycles')}; "
                   f"{timing_summary(emu)}", flush=True)
+        if script == "seam" and repeat > 1:
+            _print_spread(runs)
+
+
+#: The in-process guiding's first session number (``guide --run``; the simulator's default):
+#: with ``--repeat N`` the in-process runs are N sessions with other sensor noise.
+SIM_RUN = 500
+
+
+def _guide_in_process(script: str, seed: int, params: Path, work: Path, run: int
+                      ) -> dict[str, Any] | None:
+    """One guided session on the in-process simulator (session ``run``); its figures, or None
+    (printed) if it did not complete."""
+    sim = work / f"guide_{script}_sim{'' if run == SIM_RUN else f'_{run}'}.parquet"
+    done = subprocess.run(_lt("guide", "--robot", "er20", "--params", str(params),
+                              "--operator", script, "--mass", "100", "--seed", str(seed),
+                              "--run", str(run), "-o", str(sim), "--json"),
+                          capture_output=True, text=True, check=False)
+    if done.returncode not in (0, 1) or not sim.exists():
+        print(f"{script:<7} {'in-process simulator':<21} FAIL: {_tail(done.stderr)}")
+        return None
+    f = _session_figures(sim)
+    f["taught"] = _teach(sim, work) if script == "seam" else None
+    return f
+
+
+def _print_spread(runs: dict[str, list[dict[str, Any]]]) -> None:
+    """The seam's spread per pipeline over its runs: deviation median (range), line length
+    median, runs with a fault. The in-process runs differ by their sensor noise only."""
+    import numpy as np
+
+    print("seam spread over the runs (median, range; faults):")
+    for name, fs in runs.items():
+        taught = [f["taught"] for f in fs if isinstance(f["taught"], dict)]
+        dev = np.array([t["dev_mm"] for t in taught])
+        length = np.array([t["length_mm"] for t in taught])
+        faults = sum(bool(f["faults"]) for f in fs)
+        text = (f"deviation {np.median(dev):.1f} mm ({dev.min():.1f}-{dev.max():.1f}), line "
+                f"{np.median(length):.0f} mm" if dev.size else "no line taught")
+        print(f"  {name:<21} {len(fs)} runs: {text}; a fault in {faults} of {len(fs)}",
+              flush=True)
 
 
 def _print_run(script: str, name: str, f: dict[str, Any], bad: list[str]) -> None:
     taught = f.get("taught")
     line = (f"{taught['length_mm']:.0f} mm, dev {taught['dev_mm']:.1f} mm; "
             if isinstance(taught, dict) else "")
-    print(f"{script:<7} {name:<21} {f['max_speed']:>6.3f} m/s {f['drift_mm']:>6.1f} mm "
-          f"{f['overrun_mm']:>6.1f} mm {line}{_verdict(bad)}", flush=True)
+    print(f"{script:<7} {name:<21} {f['max_speed']:>6.3f} m/s {f['max_force']:>5.0f} N "
+          f"{f['drift_mm']:>6.1f} mm {f['overrun_mm']:>6.1f} mm {line}{_verdict(bad)}",
+          flush=True)
 
 
 def main() -> None:
@@ -357,6 +437,9 @@ def main() -> None:
                     help="guiding scripts to compare (default: all)")
     ap.add_argument("--repeat", type=int, default=1, metavar="N",
                     help="run each guided session over the wire N times")
+    ap.add_argument("--command-lag", choices=("measured", "none"), default="measured",
+                    help="the wire runs' estimator friction follows the command after the "
+                         "interface's lag measured on a wire recording (default), or at once")
     ap.add_argument("--rt-priority", type=int, default=None, metavar="P",
                     help="run the emulators, record and guide with SCHED_FIFO priority P")
     args = ap.parse_args()
@@ -367,7 +450,8 @@ def main() -> None:
     if not args.no_identify:
         calibration_section(args, work)
     if args.guide or args.no_identify:
-        guide_section(args.kinds, 1, work, args.scripts, max(1, args.repeat))
+        guide_section(args.kinds, 1, work, args.scripts, max(1, args.repeat),
+                      args.command_lag == "measured")
 
 
 def _rsi_sized(traj: Path, out: Path, robot: str) -> list[float]:

@@ -27,6 +27,7 @@ from leadthrough.drivers.streaming import StreamingDriver
 from leadthrough.errors import ControlError, DriverError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.trajectory_file import save_trajectory
+from leadthrough.identification.command_lag import measure_command_lag
 from leadthrough.robot import Robot, load_robot
 from leadthrough.session.trajectory_recording import (
     TrajectoryAbortedError,
@@ -105,6 +106,10 @@ def test_a_trajectory_is_recorded_at_the_controllers_cycle(kind: str,
     lag = float(np.max(np.abs(rec.q - rec.q_cmd)))
     assert lag <= 4 * driver.dt * np.max(np.abs(traj.qd)) + 1e-3
     assert done.max_following_error == pytest.approx(lag)
+    # the emulated controller takes a command in its next cycle: a lag of one cycle, which
+    # identify measures and the estimator's friction waits for
+    measured = measure_command_lag(rec)
+    assert measured is not None and abs(measured.lag_s - driver.dt) <= 0.25 * driver.dt
     signal = rec.torque if kind == "kuka-rsi" else rec.current
     assert signal is not None and np.all(np.isfinite(signal)) and np.ptp(signal, axis=0).min() > 0
 

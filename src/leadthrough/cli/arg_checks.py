@@ -3,16 +3,20 @@ trajectory file), done before any work so that a bad argument exits 2 with nothi
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from leadthrough.dynamics.model import MAX_COMMAND_LAG_S
 from leadthrough.errors import DataError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.fileio import require_folder
+from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_PAYLOAD_COM_M", "check_output", "check_trajectory_limits", "warm_up_seconds"]
+__all__ = ["MAX_PAYLOAD_COM_M", "check_output", "check_trajectory_limits", "warm_up_seconds",
+           "with_command_lag"]
 
 #: Farthest payload CoM from the TCP ``record`` simulates [m].
 MAX_PAYLOAD_COM_M = 1.0
@@ -28,6 +32,21 @@ def warm_up_seconds(minutes: float) -> float:
         raise DataError("out of range", field="--warm-up", value=minutes,
                         expected="0 <= minutes <= 1440")
     return 60.0 * float(minutes)
+
+
+def with_command_lag(pf: ParamsFile, lag: float | None) -> ParamsFile:
+    """The params of ``guide``, with ``--command-lag`` [s] in place of the measured lag if
+    given.
+
+    Raises:
+        DataError: Not a finite lag from 0 to ``MAX_COMMAND_LAG_S``.
+    """
+    if lag is None:
+        return pf
+    if not (np.isfinite(lag) and 0.0 <= lag <= MAX_COMMAND_LAG_S):
+        raise DataError("out of range", field="--command-lag", value=lag,
+                        expected=f"0 <= seconds <= {MAX_COMMAND_LAG_S:g}")
+    return replace(pf, params=replace(pf.params, command_lag=float(lag)))
 
 
 def check_output(path: Path, suffixes: tuple[str, ...]) -> None:

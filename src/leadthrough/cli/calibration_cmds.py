@@ -33,6 +33,7 @@ from leadthrough.identification.api import (
     identify,
     identify_with_sweep,
 )
+from leadthrough.identification.command_lag import measure_command_lag
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent import ConsistentConfig
 from leadthrough.identification.metrics import ResidualStats
@@ -368,6 +369,9 @@ def run_identify(args: argparse.Namespace) -> int:
     bar.close(f"J = {result.J:.3f}")
     params = result.params if pre is None else replace(result.params,
                                                        presliding=pre.presliding)
+    lag = measure_command_lag(rec)  # None where the recording logged no commands
+    if lag is not None:
+        params = replace(params, command_lag=lag.lag_s)
     save_params(args.output, robot, args.method, params, result.stats, sim_seed,
                 friction_sweep=sweep is not None)
     if args.urdf_out is not None:
@@ -383,6 +387,8 @@ def run_identify(args: argparse.Namespace) -> int:
             out["min_pseudo_inertia_eig"] = eig
         if pre is not None:
             out["presliding"] = _presliding_json(robot, pre)
+        if lag is not None:
+            out["command_lag_s"] = lag.lag_s
         print(json.dumps(out, indent=2))
     else:
         _print_stats(robot, result.stats, f"{args.method} on {args.recording} "
@@ -393,6 +399,9 @@ def run_identify(args: argparse.Namespace) -> int:
             print(f"  presliding test ({pre.pairs.first.size} rest pairs): z0 [1e-4 rad] "
                   + ", ".join(f"{1e4 * z:.2f}" for z in pre.presliding)
                   + "; level at rest [N·m] " + ", ".join(f"{g:.3g}" for g in pre.level))
+        if lag is not None:
+            print(f"  command lag {1e3 * lag.lag_s:.1f} ms (the recording's commands to its "
+                  f"positions; sampled every {1e3 * lag.period_s:.1f} ms)")
         print(f"parameters written to {args.output}"
               + (f", URDF to {args.urdf_out}" if args.urdf_out is not None else ""))
     return 0

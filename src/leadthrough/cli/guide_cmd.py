@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from leadthrough.cli.arg_checks import warm_up_seconds
+from leadthrough.cli.arg_checks import warm_up_seconds, with_command_lag
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
 from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
@@ -68,6 +68,9 @@ def register(sub: Any) -> None:
     p.add_argument("--operator-seed", type=int, default=None, metavar="N",
                    help="seed of the random operator's pushes (default: --seed); vary this "
                         "for other push sequences on the same robot")
+    p.add_argument("--run", type=int, default=None, metavar="N",
+                   help="the simulator's session number: its sensor noise (default 500); vary "
+                        "this to see how a session spreads with the noise alone")
     p.add_argument("--allow-no-sweep", action="store_true",
                    help="guide with parameters identified without a friction sweep (refused "
                         "otherwise: their friction is 15-24 %% low at guiding speeds, which "
@@ -82,6 +85,12 @@ def register(sub: Any) -> None:
     p.add_argument("--warm-up", type=float, default=0.0, metavar="MINUTES",
                    help="production-like motion the realistic robot did before the session "
                         "[min] (default 0: cold, as a calibration in the morning)")
+    p.add_argument("--command-lag", type=float, default=None, metavar="S",
+                   help="how long a command takes to show in the measured position on this "
+                        "robot's interface [s] (default: the lag `identify` measured on the "
+                        "params' recording, [meta] command_lag; give it when the params come "
+                        "from another interface, e.g. identified in-process and guided over a "
+                        "driver)")
     p.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -92,7 +101,7 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
-    pf = load_params(args.params, robot)
+    pf = with_command_lag(load_params(args.params, robot), args.command_lag)
     if not (pf.friction_sweep or args.allow_no_sweep):
         raise DataError(
             "these parameters cannot guide: their friction was not measured at guiding speeds",
@@ -115,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
     seed = sim_robot_seed(args.seed, pf)
     loop = LoopConfig(guiding=guiding)
     cfg = SimSessionConfig(operator=args.operator, duration_s=args.duration, seed=seed,
+                           **({} if args.run is None else {"run": args.run}),
                            operator_seed=args.operator_seed, paced=args.realtime, loop=loop,
                            plant=args.plant, warm_up_s=warm_up_seconds(args.warm_up))
     session = run_sim_session(robot, pf, cfg)

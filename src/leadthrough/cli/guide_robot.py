@@ -53,7 +53,7 @@ __all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot"]
 
 #: The guiding controller's cycle the paper uses [s].
 PAPER_CYCLE_S = 0.01
-_SIM_ONLY = ("operator", "seed", "operator_seed")
+_SIM_ONLY = ("operator", "seed", "operator_seed", "run")
 
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:

@@ -33,13 +33,17 @@ from leadthrough.dynamics.regressor import link_torque, standard_parameters
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_LOAD_FRICTION", "MAX_PRESLIDING_RAD", "DriveModelParameters", "FrictionModel",
-           "model_torque", "nominal_drive_parameters"]
+__all__ = ["MAX_COMMAND_LAG_S", "MAX_LOAD_FRICTION", "MAX_PRESLIDING_RAD",
+           "DriveModelParameters", "FrictionModel", "model_torque", "nominal_drive_parameters"]
 
 Array = NDArray[np.float64]
 
 #: Largest presliding length z₀ accepted anywhere [rad] (gear presliding is ≲ 1e-3)
 MAX_PRESLIDING_RAD = 0.1
+
+#: Largest command-to-position lag accepted anywhere [s]: a controller interface's transport
+#: and servo delay is a few of its 1-8 ms cycles.
+MAX_COMMAND_LAG_S = 0.1
 
 #: Largest load-dependent Coulomb coefficient f_cL accepted anywhere [-] (exclusive): a gear whose
 #: friction grew by as much as the torque it transmits would lock; published values are a few
@@ -77,6 +81,11 @@ class DriveModelParameters:
         load_friction: f_cL per joint [-], shape (n,), or empty for none (zeros): the Coulomb
             level is f_c0 + f_cL·|τ_load| (f_c0 is ``stribeck.f1`` or ``coulomb``). Not in
             eq. 21 (see the module docstring). 0 <= f_cL < :data:`MAX_LOAD_FRICTION`.
+        command_lag: How long a joint command takes to show in the measured position [s]
+            (the controller interface's transport and the servo's delay), measured on the
+            identification recording (:mod:`leadthrough.identification.command_lag`); 0 where
+            the recording carried no commands. Not in eq. 21: the estimator's friction follows
+            the command this much later. 0 <= lag <= :data:`MAX_COMMAND_LAG_S`.
     """
 
     phi: Array
@@ -89,6 +98,7 @@ class DriveModelParameters:
     offset: Array = field(default_factory=lambda: np.zeros(0))
     presliding: Array = field(default_factory=lambda: np.zeros(0))
     load_friction: Array = field(default_factory=lambda: np.zeros(0))
+    command_lag: float = 0.0
 
     def __post_init__(self) -> None:
         if self.friction_model is FrictionModel.STRIBECK and self.stribeck is None:
@@ -106,6 +116,9 @@ class DriveModelParameters:
             raise DataError("load-dependent friction out of range", field="load_friction",
                             value=fl.tolist(),
                             expected=f"{n} values in [0, {MAX_LOAD_FRICTION:g}), or none")
+        if not 0.0 <= self.command_lag <= MAX_COMMAND_LAG_S:
+            raise DataError("command lag out of range", field="command_lag",
+                            value=self.command_lag, expected=f"0 to {MAX_COMMAND_LAG_S:g} s")
 
     @property
     def has_load_friction(self) -> bool:

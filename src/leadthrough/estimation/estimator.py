@@ -46,6 +46,7 @@ from leadthrough.errors import DataError
 from leadthrough.estimation.estimator_config import (
     DEFAULT_PRESLIDING_RAD,
     EstimatorConfig,
+    command_delay_samples,
     presliding_lengths,
 )
 from leadthrough.estimation.estimator_step import (
@@ -163,6 +164,8 @@ class ExternalForceEstimator:
         s.rest_presliding = presliding_lengths(params.presliding, n, None)
         s.command_presliding = presliding_lengths(params.presliding, n, cfg.presliding_length)
         s.play_half_width = 0.5 * cfg.presliding_play_counts * robot.encoder_resolution
+        lag = params.command_lag if cfg.command_lag is None else cfg.command_lag
+        s.command_delay = command_delay_samples(lag, cfg.dt)
         self._configure(cfg)
         # views handed to Pinocchio every sample
         self._q, self._qd, self._qdd = s.q_filtered, s.qd_filtered, s.qdd_filtered
@@ -207,7 +210,7 @@ class ExternalForceEstimator:
         s.q_filtered = q
         s.joint_weight = 1.0 / s.noise_std
         s.tare_left = s.tare_taken = self._tare_len
-        s.rezero_left = s.samples = 0
+        s.rezero_left = s.samples = s.command_slot = 0
         s.faulted = False
         s.first = True
         s.status = EstimatorStatus.WARMING_UP
@@ -316,4 +319,5 @@ _STATE_FIELDS = (
     "load_torque", "friction_torque", "friction_state", "friction_level", "friction_sign",
     "friction_envelope", "play", "play_increment", "joint_weight", "residual_low_pass",
     "observer_p0", "observer_integral", "observer_residual", "observer_momentum", "tare",
-    "tare_sum", "rezero_sum", "last_tau_ext", "last_wrench")
+    "tare_sum", "rezero_sum", "last_tau_ext", "last_wrench", "command_history",
+    "friction_command")

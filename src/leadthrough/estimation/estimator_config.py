@@ -9,10 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.model import MAX_PRESLIDING_RAD
-from leadthrough.errors import check_fields
+from leadthrough.dynamics.model import MAX_COMMAND_LAG_S, MAX_PRESLIDING_RAD
+from leadthrough.errors import DataError, check_fields
+from leadthrough.estimation.estimator_step import COMMAND_HISTORY
 
-__all__ = ["DEFAULT_PRESLIDING_RAD", "EstimatorConfig", "presliding_lengths"]
+__all__ = ["DEFAULT_PRESLIDING_RAD", "EstimatorConfig", "command_delay_samples",
+           "presliding_lengths"]
 
 Array = NDArray[np.float64]
 
@@ -73,6 +75,16 @@ class EstimatorConfig:
             it, else :data:`DEFAULT_PRESLIDING_RAD`. Nothing here comes from the simulator's
             own bristle lengths (issue 24). A joint commanded to stand still is driven by its
             measured displacement with the same z₀.
+        command_lag: The ``"command"`` friction follows the commanded velocity this much later
+            [s], rounded to whole samples of ``dt``: the time a command takes to show in the
+            measured position (the interface's transport and the servo). Sent at once, the
+            command would turn the model's friction over a cycle or two before the gear's at a
+            reversal (over an 8 ms interface, a ~60 N·m swing on a heavy axis). None (the
+            default): the lag measured on the identification recording
+            (``DriveModelParameters.command_lag``, the params file's ``[meta] command_lag``),
+            0 where none was measured. It must be the lag of the interface this estimator runs
+            on: parameters identified in-process or from logs and used over a controller's
+            interface need it given here (``guide --command-lag``).
         presliding_play_counts: Width of the play operator on the encoder that drives the
             friction at rest [encoder counts] (``presliding_kernels.play_step``): chatter
             within it moves nothing. 0 passes every count.
@@ -99,6 +111,7 @@ class EstimatorConfig:
     standstill_velocity: float = 0.02
     friction_velocity: str = "measured"
     presliding_length: float | None = None
+    command_lag: float | None = None
     presliding_play_counts: float = 2.5
     friction_weighting: float = 0.0
 
@@ -123,6 +136,9 @@ class EstimatorConfig:
              self.presliding_length is None
              or 0 < self.presliding_length <= MAX_PRESLIDING_RAD,
              f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad"),
+            ("command_lag",
+             self.command_lag is None or 0 <= self.command_lag <= MAX_COMMAND_LAG_S,
+             f"None or 0 to {MAX_COMMAND_LAG_S:g} s"),
             ("presliding_play_counts", 0 <= self.presliding_play_counts < 1e6,
              "0 <= width < 1e6 counts"),
             ("friction_weighting",
@@ -141,3 +157,17 @@ def presliding_lengths(identified: Array, n: int, chosen: float | None) -> Array
     if identified.size:
         return np.asarray(identified, dtype=float)
     return np.full(n, DEFAULT_PRESLIDING_RAD)
+
+
+def command_delay_samples(lag: float, dt: float) -> int:
+    """The command lag ``lag`` [s] in whole samples of ``dt`` [s] (see
+    ``EstimatorConfig.command_lag``).
+
+    Raises:
+        DataError: More samples than the estimator's ring of past commands holds.
+    """
+    samples = round(lag / dt)
+    if not 0 <= samples < COMMAND_HISTORY:
+        raise DataError("command lag too long for the sample period", field="command_lag",
+                        value=lag, expected=f"below {COMMAND_HISTORY} samples of {dt:g} s")
+    return samples

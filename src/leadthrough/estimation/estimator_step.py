@@ -44,7 +44,9 @@ from leadthrough.estimation.filters import (
 from leadthrough.estimation.wrench import friction_weights, wrench_from_torque
 
 __all__ = [
+    "COMMAND_HISTORY",
     "EstimatorStatus",
+    "delay_command",
     "estimator_dtype",
     "finish_sample",
     "input_dtype",
@@ -56,6 +58,10 @@ __all__ = [
 
 Array = NDArray[np.float64]
 Record = Any     # a record of its dtype (compiled code reads it by field)
+
+#: Length of the estimator's ring of past commands (``delay_command``) [samples]: the longest
+#: command delay is one less.
+COMMAND_HISTORY = 128
 Records = NDArray[np.void]   # a record as Python passes it: a structured array of one element
 
 
@@ -102,6 +108,7 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("manipulability_threshold", f8), ("max_damping", f8), ("min_force_lever", f8),
         ("friction_follows_command", b1),     # friction with memory, driven by qd_cmd
         ("command_presliding", *joints),      # its z₀ while commanded to move [rad]
+        ("command_delay", i8),                # samples the friction's command is delayed by
         ("weigh_by_friction", b1), ("friction_weighting", f8), ("envelope_decay", f8),
         ("warm_up_samples", i8),
         # per joint constants
@@ -123,6 +130,9 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("friction_sign", *joints),           # smoothed sign
         ("friction_envelope", *joints),       # envelope of the friction's uncertainty [N·m]
         ("play", *joints), ("play_increment", *joints),
+        ("command_history", f8, (COMMAND_HISTORY, n)),   # the last qd_cmd, a ring
+        ("command_slot", i8),                 # where the next qd_cmd goes in it
+        ("friction_command", *joints),        # qd_cmd of command_delay samples ago [rad/s]
         ("joint_weight", *joints),            # of the force fit [1/(N·m)]
         # state: τ_ext
         ("residual_low_pass", *joints),       # low-pass state of τ̂_d − τ̂_j [N·m]
@@ -241,7 +251,9 @@ def _friction(inp: Record, est: Record) -> None:
     fp = est.friction
     if est.friction_follows_command:
         play_step(inp.q, est.play_half_width, est.play, est.play_increment)
-        presliding_friction_step(inp.qd_cmd, est.play_increment, fp, est.load_torque, est.dt,
+        delay_command(inp.qd_cmd, est)
+        presliding_friction_step(est.friction_command, est.play_increment, fp,
+                                 est.load_torque, est.dt,
                                  est.command_presliding, est.rest_presliding,
                                  est.friction_state, est.friction_torque, est.friction_level)
         if est.weigh_by_friction:
@@ -251,6 +263,35 @@ def _friction(inp: Record, est: Record) -> None:
         return
     smoothed_friction(est.qd_filtered, est.inverse_standstill_velocity, fp, est.load_torque,
                       est.friction_sign, est.friction_torque)
+
+
+@njit(cache=True, nogil=True)
+def delay_command(qd_cmd: Array, est: Record) -> None:
+    """``est.friction_command`` = the ``qd_cmd`` of ``delay`` samples ago: the velocity the
+    joint has now when the command reaches the measured position ``delay`` samples after it
+    was sent (the interface's command-to-position lag, see ``EstimatorConfig.command_lag``).
+    Samples before the last reset count as zero (a reset is at rest).
+
+    Args:
+        qd_cmd: This sample's commanded joint velocity [rad/s], shape (n,).
+        est: The estimator's record: ``command_delay`` (0 <= delay < ``COMMAND_HISTORY``
+            samples), the ring ``command_history`` of the last commands, shape
+            (COMMAND_HISTORY, n), and ``command_slot`` (both in place); ``friction_command``
+            (written).
+    """
+    out, delay, history = est.friction_command, est.command_delay, est.command_history
+    if delay == 0:
+        for j in range(qd_cmd.size):
+            out[j] = qd_cmd[j]
+        return
+    slot = est.command_slot
+    size = history.shape[0]
+    for j in range(qd_cmd.size):
+        history[slot, j] = qd_cmd[j]
+    source = (slot - delay) % size
+    for j in range(qd_cmd.size):
+        out[j] = history[source, j]
+    est.command_slot = (slot + 1) % size
 
 
 @njit(cache=True, nogil=True)

@@ -10,6 +10,7 @@ Layout::
     J = 38.9                          # on the identification data [N·m]
     k_omega = 1.0
     friction_sweep = true             # the friction was held to a constant-velocity sweep
+    command_lag = 0.008               # command-to-position lag [s] (optional: on the recording)
 
     [noise]                          # residual τ_ω on the identification data (eq. 26, 30, 36)
     mean = [...]                     # τ̄_ω per joint [N·m]
@@ -33,7 +34,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -44,6 +45,7 @@ from leadthrough import __version__
 from leadthrough.data.recording import is_sim_seed
 from leadthrough.dynamics.friction import StribeckParameters
 from leadthrough.dynamics.model import (
+    MAX_COMMAND_LAG_S,
     MAX_LOAD_FRICTION,
     MAX_PRESLIDING_RAD,
     DriveModelParameters,
@@ -144,6 +146,7 @@ def save_params(
         f"k_omega = {_fmt(stats.k_omega)}",
         *([] if sim_seed is None else [f"sim_seed = {int(sim_seed)}"]),
         *(["friction_sweep = true"] if friction_sweep else []),
+        *([f"command_lag = {_fmt(params.command_lag)}"] if params.command_lag else []),
         "",
         "[noise]",
         "mean = [" + ", ".join(_fmt(v) for v in stats.mean) + "]",
@@ -210,8 +213,13 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     if not isinstance(sweep, bool):
         raise DataError("malformed", source=path, field="meta.friction_sweep", value=sweep,
                         expected="true or false")
+    lag = _nonnegative(path, "meta.command_lag", meta.get("command_lag", 0.0))
+    if lag > MAX_COMMAND_LAG_S:
+        raise DataError("out of range", source=path, field="meta.command_lag", value=lag,
+                        expected=f"0 to {MAX_COMMAND_LAG_S:g} s")
     return ParamsFile(robot=robot.name, method=str(meta.get("method", "")),
-                      params=joints.parameters(), noise_mean=noise_mean, noise_std=noise_std,
+                      params=replace(joints.parameters(), command_lag=lag),
+                      noise_mean=noise_mean, noise_std=noise_std,
                       J=_nonnegative(path, "meta.J", meta.get("J")), path=path,
                       sim_seed=seed, friction_sweep=sweep)
 

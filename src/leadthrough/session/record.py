@@ -78,8 +78,11 @@ class SessionLog:
         current: Measured motor currents [A], shape (N, n).
         tau_ext: Estimated external joint torque [N·m], shape (N, n).
         wrench_base: Estimated wrench at the TCP, base axes [N, N·m], shape (N, 6).
-        q_cmd: Joint position command sent to the servo [rad], shape (N, n).
-        qd_cmd: Joint velocity feed-forward sent [rad/s], shape (N, n).
+        q_cmd: Joint position command the loop computed in this period [rad], shape (N, n):
+            sent at the start of the next one (row i is sent after sample i, unlike a
+            :class:`~leadthrough.data.recording.Recording`'s ``q_cmd``, which is the command
+            sent before its sample).
+        qd_cmd: Its joint velocity feed-forward [rad/s], shape (N, n).
         tcp_cmd_base: Commanded TCP position in the base frame [m], shape (N, 3).
         tcp_cmd_quat: Commanded TCP orientation, quaternion (x, y, z, w), shape (N, 4).
         twist_cmd_base: Commanded TCP twist, base axes at the TCP [m/s, rad/s], shape (N, 6).
