@@ -19,6 +19,7 @@ from leadthrough.cli import (
     emulate_cmd,
     friction_refresh_cmd,
     guide_cmd,
+    identify_cmd,
     payload_cmd,
     pendant_cmd,
     robots_cmd,
@@ -66,6 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     robots_cmd.register(sub)
     calibration_cmds.register(sub)
+    identify_cmd.register(sub)
     friction_refresh_cmd.register(sub)
     payload_cmd.register(sub)
     guide_cmd.register(sub)
