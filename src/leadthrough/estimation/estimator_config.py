@@ -78,8 +78,8 @@ class EstimatorConfig:
         command_lag: The ``"command"`` friction follows the commanded velocity this much later
             [s], rounded to whole samples of ``dt``: the time a command takes to show in the
             measured position (the interface's transport and the servo). Sent at once, the
-            command would turn the model's friction over a cycle or two before the gear's at a
-            reversal (over an 8 ms interface, a ~60 N·m swing on a heavy axis). None (the
+            command would turn the model's friction over that much before the gear's at a
+            reversal (one 8 ms cycle on the emulated J519). None (the
             default): the lag measured on the identification recording
             (``DriveModelParameters.command_lag``, the params file's ``[meta] command_lag``),
             0 where none was measured. It must be the lag of the interface this estimator runs
