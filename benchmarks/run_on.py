@@ -14,7 +14,9 @@ instance:
    directions, 100 kg translational mass): the travel after each release beyond the shortest
    stop at the acceleration limit (``release_overruns``), p90 and max over all releases; the
    time the robot kept moving after a release beyond that stop (``release_motion_times``);
-   faults latched with no hand on the tool for a stop's length (``faults_without_hand``).
+   faults latched with no hand on the tool for a stop's length (``faults_without_hand``); the
+   force estimate's error while the TCP moves at least 0.02 m/s (RMS over all sessions, as
+   ``force_error_in_motion``) and the phantom force after each release (``phantom_forces``).
 2. ``--seam`` ``seam`` sessions (the operator stops at P1, marks it, guides along the seam,
    stops at P2): the taught endpoints' distance to the operator's targets.
 3. A ``rest`` session (drift with no hand: exactly 0 expected) and a ``push-x`` session (peak
@@ -44,11 +46,14 @@ from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.metrics import (
+    MOTION_SPEED,
     faults_without_hand,
+    phantom_forces,
     release_motion_times,
     release_overruns,
     rest_drift,
 )
+from leadthrough.session.record import SessionLog
 from leadthrough.sim.calibration_set import record_excitation, record_friction_sweep
 from leadthrough.sim.plant import PLANT_NAMES, plant_preset
 from leadthrough.sim.robot import SimConfig
@@ -96,7 +101,8 @@ def random_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
     guiding = light_guiding()
     acc = guiding.limits.max_linear_acceleration
     stop_s = guiding.limits.max_linear_speed / acc
-    out: dict[str, list[float]] = {"overrun": [], "moving": [], "session_max": []}
+    out: dict[str, list[float]] = {"overrun": [], "moving": [], "session_max": [],
+                                   "force_sq": [], "force_n": [], "phantom": []}
     faults: list[str] = []
     for k in range(sessions):
         s = session(robot, params, SimSessionConfig(
@@ -105,15 +111,35 @@ def random_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
         m = release_motion_times(s.result.log, acc)
         f = faults_without_hand(s.result.log, stop_s)
         assert o is not None and m is not None and f is not None  # the simulator logs truth
+        err, n_moving = _force_error_sums(s.result.log)
+        ph = phantom_forces(s.result.log)
+        out["force_sq"].append(err)
+        out["force_n"].append(n_moving)
+        out["phantom"] += [] if ph is None else list(ph)
         out["overrun"] += list(o)
         out["moving"] += list(m)
         out["session_max"].append(float(o.max()) if o.size else 0.0)
         faults += f
         print(f"  instance {seed} operator {k:2d}: overrun max {1e3 * out['session_max'][-1]:5.1f}"
               f" mm, moving after release max {max(m, default=0.0):.2f} s, faults "
-              f"{s.summary.faults} (without hand {f})", flush=True)
+              f"{s.summary.faults} (without hand {f}); force error moving "
+              f"{_rms(err, n_moving):5.1f} N, phantom max "
+              f"{max(ph, default=0.0) if ph is not None else math.nan:5.1f} N", flush=True)
     out["faults_without_hand"] = [float(len(faults))]
     return out
+
+
+def _force_error_sums(log: SessionLog) -> tuple[float, float]:
+    """Σ|f̂ − f|² [N²] and the sample count over the samples whose commanded TCP speed is at
+    least ``MOTION_SPEED`` (as ``force_error_in_motion``), to pool sessions."""
+    assert log.wrench_applied_base is not None  # the simulator logs truth
+    moving = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1) >= MOTION_SPEED
+    err = log.wrench_base[moving, :3] - log.wrench_applied_base[moving, :3]
+    return float(np.sum(err ** 2)), float(np.count_nonzero(moving))
+
+
+def _rms(sum_sq: float, n: float) -> float:
+    return math.sqrt(sum_sq / n) if n else math.nan
 
 
 def seam_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
@@ -174,6 +200,7 @@ def main() -> None:
     session_max: list[float] = []
     seam: list[float] = []
     faults = 0
+    force_sq, force_n, phantom = 0.0, 0.0, []
     for seed in seeds:
         params = calibrated(robot, seed, args.plant, args.cache)
         r = random_sessions(robot, params, seed, args.plant, args.sessions)
@@ -181,6 +208,8 @@ def main() -> None:
         moving += r["moving"]
         session_max += r["session_max"]
         faults += int(r["faults_without_hand"][0])
+        force_sq, force_n = force_sq + sum(r["force_sq"]), force_n + sum(r["force_n"])
+        phantom += r["phantom"]
         seam += seam_sessions(robot, params, seed, args.plant, args.seam)
         drift, peak = rest_and_push(robot, params, seed, args.plant)
         print(f"instance {seed}: rest drift {1e3 * drift:.3f} mm, push-x peak {peak:.3f} m/s",
@@ -196,6 +225,10 @@ def main() -> None:
         print(f"  moving after a release beyond that stop: max {max(moving):.2f} s "
               f"(goal <= 0.5 s)")
     print(f"  faults with no hand on the tool: {faults} (goal 0)")
+    print(f"  force error while moving >= {MOTION_SPEED:g} m/s: {_rms(force_sq, force_n):.1f} N "
+          f"RMS (goal 5 N); phantom within 0.5 s of a release: median "
+          f"{np.median(phantom) if phantom else math.nan:.1f} N, max "
+          f"{max(phantom, default=math.nan):.1f} N (goal <= 15 N)")
     if seam:
         e = 1e3 * np.asarray(seam)
         print(f"  seam endpoints P1/P2: median {np.median(e):.1f} mm, max {e.max():.1f} mm "

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -27,6 +29,7 @@ from leadthrough.estimation.filters import (
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.estimation.wrench import friction_weights, wrench_from_torque
 from leadthrough.robot import Robot
+from leadthrough.robot.poses import guide_start_pose
 from leadthrough.sim import ConstantWrench, Payload, SimConfig, SimRobot, hold
 from leadthrough.sim.mujoco_model import build_mujoco_model
 from leadthrough.state_records import view
@@ -463,8 +466,6 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
     """The estimator's per-sample model (its identified links in Pinocchio, its compiled
     friction with the smoothed sign, rotor inertia and offset) equals the offline eq. 21 for
     |q̇| > v_ε; with a load-dependent Coulomb level, given the same τ_load (the link torque)."""
-    from dataclasses import replace
-
     from leadthrough.dynamics import FrictionModel, model_torque
     from leadthrough.dynamics.friction import StribeckParameters
     from leadthrough.estimation.estimator_step import smoothed_friction
@@ -629,15 +630,33 @@ def test_friction_weights_count_a_turning_joint_less_and_recover() -> None:
     sigma = np.array([10.0, 1.0])
     level = np.array([50.0, 5.0])
     envelope, weight = np.zeros(2), np.zeros(2)
-    friction_weights(level, level.copy(), 0.9, 2.0, sigma, envelope, weight)
+    friction_weights(level, level.copy(), level.copy(), 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(weight, 1.0 / sigma)
     state = np.array([50.0, 0.0])  # joint 2 turning over after a reversal
-    friction_weights(level, state, 0.9, 2.0, sigma, envelope, weight)
+    friction_weights(level, state, state.copy(), 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(weight, [0.1, 1.0 / np.sqrt(1.0 + (2.0 * 5.0) ** 2)])
     for _ in range(10):  # turned over: the envelope holds the peak, decaying
-        friction_weights(level, -level, 0.9, 2.0, sigma, envelope, weight)
+        friction_weights(level, -level, -level, 0.9, 2.0, sigma, envelope, weight)
     np.testing.assert_allclose(envelope, [0.0, 5.0 * 0.9**10])
     np.testing.assert_allclose(weight[1], 1.0 / np.sqrt(1.0 + (2.0 * 5.0 * 0.9**10) ** 2))
+
+
+@settings(max_examples=30, deadline=None)
+@given(stuck=st.floats(0.0, 1.0))
+def test_friction_weights_doubt_a_joint_the_command_turned_and_the_encoder_did_not(
+        stuck: float) -> None:
+    """Steady sliding on the command's side (|F| = g) while the encoder's state is still
+    ``stuck``·g on the old side: the gap F − F_enc = (1 + stuck)·g sets the weight; agreeing
+    states give 1/σ."""
+    sigma, level = np.array([1.0]), np.array([10.0])
+    envelope, weight = np.zeros(1), np.zeros(1)
+    turned, encoder = -level, stuck * level
+    friction_weights(level, turned, encoder, 0.9, 2.0, sigma, envelope, weight)
+    gap = (1.0 + stuck) * 10.0
+    np.testing.assert_allclose(envelope, [gap])
+    np.testing.assert_allclose(weight, [1.0 / np.sqrt(1.0 + (2.0 * gap) ** 2)])
+    friction_weights(level, turned, turned.copy(), 0.0, 2.0, sigma, np.zeros(1), weight)
+    np.testing.assert_allclose(weight, 1.0 / sigma)
 
 
 def test_friction_weighting_needs_the_force_fit_and_commanded_friction() -> None:
@@ -654,3 +673,40 @@ def test_min_force_lever_must_be_finite_and_not_negative(bad: float) -> None:
         EstimatorConfig(axes="force", min_force_lever=bad)
     assert "finite value >= 0 m" in str(err.value)
     assert EstimatorConfig(axes="force", min_force_lever=0.0).min_force_lever == 0.0
+
+
+def test_a_joint_the_command_moves_and_the_encoder_does_not_counts_less(er20: Robot) -> None:
+    """Joint 3 commanded to move at 0.01 rad/s: while its encoder stands still (a joint stuck
+    before breakaway) the command's friction has turned to g and the encoder's has not, and
+    the force fit weighs the joint by that gap (without it, by 1/σ: the command's friction is
+    at its level); once the encoder follows the command the weight returns to 1/σ (after the
+    envelope's decay). The other joints stand still: weighed by the gap to their static
+    level, as before, whatever joint 3 does."""
+    n = er20.n
+    params = replace(nominal_drive_parameters(er20), coulomb=np.full(n, 10.0),
+                     viscous=np.zeros(n), presliding=np.full(n, 2e-4))
+    sigma = np.linspace(1.0, 3.0, n)
+    cfg = EstimatorConfig(axes="force", friction_velocity="command", friction_weighting=1.0,
+                          warm_up_s=0.0, presliding_play_counts=0.0)
+    est = ExternalForceEstimator(er20, params, np.zeros(n), cfg, noise_std=sigma)
+    inp, out = est.make_input(), est.make_output()
+    q = guide_start_pose(er20).copy()
+    est.reset(q)
+    inp.qd_cmd[:] = 0.0
+    inp.qd_cmd[2] = 0.01
+
+    def run(steps: int, follow: bool) -> np.ndarray:
+        for _ in range(steps):
+            if follow:
+                q[2] += 0.01 * 1e-3
+            inp.t, inp.q[:], inp.current[:] = inp.t + 1e-3, q, 0.0
+            est.update(inp, out)
+        return est.record["joint_weight"][0].copy()
+
+    stuck = run(300, follow=False)
+    at_rest = 1.0 / np.hypot(sigma, 10.0)   # the gap to the static level g = 10 N·m
+    # from rest (both states 0) the command turned its friction to g, the encoder not
+    np.testing.assert_allclose(stuck, at_rest, rtol=1e-3)
+    moving = run(2000, follow=True)
+    assert moving[2] == pytest.approx(1.0 / sigma[2], rel=1e-3)
+    np.testing.assert_allclose(np.delete(moving, 2), np.delete(at_rest, 2), rtol=1e-3)

@@ -320,4 +320,4 @@ _STATE_FIELDS = (
     "friction_envelope", "play", "play_increment", "joint_weight", "residual_low_pass",
     "observer_p0", "observer_integral", "observer_residual", "observer_momentum", "tare",
     "tare_sum", "rezero_sum", "last_tau_ext", "last_wrench", "command_history",
-    "friction_command")
+    "friction_command", "encoder_friction")

@@ -29,7 +29,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from leadthrough.dynamics.friction import coulomb_level, eq15_friction, friction_dtype
-from leadthrough.dynamics.presliding import play_step, presliding_friction_step
+from leadthrough.dynamics.presliding import dahl_step, play_step, presliding_friction_step
 from leadthrough.estimation.external_torque import (
     average_into_tare,
     direct_residual,
@@ -129,6 +129,7 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("friction_level", *joints),          # the eq. 15 level g(q̇) [N·m]
         ("friction_sign", *joints),           # smoothed sign
         ("friction_envelope", *joints),       # envelope of the friction's uncertainty [N·m]
+        ("encoder_friction", *joints),        # the friction turned by the encoder [N·m]
         ("play", *joints), ("play_increment", *joints),
         ("command_history", f8, (COMMAND_HISTORY, n)),   # the last qd_cmd, a ring
         ("command_slot", i8),                 # where the next qd_cmd goes in it
@@ -257,12 +258,35 @@ def _friction(inp: Record, est: Record) -> None:
                                  est.command_presliding, est.rest_presliding,
                                  est.friction_state, est.friction_torque, est.friction_level)
         if est.weigh_by_friction:
-            friction_weights(est.friction_level, est.friction_state, est.envelope_decay,
-                             est.friction_weighting, est.noise_std, est.friction_envelope,
-                             est.joint_weight)
+            encoder_friction_step(est.play_increment, est.friction_level, est.rest_presliding,
+                                  est.encoder_friction)
+            friction_weights(est.friction_level, est.friction_state, est.encoder_friction,
+                             est.envelope_decay, est.friction_weighting, est.noise_std,
+                             est.friction_envelope, est.joint_weight)
         return
     smoothed_friction(est.qd_filtered, est.inverse_standstill_velocity, fp, est.load_torque,
                       est.friction_sign, est.friction_torque)
+
+
+@njit(cache=True, nogil=True)
+def encoder_friction_step(increment: Array, level: Array, presliding: Array, out: Array
+                          ) -> None:
+    """The Coulomb + Stribeck friction as the encoder alone would turn it over, one step: a
+    Dahl state driven by the measured displacement (through the play operator) toward the
+    level of the commanded speed, moving or not. Not the friction the estimate uses (driven by
+    the command, see ``presliding_friction_step``): where the two disagree, a joint that the
+    command says has reversed has not yet moved back, and its friction is in doubt
+    (``friction_weights``).
+
+    Args:
+        increment: Measured displacement of this step, after the play operator [rad], (n,).
+        level: The eq. 15 level g at the commanded speed [N·m], shape (n,).
+        presliding: z₀ per joint [rad], shape (n,).
+        out: The state [N·m] (in place), shape (n,).
+    """
+    for j in range(increment.size):
+        if increment[j] != 0.0 and level[j] > 0.0:
+            out[j] = dahl_step(out[j], increment[j], level[j], presliding[j])
 
 
 @njit(cache=True, nogil=True)
