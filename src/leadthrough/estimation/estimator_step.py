@@ -258,7 +258,8 @@ def _friction(inp: Record, est: Record) -> None:
                                  est.command_presliding, est.rest_presliding,
                                  est.friction_state, est.friction_torque, est.friction_level)
         if est.weigh_by_friction:
-            encoder_friction_step(est.play_increment, est.friction_level, est.rest_presliding,
+            encoder_friction_step(est.play_increment, est.friction_command, est.friction_level,
+                                  est.rest_presliding, est.friction_state,
                                   est.encoder_friction)
             friction_weights(est.friction_level, est.friction_state, est.encoder_friction,
                              est.envelope_decay, est.friction_weighting, est.noise_std,
@@ -269,23 +270,28 @@ def _friction(inp: Record, est: Record) -> None:
 
 
 @njit(cache=True, nogil=True)
-def encoder_friction_step(increment: Array, level: Array, presliding: Array, out: Array
-                          ) -> None:
-    """The Coulomb + Stribeck friction as the encoder alone would turn it over, one step: a
-    Dahl state driven by the measured displacement (through the play operator) toward the
-    level of the commanded speed, moving or not. Not the friction the estimate uses (driven by
-    the command, see ``presliding_friction_step``): where the two disagree, a joint that the
-    command says has reversed has not yet moved back, and its friction is in doubt
-    (``friction_weights``).
+def encoder_friction_step(increment: Array, command: Array, level: Array, presliding: Array,
+                          state: Array, out: Array) -> None:
+    """The Coulomb + Stribeck friction as the encoder alone would turn it over, one step: while
+    a joint is commanded to move, a Dahl state driven by the measured displacement (through
+    the play operator) toward the level of the commanded speed. Not the friction the estimate
+    uses (turned by the command, see ``presliding_friction_step``): where the two disagree, a
+    joint that the command says has reversed has not yet moved back, and its friction is in
+    doubt (``friction_weights``). At rest the estimate's friction is the encoder's already: the
+    state is set to it, and the next motion starts from there.
 
     Args:
         increment: Measured displacement of this step, after the play operator [rad], (n,).
+        command: The commanded velocity the friction follows [rad/s], shape (n,) (0: at rest).
         level: The eq. 15 level g at the commanded speed [N·m], shape (n,).
         presliding: z₀ per joint [rad], shape (n,).
-        out: The state [N·m] (in place), shape (n,).
+        state: The estimate's friction state F after this step [N·m], shape (n,).
+        out: The encoder's state F_enc [N·m] (in place), shape (n,).
     """
     for j in range(increment.size):
-        if increment[j] != 0.0 and level[j] > 0.0:
+        if command[j] == 0.0:
+            out[j] = state[j]
+        elif increment[j] != 0.0 and level[j] > 0.0:
             out[j] = dahl_step(out[j], increment[j], level[j], presliding[j])
 
 
