@@ -48,12 +48,12 @@ from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.metrics import (
     MOTION_SPEED,
     faults_without_hand,
+    force_errors_in_motion,
     phantom_forces,
     release_motion_times,
     release_overruns,
     rest_drift,
 )
-from leadthrough.session.record import SessionLog
 from leadthrough.sim.calibration_set import record_excitation, record_friction_sweep
 from leadthrough.sim.plant import PLANT_NAMES, plant_preset
 from leadthrough.sim.robot import SimConfig
@@ -102,7 +102,7 @@ def random_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
     acc = guiding.limits.max_linear_acceleration
     stop_s = guiding.limits.max_linear_speed / acc
     out: dict[str, list[float]] = {"overrun": [], "moving": [], "session_max": [],
-                                   "force_sq": [], "force_n": [], "phantom": []}
+                                   "force_error": [], "phantom": []}
     faults: list[str] = []
     for k in range(sessions):
         s = session(robot, params, SimSessionConfig(
@@ -111,11 +111,11 @@ def random_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
         m = release_motion_times(s.result.log, acc)
         f = faults_without_hand(s.result.log, stop_s)
         assert o is not None and m is not None and f is not None  # the simulator logs truth
-        err, n_moving = _force_error_sums(s.result.log)
+        err = force_errors_in_motion(s.result.log)
         ph = phantom_forces(s.result.log)
-        out["force_sq"].append(err)
-        out["force_n"].append(n_moving)
-        out["phantom"] += [] if ph is None else list(ph)
+        assert err is not None and ph is not None  # the simulator logs truth
+        out["force_error"] += list(err)
+        out["phantom"] += list(ph)
         out["overrun"] += list(o)
         out["moving"] += list(m)
         out["session_max"].append(float(o.max()) if o.size else 0.0)
@@ -123,23 +123,13 @@ def random_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
         print(f"  instance {seed} operator {k:2d}: overrun max {1e3 * out['session_max'][-1]:5.1f}"
               f" mm, moving after release max {max(m, default=0.0):.2f} s, faults "
               f"{s.summary.faults} (without hand {f}); force error moving "
-              f"{_rms(err, n_moving):5.1f} N, phantom max "
-              f"{max(ph, default=0.0) if ph is not None else math.nan:5.1f} N", flush=True)
+              f"{_rms(list(err)):5.1f} N, phantom max {max(ph, default=0.0):5.1f} N", flush=True)
     out["faults_without_hand"] = [float(len(faults))]
     return out
 
 
-def _force_error_sums(log: SessionLog) -> tuple[float, float]:
-    """Σ|f̂ − f|² [N²] and the sample count over the samples whose commanded TCP speed is at
-    least ``MOTION_SPEED`` (as ``force_error_in_motion``), to pool sessions."""
-    assert log.wrench_applied_base is not None  # the simulator logs truth
-    moving = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1) >= MOTION_SPEED
-    err = log.wrench_base[moving, :3] - log.wrench_applied_base[moving, :3]
-    return float(np.sum(err ** 2)), float(np.count_nonzero(moving))
-
-
-def _rms(sum_sq: float, n: float) -> float:
-    return math.sqrt(sum_sq / n) if n else math.nan
+def _rms(errors: list[float]) -> float:
+    return math.sqrt(float(np.mean(np.square(errors)))) if errors else math.nan
 
 
 def seam_sessions(robot: Robot, params: ParamsFile, seed: int, plant: str,
@@ -200,7 +190,8 @@ def main() -> None:
     session_max: list[float] = []
     seam: list[float] = []
     faults = 0
-    force_sq, force_n, phantom = 0.0, 0.0, []
+    force_error: list[float] = []
+    phantom: list[float] = []
     for seed in seeds:
         params = calibrated(robot, seed, args.plant, args.cache)
         r = random_sessions(robot, params, seed, args.plant, args.sessions)
@@ -208,7 +199,7 @@ def main() -> None:
         moving += r["moving"]
         session_max += r["session_max"]
         faults += int(r["faults_without_hand"][0])
-        force_sq, force_n = force_sq + sum(r["force_sq"]), force_n + sum(r["force_n"])
+        force_error += r["force_error"]
         phantom += r["phantom"]
         seam += seam_sessions(robot, params, seed, args.plant, args.seam)
         drift, peak = rest_and_push(robot, params, seed, args.plant)
@@ -225,7 +216,7 @@ def main() -> None:
         print(f"  moving after a release beyond that stop: max {max(moving):.2f} s "
               f"(goal <= 0.5 s)")
     print(f"  faults with no hand on the tool: {faults} (goal 0)")
-    print(f"  force error while moving >= {MOTION_SPEED:g} m/s: {_rms(force_sq, force_n):.1f} N "
+    print(f"  force error while moving >= {MOTION_SPEED:g} m/s: {_rms(force_error):.1f} N "
           f"RMS (goal 5 N); phantom within 0.5 s of a release: median "
           f"{np.median(phantom) if phantom else math.nan:.1f} N, max "
           f"{max(phantom, default=math.nan):.1f} N (goal <= 15 N)")

@@ -436,7 +436,8 @@ def main() -> None:
     ap.add_argument("--scripts", nargs="+", default=None, choices=list(SCRIPT_S),
                     help="guiding scripts to compare (default: all)")
     ap.add_argument("--repeat", type=int, default=1, metavar="N",
-                    help="run each guided session over the wire N times")
+                    help="run each guided session N times, over the wire and in-process "
+                         "(sessions --run 500, 501, ...)")
     ap.add_argument("--command-lag", choices=("measured", "none"), default="measured",
                     help="the wire runs' estimator friction follows the command after the "
                          "interface's lag measured on a wire recording (default), or at once")

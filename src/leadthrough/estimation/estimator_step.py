@@ -47,6 +47,7 @@ __all__ = [
     "COMMAND_HISTORY",
     "EstimatorStatus",
     "delay_command",
+    "encoder_friction_step",
     "estimator_dtype",
     "finish_sample",
     "input_dtype",
@@ -58,11 +59,11 @@ __all__ = [
 
 Array = NDArray[np.float64]
 Record = Any     # a record of its dtype (compiled code reads it by field)
+Records = NDArray[np.void]   # a record as Python passes it: a structured array of one element
 
 #: Length of the estimator's ring of past commands (``delay_command``) [samples]: the longest
 #: command delay is one less.
 COMMAND_HISTORY = 128
-Records = NDArray[np.void]   # a record as Python passes it: a structured array of one element
 
 
 class EstimatorStatus(IntEnum):

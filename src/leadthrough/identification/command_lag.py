@@ -90,8 +90,9 @@ def measure_command_lag(rec: Recording, max_lag_s: float = MAX_COMMAND_LAG_S
     moved = np.isfinite(joints)
     if not moved.any():
         return None
-    # to 0.1 ms: finer means nothing at the 1-8 ms of a controller's cycle
-    lag = round(float(np.clip(np.median(joints[moved]), 0.0, max_lag_s)), 4)
+    # each joint's lag lies on the searched grid, from 0 to max_lag_s; to 0.1 ms: finer means
+    # nothing at the 1-8 ms of a controller's cycle
+    lag = round(float(np.median(joints[moved])), 4)
     return CommandLag(lag_s=lag, joints_s=joints, period_s=period)
 
 

@@ -15,7 +15,8 @@ from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
 __all__ = ["CycleTime", "SessionSummary", "faults_without_hand", "force_error_in_motion",
-           "phantom_forces", "release_motion_times", "release_overruns", "rest_drift", "summarize"]
+           "force_errors_in_motion", "phantom_forces", "release_motion_times", "release_overruns",
+           "rest_drift", "summarize"]
 
 #: TCP speed from which the force error counts as "in motion" [m/s] (issue 24).
 MOTION_SPEED = 0.02
@@ -117,20 +118,26 @@ def _hands_off(log: SessionLog) -> list[tuple[int, int]] | None:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def force_error_in_motion(log: SessionLog, min_speed: float = MOTION_SPEED) -> float | None:
-    """RMS of |estimated − applied force| over the samples whose commanded TCP speed is at least
+def force_errors_in_motion(log: SessionLog, min_speed: float = MOTION_SPEED) -> Array | None:
+    """|estimated − applied force| [N] at each sample whose commanded TCP speed is at least
     ``min_speed`` [m/s], the estimate in base axes (``wrench_base``) against the simulator's
-    applied wrench.
+    applied wrench; shape (samples that fast,), or None without the truth."""
+    if log.wrench_applied_base is None:
+        return None
+    moving = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1) >= min_speed
+    return np.asarray(np.linalg.norm(
+        log.wrench_base[moving, :3] - log.wrench_applied_base[moving, :3], axis=1))
+
+
+def force_error_in_motion(log: SessionLog, min_speed: float = MOTION_SPEED) -> float | None:
+    """RMS of :func:`force_errors_in_motion`.
 
     Returns:
         RMS [N], or None without the truth or without a sample that fast.
     """
-    if log.wrench_applied_base is None:
+    err = force_errors_in_motion(log, min_speed)
+    if err is None or not err.size:
         return None
-    moving = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1) >= min_speed
-    if not moving.any():
-        return None
-    err = np.linalg.norm(log.wrench_base[moving, :3] - log.wrench_applied_base[moving, :3], axis=1)
     return float(np.sqrt(np.mean(err ** 2)))
 
 
