@@ -95,10 +95,28 @@ def test_a_current_model_is_left_alone(er20: Robot, check: SimRecording) -> None
     np.testing.assert_allclose(again.viscous_scale, 1.0, atol=0.02)
 
 
+def test_a_viscous_part_far_off_ends_at_its_bound_and_says_so(
+        er20: Robot, check: SimRecording) -> None:
+    # the level part right, the viscous part 16 times too high (the sweep-based split between
+    # Stribeck and viscous friction can be far off): not an error, b at its bound, a kept
+    level = np.ones(6)
+    done = refresh_friction(_scaled(er20, level, np.full(6, 16.0)), check.measured, er20)
+    fitted = done.separable
+    assert fitted.any()
+    np.testing.assert_array_equal(done.viscous_at_bound, fitted)
+    np.testing.assert_allclose(done.viscous_scale[fitted], 0.25, rtol=1e-6)
+    np.testing.assert_allclose(done.level_scale, 1.0, atol=0.1)
+    assert np.all(done.error_after[fitted] < 0.25 * done.error_before[fitted])
+    # without the viscous part in question nothing is at a bound
+    assert not refresh_friction(_scaled(er20, level, level), check.measured,
+                                er20).viscous_at_bound.any()
+
+
 def test_a_model_far_off_is_an_error_not_a_drift(er20: Robot, check: SimRecording) -> None:
     with pytest.raises(DataError) as e:
         refresh_friction(_scaled(er20, np.full(6, 8.0), np.full(6, 8.0)), check.measured, er20)
     assert "friction scale" in str(e.value.field) and e.value.expected is not None
+    assert e.value.value > 0.0
     with pytest.raises(DataError) as e:  # no eq. 15 friction to rescale
         refresh_friction(nominal_drive_parameters(er20), check.measured, er20)
     assert e.value.field == "friction_model"

@@ -78,11 +78,12 @@ def run(args: argparse.Namespace) -> int:
     save_params(args.output, robot, pf.method, done.params, stats, sim_seed=pf.sim_seed,
                 friction_sweep=pf.friction_sweep)
     rows = [{"joint": name, "level_scale": float(a), "viscous_scale": float(b),
-             "viscous_fitted": bool(s), "error_before": float(e0), "error_after": float(e1),
+             "viscous_fitted": bool(s), "viscous_at_bound": bool(bound),
+             "error_before": float(e0), "error_after": float(e1),
              "points": int(done.points.speed[j].size)}
-            for j, (name, a, b, s, e0, e1) in enumerate(zip(
+            for j, (name, a, b, s, bound, e0, e1) in enumerate(zip(
                 robot.joint_names, done.level_scale, done.viscous_scale, done.separable,
-                done.error_before, done.error_after, strict=True))]
+                done.viscous_at_bound, done.error_before, done.error_after, strict=True))]
     if args.json:
         print(json.dumps({"robot": robot.name, "joints": rows, "output": str(args.output)},
                          indent=2))
@@ -90,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     print("joint      level  viscous  friction error at the check: before -> after")
     for r in rows:
         visc = f"{r['viscous_scale']:.3f}" if r["viscous_fitted"] else "  = level"
+        visc += " (bound)" if r["viscous_at_bound"] else ""
         print(f"{r['joint']:<10} {r['level_scale']:.3f}  {visc:>8}  "
               f"{100 * r['error_before']:5.1f} % -> {100 * r['error_after']:5.1f} %")
     print(f"refreshed parameters written to {args.output}")
