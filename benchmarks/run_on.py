@@ -226,9 +226,10 @@ def report(label: str, sessions: int, f: Figures) -> None:
     if f.seam:
         e = 1e3 * np.asarray(f.seam)
         taught = e[np.isfinite(e)]
-        print(f"  seam endpoints P1/P2: median {np.median(e):.1f} mm, max taught "
-              f"{taught.max(initial=math.nan):.1f} mm ({len(e)} endpoints); sessions not "
-              f"taught {(len(e) - len(taught)) // 2} of {len(e) // 2}")
+        worst = taught.max() if taught.size else math.nan
+        print(f"  seam endpoints P1/P2: median {np.median(e):.1f} mm, max taught {worst:.1f} mm "
+              f"({len(e)} endpoints); sessions not taught {(len(e) - len(taught)) // 2} of "
+              f"{len(e) // 2}")
     print(f"  rest drift with no hand: max {1e3 * max(f.rest_drift):.3f} mm (goal 0); push-x "
           f"peak {min(f.push_peak):.3f}-{max(f.push_peak):.3f} m/s (cap 0.2)")
 
