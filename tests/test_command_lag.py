@@ -18,7 +18,7 @@ from leadthrough.data.recording import Recording
 from leadthrough.dynamics.model import MAX_COMMAND_LAG_S, nominal_drive_parameters
 from leadthrough.errors import DataError
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
-from leadthrough.estimation.estimator_step import COMMAND_HISTORY
+from leadthrough.estimation.friction_torque import COMMAND_HISTORY
 from leadthrough.identification.command_lag import measure_command_lag
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import load_params, save_params

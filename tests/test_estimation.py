@@ -468,7 +468,7 @@ def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: st
     |q̇| > v_ε; with a load-dependent Coulomb level, given the same τ_load (the link torque)."""
     from leadthrough.dynamics import FrictionModel, model_torque
     from leadthrough.dynamics.friction import StribeckParameters
-    from leadthrough.estimation.estimator_step import smoothed_friction
+    from leadthrough.estimation.friction_torque import smoothed_friction
     from leadthrough.estimation.identified_model import IdentifiedModel
 
     base = nominal_drive_parameters(er20)

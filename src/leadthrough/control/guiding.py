@@ -63,10 +63,10 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control import guiding_state
 from leadthrough.control import safety_rules as rules
 from leadthrough.control.auto_friction import AutoFriction
 from leadthrough.control.guiding_cycle import guiding_cycle, not_started_cycle
-from leadthrough.control.guiding_state import Law, controller_dtype
 from leadthrough.control.guiding_types import (
     CONTROLLERS,
     GuidingConfig,
@@ -77,7 +77,6 @@ from leadthrough.control.guiding_types import (
 from leadthrough.control.ik import DifferentialIK
 from leadthrough.control.ik_step import update_manipulability_of
 from leadthrough.control.operator_limits import adjusted_config
-from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
 from leadthrough.control.safety import Event, Fault, SafetySupervisor, State
 from leadthrough.errors import ControlError
 from leadthrough.robot.description import Robot
@@ -128,63 +127,15 @@ class GuidingController:
         self._ik = DifferentialIK(robot, cfg.ik, cfg.dt)
         self._safety = SafetySupervisor(robot, cfg.safety, cfg.limits)
         #: The controller's record (:func:`~leadthrough.control.guiding_state.controller_dtype`).
-        self.record = new_record(controller_dtype(n))
+        self.record = new_record(guiding_state.controller_dtype(n))
         self._s = view(self.record)
-        self._set_up(cfg)
+        guiding_state.write_settings(self._s, cfg)
+        guiding_state.write_initial_state(self._s)
         self._jacobian_in_frame = np.zeros((6, n))
         # what a cycle runs on when given an input or output made for another robot
         self._bad_input, self._spare_output = GuidingInput(n), GuidingOutput(n)
         self._bad_input.q[:] = math.nan
         self._layouts = (self._bad_input.record.dtype, self._spare_output.record.dtype)
-
-    def _set_up(self, cfg: GuidingConfig) -> None:
-        """The record's settings, and the state before the first reset."""
-        self._write_settings(cfg)
-        s = self._s
-        s.q_measured = math.nan       # the last finite q before the first reset
-        s.rest_s = s.release_s = s.stop_plan = math.inf
-        s.ik_scale = s.speed_scale = 1.0
-
-    def _write_settings(self, cfg: GuidingConfig) -> None:
-        """The record's settings from ``cfg`` (the state untouched)."""
-        s = self._s
-        s.dt = cfg.dt
-        self._write_live_settings(cfg)
-        if cfg.controller != "virtual-friction":
-            s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
-        s.hold_s = cfg.settle_s + cfg.rezero_s
-        # rest_drift.py: the release detector's smoothing and window measure the drift's rate
-        s.drift_rate = 1.0 / cfg.drift_s if cfg.drift_s > 0.0 else 0.0
-        s.drift_span_s = RELEASE_WINDOW_S - RELEASE_SMOOTHING_S
-        s.drift_alpha_fast = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
-        s.drift_alpha_slow = cfg.dt / (RELEASE_WINDOW_S + cfg.dt)
-        s.drift_decay = math.exp(-cfg.dt / cfg.drift_s) if cfg.drift_s > 0.0 else 0.0
-        s.release_drop = RELEASE_DROP
-        s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
-        s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
-        hr = cfg.hand_release
-        s.hand_release = hr.enabled and cfg.controller == "virtual-friction"
-        s.hand_drop_fraction = hr.drop_fraction
-        s.hand_lockout_s, s.hand_window_s, s.hand_alpha = hr.lockout_s, hr.window_s, hr.alpha(
-            cfg.dt)
-        s.hand_forget, s.hand_rise_forget = hr.forget(cfg.dt), hr.rise_forget(cfg.dt)
-        s.max_speed = cfg.limits.max_speed
-        s.max_step = cfg.limits.max_step(cfg.dt)
-        s.stop_fraction = cfg.ik.stop_acceleration_fraction
-
-    def _write_live_settings(self, cfg: GuidingConfig) -> None:
-        """The settings an operator may change: the frame, the law's coefficients, the axis
-        mask and the friction (eq. 36 replaces it at the next cycle when automatic)."""
-        s = self._s
-        s.tool_frame = cfg.frame == "tool"
-        if cfg.controller == "virtual-friction":
-            s.law, s.law_coefficients = Law.VIRTUAL_FRICTION, cfg.virtual_friction.dt_over_mass(
-                cfg.dt)
-        else:
-            s.law, s.law_coefficients = Law.VELOCITY, cfg.velocity_baseline.gain
-        s.axis_mask = [1.0 if a else 0.0 for a in cfg.axes_enabled]
-        s.friction = cfg.virtual_friction.friction
-        s.stopping_friction = cfg.virtual_friction.stopping_friction
 
     # ----------------------------------------------------------------- set-up
     def make_input(self) -> GuidingInput:
@@ -237,17 +188,7 @@ class GuidingController:
         s.qd_cmd = s.qd_dls = 0.0
         s.kinematics_fresh = s.kinematics_new = True
         self._update_auto_friction()
-        s.twist = s.release_peak = s.release_smooth = s.rest_baseline = 0.0
-        s.drift_fast = s.drift_slow = 0.0
-        s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
-        s.hand_released = s.hand_settled = False
-        s.hand_release_s = math.inf
-        s.pose_rotation = ik.rotation_tool_to_base
-        s.pose_position = p
-        s.residual_fresh = s.resync = False
-        s.started = True
-        s.stop_plan = 0.0 if self._safety.has_box else math.inf
-        s.release_s = s.rest_s = math.inf
+        guiding_state.write_reset_state(s, ik.rotation_tool_to_base, p, self._safety.has_box)
         self._safety.reset(t)
 
     def clear_fault(self, t: float = 0.0) -> bool:
@@ -287,7 +228,7 @@ class GuidingController:
             raise ControlError("the commanded motion is not at rest", field="config",
                                expected="a retune at rest")
         self.config = config
-        self._write_live_settings(config)
+        guiding_state.write_live_settings(s, config)
         if self._auto is not None:
             s.kinematics_fresh = False   # eq. 36 again, in the new frame
         s.release_peak = s.release_smooth = s.rest_baseline = 0.0
@@ -339,7 +280,7 @@ class GuidingController:
         cfg = adjusted_config(self.config, self._commissioned, frame=frame,
                               axes_enabled=axes_enabled, mass=mass, friction=friction)
         self.config = cfg
-        self._write_settings(cfg)
+        guiding_state.write_settings(self._s, cfg)
         if self._auto is not None:
             self._s.kinematics_fresh = False   # eq. 36 again, in the new frame
         return cfg

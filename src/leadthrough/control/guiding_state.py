@@ -2,20 +2,35 @@
 
 One NumPy structured record (:func:`controller_dtype`) that the compiled cycle
 (:mod:`leadthrough.control.guiding_cycle`) reads by field; :class:`GuidingController
-<leadthrough.control.guiding.GuidingController>` fills the settings once and reads the state
-with attribute access (:mod:`leadthrough.state_records`). Twists and wrenches are 6-vectors in
-the controller's frame, linear first; poses are a rotation (3, 3) and a position [m] (3,).
+<leadthrough.control.guiding.GuidingController>` writes it with attribute access
+(:mod:`leadthrough.state_records`) through the functions here: the settings a
+:class:`~leadthrough.control.guiding_types.GuidingConfig` becomes (:func:`write_settings`, the
+operator's part :func:`write_live_settings`), the state before the first reset
+(:func:`write_initial_state`) and at a reset (:func:`write_reset_state`). Twists and wrenches
+are 6-vectors in the controller's frame, linear first; poses are a rotation (3, 3) and a
+position [m] (3,).
 """
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 from functools import cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["Law", "controller_dtype"]
+from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
+from leadthrough.state_records import Fields
+
+if TYPE_CHECKING:
+    from leadthrough.control.guiding_types import GuidingConfig
+
+__all__ = ["Law", "controller_dtype", "write_initial_state", "write_live_settings",
+           "write_reset_state", "write_settings"]
+
+Array = NDArray[np.float64]
 
 
 class Law(IntEnum):
@@ -87,3 +102,88 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("q_measured", f8, (n,)),                # last finite measurement before a reset
     ])
 
+
+def write_settings(s: Fields, cfg: GuidingConfig) -> None:
+    """The record's settings from ``cfg`` (the state untouched).
+
+    Args:
+        s: The controller's record.
+        cfg: The controller's settings.
+    """
+    s.dt = cfg.dt
+    write_live_settings(s, cfg)
+    if cfg.controller != "virtual-friction":
+        s.velocity_alpha = cfg.velocity_baseline.alpha(cfg.dt)
+    s.hold_s = cfg.settle_s + cfg.rezero_s
+    # rest_drift.py: the release detector's smoothing and window measure the drift's rate
+    s.drift_rate = 1.0 / cfg.drift_s if cfg.drift_s > 0.0 else 0.0
+    s.drift_span_s = RELEASE_WINDOW_S - RELEASE_SMOOTHING_S
+    s.drift_alpha_fast = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
+    s.drift_alpha_slow = cfg.dt / (RELEASE_WINDOW_S + cfg.dt)
+    s.drift_decay = math.exp(-cfg.dt / cfg.drift_s) if cfg.drift_s > 0.0 else 0.0
+    s.release_drop = RELEASE_DROP
+    s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
+    s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
+    hr = cfg.hand_release
+    s.hand_release = hr.enabled and cfg.controller == "virtual-friction"
+    s.hand_drop_fraction = hr.drop_fraction
+    s.hand_lockout_s, s.hand_window_s, s.hand_alpha = hr.lockout_s, hr.window_s, hr.alpha(
+        cfg.dt)
+    s.hand_forget, s.hand_rise_forget = hr.forget(cfg.dt), hr.rise_forget(cfg.dt)
+    s.max_speed = cfg.limits.max_speed
+    s.max_step = cfg.limits.max_step(cfg.dt)
+    s.stop_fraction = cfg.ik.stop_acceleration_fraction
+
+
+def write_live_settings(s: Fields, cfg: GuidingConfig) -> None:
+    """The settings an operator may change: the frame, the law's coefficients, the axis
+    mask and the friction (eq. 36 replaces it at the next cycle when automatic).
+
+    Args:
+        s: The controller's record.
+        cfg: The controller's settings.
+    """
+    s.tool_frame = cfg.frame == "tool"
+    if cfg.controller == "virtual-friction":
+        s.law, s.law_coefficients = Law.VIRTUAL_FRICTION, cfg.virtual_friction.dt_over_mass(
+            cfg.dt)
+    else:
+        s.law, s.law_coefficients = Law.VELOCITY, cfg.velocity_baseline.gain
+    s.axis_mask = [1.0 if a else 0.0 for a in cfg.axes_enabled]
+    s.friction = cfg.virtual_friction.friction
+    s.stopping_friction = cfg.virtual_friction.stopping_friction
+
+
+def write_initial_state(s: Fields) -> None:
+    """The state before the first reset (after :func:`write_settings`).
+
+    Args:
+        s: The controller's record.
+    """
+    s.q_measured = math.nan       # the last finite q before the first reset
+    s.rest_s = s.release_s = s.stop_plan = math.inf
+    s.ik_scale = s.speed_scale = 1.0
+
+
+def write_reset_state(s: Fields, rotation: Array, position: Array, has_box: bool) -> None:
+    """The state of a (re)start at rest, after the setpoint, its kinematics and its friction
+    are written: the law's twist and the detectors cleared, the commanded TCP pose the
+    setpoint's, started.
+
+    Args:
+        s: The controller's record.
+        rotation: The setpoint's TCP rotation, shape (3, 3).
+        position: The setpoint's TCP position [m], shape (3,).
+        has_box: Whether a workspace box is set (its stop is then checked from the first cycle).
+    """
+    s.twist = s.release_peak = s.release_smooth = s.rest_baseline = 0.0
+    s.drift_fast = s.drift_slow = 0.0
+    s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
+    s.hand_released = s.hand_settled = False
+    s.hand_release_s = math.inf
+    s.pose_rotation = rotation
+    s.pose_position = position
+    s.residual_fresh = s.resync = False
+    s.started = True
+    s.stop_plan = 0.0 if has_box else math.inf
+    s.release_s = s.rest_s = math.inf

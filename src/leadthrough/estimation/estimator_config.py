@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import MAX_COMMAND_LAG_S, MAX_PRESLIDING_RAD
 from leadthrough.errors import DataError, check_fields
-from leadthrough.estimation.estimator_step import COMMAND_HISTORY
+from leadthrough.estimation.friction_torque import COMMAND_HISTORY
 
 __all__ = ["DEFAULT_PRESLIDING_RAD", "EstimatorConfig", "command_delay_samples",
            "presliding_lengths"]

@@ -4,9 +4,9 @@
 
 1. :func:`read_sample`: the sample's checks, the causal differentiator (q̇, q̈,
    :mod:`~leadthrough.estimation.filters`), the drive torque τ̂_j = K·i, the gear's load torque
-   (:func:`transmitted_torque`), the friction τ_f (eq. 15 with a smoothed sign, or with memory:
-   :mod:`leadthrough.dynamics.presliding`; its Coulomb level load-dependent,
-   :func:`leadthrough.dynamics.friction.coulomb_level`) and the force fit's joint weights;
+   (:func:`transmitted_torque`), the friction τ_f and the force fit's joint weights
+   (:mod:`~leadthrough.estimation.friction_torque`: eq. 15 with a smoothed sign, or with
+   memory);
 2. Pinocchio on the filtered state (RNEA, or CRBA + Coriolis + gravity for the observer, and the
    TCP Jacobian);
 3. :func:`finish_sample`: τ_ext (eq. 27 and 30, or the momentum observer,
@@ -28,8 +28,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from leadthrough.dynamics.friction import coulomb_level, eq15_friction, friction_dtype
-from leadthrough.dynamics.presliding import dahl_step, play_step, presliding_friction_step
+from leadthrough.dynamics.friction import friction_dtype
 from leadthrough.estimation.external_torque import (
     average_into_tare,
     direct_residual,
@@ -41,29 +40,22 @@ from leadthrough.estimation.filters import (
     differentiate,
     restart_differentiator,
 )
-from leadthrough.estimation.wrench import friction_weights, wrench_from_torque
+from leadthrough.estimation.friction_torque import COMMAND_HISTORY, sample_friction
+from leadthrough.estimation.wrench import wrench_from_torque
 
 __all__ = [
-    "COMMAND_HISTORY",
     "EstimatorStatus",
-    "delay_command",
-    "encoder_friction_step",
     "estimator_dtype",
     "finish_sample",
     "input_dtype",
     "output_dtype",
     "read_sample",
-    "smoothed_friction",
     "transmitted_torque",
 ]
 
 Array = NDArray[np.float64]
 Record = Any     # a record of its dtype (compiled code reads it by field)
 Records = NDArray[np.void]   # a record as Python passes it: a structured array of one element
-
-#: Length of the estimator's ring of past commands (``delay_command``) [samples]: the longest
-#: command delay is one less.
-COMMAND_HISTORY = 128
 
 
 class EstimatorStatus(IntEnum):
@@ -192,7 +184,7 @@ def read_sample(inputs: Records, estimator: Records, outputs: Records) -> bool:
         est.drive_torque[j] = inp.current[j] * est.torque_per_amp[j]
     transmitted_torque(est.drive_torque, est.offset, est.rotor_inertia, est.qdd_filtered,
                        est.friction_torque, est.load_torque)
-    _friction(inp, est)
+    sample_friction(inp, est)
     return True
 
 
@@ -244,114 +236,6 @@ def _hold_last(est: Record, out: Record) -> None:
         out.wrench[r] = est.last_wrench[r]
     out.status = est.status
 
-
-@njit(cache=True, nogil=True)
-def _friction(inp: Record, est: Record) -> None:
-    """τ_f: with memory, driven by the command while a joint moves and by the measured motion
-    at rest (and the force fit's weights from its uncertainty); or eq. 15 of the measured
-    velocity with the smoothed sign sat(q̇/v_ε)."""
-    fp = est.friction
-    if est.friction_follows_command:
-        play_step(inp.q, est.play_half_width, est.play, est.play_increment)
-        delay_command(inp.qd_cmd, est)
-        presliding_friction_step(est.friction_command, est.play_increment, fp,
-                                 est.load_torque, est.dt,
-                                 est.command_presliding, est.rest_presliding,
-                                 est.friction_state, est.friction_torque, est.friction_level)
-        if est.weigh_by_friction:
-            encoder_friction_step(est.play_increment, est.friction_command, est.friction_level,
-                                  est.rest_presliding, est.friction_state,
-                                  est.encoder_friction)
-            friction_weights(est.friction_level, est.friction_state, est.encoder_friction,
-                             est.envelope_decay, est.friction_weighting, est.noise_std,
-                             est.friction_envelope, est.joint_weight)
-        return
-    smoothed_friction(est.qd_filtered, est.inverse_standstill_velocity, fp, est.load_torque,
-                      est.friction_sign, est.friction_torque)
-
-
-@njit(cache=True, nogil=True)
-def encoder_friction_step(increment: Array, command: Array, level: Array, presliding: Array,
-                          state: Array, out: Array) -> None:
-    """The Coulomb + Stribeck friction as the encoder alone would turn it over, one step: while
-    a joint is commanded to move, a Dahl state driven by the measured displacement (through
-    the play operator) toward the level of the commanded speed. Not the friction the estimate
-    uses (turned by the command, see ``presliding_friction_step``): where the two disagree, a
-    joint that the command says has reversed has not yet moved back, and its friction is in
-    doubt (``friction_weights``). At rest the estimate's friction is the encoder's already: the
-    state is set to it, and the next motion starts from there.
-
-    Args:
-        increment: Measured displacement of this step, after the play operator [rad], (n,).
-        command: The commanded velocity the friction follows [rad/s], shape (n,) (0: at rest).
-        level: The eq. 15 level g at the commanded speed [N·m], shape (n,).
-        presliding: z₀ per joint [rad], shape (n,).
-        state: The estimate's friction state F after this step [N·m], shape (n,).
-        out: The encoder's state F_enc [N·m] (in place), shape (n,).
-    """
-    for j in range(increment.size):
-        if command[j] == 0.0:
-            out[j] = state[j]
-        elif increment[j] != 0.0 and level[j] > 0.0:
-            out[j] = dahl_step(out[j], increment[j], level[j], presliding[j])
-
-
-@njit(cache=True, nogil=True)
-def delay_command(qd_cmd: Array, est: Record) -> None:
-    """``est.friction_command`` = the ``qd_cmd`` of ``delay`` samples ago: the velocity the
-    joint has now when the command reaches the measured position ``delay`` samples after it
-    was sent (the interface's command-to-position lag, see ``EstimatorConfig.command_lag``).
-    Samples before the last reset count as zero (a reset is at rest).
-
-    Args:
-        qd_cmd: This sample's commanded joint velocity [rad/s], shape (n,).
-        est: The estimator's record: ``command_delay`` (0 <= delay < ``COMMAND_HISTORY``
-            samples), the ring ``command_history`` of the last commands, shape
-            (COMMAND_HISTORY, n), and ``command_slot`` (both in place); ``friction_command``
-            (written).
-    """
-    out, delay, history = est.friction_command, est.command_delay, est.command_history
-    if delay == 0:
-        for j in range(qd_cmd.size):
-            out[j] = qd_cmd[j]
-        return
-    slot = est.command_slot
-    size = history.shape[0]
-    for j in range(qd_cmd.size):
-        history[slot, j] = qd_cmd[j]
-    source = (slot - delay) % size
-    for j in range(qd_cmd.size):
-        out[j] = history[source, j]
-    est.command_slot = (slot + 1) % size
-
-
-@njit(cache=True, nogil=True)
-def smoothed_friction(qd: Array, inverse_standstill_velocity: Array, fp: Record,
-                      load_torque: Array, sign: Array, out: Array) -> None:
-    """Friction of the measured velocity with a smoothed sign: eq. 15 (or the baselines'
-    Coulomb + viscous (+ cube root) model) with sgn(q̇) replaced by sat(q̇/v_ε), which fades the
-    friction to zero below the calibration's standstill threshold v_ε (the sign of a noisy
-    velocity estimate at standstill means nothing).
-
-    Args:
-        qd: Joint velocities [rad/s], shape (n,).
-        inverse_standstill_velocity: 1/v_ε per joint [s/rad], shape (n,).
-        fp: The friction parameters (:func:`~leadthrough.dynamics.friction.friction_dtype`).
-        load_torque: τ_load of the load-dependent Coulomb level [N·m], shape (n,) (not read
-            where f_cL = 0).
-        sign: Output: the smoothed sign in [−1, 1], shape (n,).
-        out: Output: the friction torque [N·m], shape (n,).
-    """
-    for j in range(qd.size):
-        sign[j] = min(1.0, max(-1.0, qd[j] * inverse_standstill_velocity[j]))
-        v = qd[j]
-        coulomb = coulomb_level(fp.coulomb[j], fp.load[j], load_torque[j])
-        if fp.stribeck:
-            out[j] = eq15_friction(v, sign[j], coulomb, fp.motor_stribeck[j],
-                                   fp.motor_rate[j], fp.gear_stribeck[j], fp.gear_rate[j],
-                                   fp.viscous[j])
-        else:
-            out[j] = sign[j] * coulomb + v * fp.viscous[j] + fp.cbrt[j] * np.cbrt(v)
 
 
 @njit(cache=True, nogil=True)

@@ -41,7 +41,7 @@ def friction_weights(level: Array, state: Array, encoder_state: Array, decay: fl
       static level (a stopped gear's friction can be anything up to it);
     * |F_j − F_enc,j|, between that state (turned over by the command while the joint moves)
       and the state the encoder alone turns over
-      (:func:`~leadthrough.estimation.estimator_step.encoder_friction_step`): up to 2g after a
+      (:func:`~leadthrough.estimation.friction_torque.encoder_friction_step`): up to 2g after a
       reversal the command has made and the joint has not yet followed (a slowly reversing
       joint sticks until its servo has built up the breakaway torque). The command's friction
       stays the estimate (driven by the encoder, a start from rest would read the servo's

@@ -7,9 +7,9 @@ from leadthrough.sim.mujoco_model import Payload, build_mujoco_model
 from leadthrough.sim.operator import ConstantWrench, Mark, NoOperator, Operator, ScriptedOperator
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES, make_operator
 from leadthrough.sim.plant import PLANT_NAMES, PlantPreset
-from leadthrough.sim.robot import Feedback, SimConfig, SimRobot, SimTruth
+from leadthrough.sim.robot import SimConfig, SimRobot, SimTruth
 from leadthrough.sim.run import SimLog, SimTruthLog, hold, run_trajectory
-from leadthrough.sim.sensors import SensorConfig
+from leadthrough.sim.sensors import Feedback, SensorConfig
 from leadthrough.sim.session import SimSession, SimSessionConfig, replay_session, run_sim_session
 
 __all__ = [

@@ -1,12 +1,15 @@
 """The simulated robot: plays a real industrial arm in position mode, stepped at 1 kHz.
 
 What a real controller would report is read with :meth:`SimRobot.read` (time, encoder positions,
-measured motor currents, sequence number). The simulator's own truth (true link and drive
-parameters, true state, true current and true external joint torque) lives apart in
-:attr:`SimRobot.truth` and :meth:`SimRobot.true_state`, for tests and noise floors only.
+measured motor currents, sequence number: a :class:`~leadthrough.sim.sensors.Feedback`). The
+simulator's own truth (true link and drive parameters, true state, true current and true
+external joint torque) lives apart in :attr:`SimRobot.truth` and :meth:`SimRobot.true_state`, for
+tests and noise floors only.
 
 Each step (dt = 1 ms):
-1. sensors read the state at t_k (encoder quantisation; current noise, bias, ADC);
+1. sensors read the state at t_k (encoder quantisation; current noise, bias, ADC; on the
+   realistic plant the current of a fixed lag earlier, and with a jitter both of a random
+   earlier instant: :class:`~leadthrough.sim.sensors.SampleTiming`);
 2. the cascaded servo turns the commanded position into a current command (saturated);
 3. the drive train turns current into torque R·Kt·i (the true Kt: on the realistic plant a few
    per cent off the drive file's, plus the motors' cogging) and sets the true friction
@@ -15,8 +18,6 @@ Each step (dt = 1 ms):
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -29,30 +30,13 @@ from leadthrough.sim.drive_friction import DriveTrain
 from leadthrough.sim.instance import SimConfig, SimTruth, draw_true_parameters
 from leadthrough.sim.mujoco_model import TCP_SITE, Payload, build_mujoco_model
 from leadthrough.sim.operator import Operator
-from leadthrough.sim.sensors import MAX_LAG_S, CurrentSensor, DelayLine
+from leadthrough.sim.sensors import CurrentSensor, Feedback, SampleTiming
 from leadthrough.sim.servo import CascadedServo, design_servo_gains
 from leadthrough.sim.thermal import JointTemperatures
 
-__all__ = ["Feedback", "SimConfig", "SimRobot", "SimTruth", "draw_true_parameters"]
+__all__ = ["SimConfig", "SimRobot", "SimTruth", "draw_true_parameters"]
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class Feedback:
-    """One sample as a real controller reports it.
-
-    Attributes:
-        t: Time [s].
-        q: Encoder joint positions [rad], shape (n,).
-        current: Measured motor currents [A], shape (n,).
-        sequence: Sample counter.
-    """
-
-    t: float
-    q: Array
-    current: Array
-    sequence: int
 
 
 class SimRobot:
@@ -119,11 +103,8 @@ class SimRobot:
         self._i_meas = np.zeros(n)
         self._speed = np.zeros(n)
         # sample timing: the current's lag and the jitter a driver asks for (sensors module)
-        self._lag_steps = lag / config.timestep
-        self._jitter_steps = 0.0
-        self._rng_jitter = np.random.default_rng([config.seed, 8, config.run])
-        self._delay = None if lag == 0.0 else DelayLine(n, MAX_LAG_S / config.timestep)
-        self._q_jittered = np.zeros(n)
+        self._timing = SampleTiming(n, lag, config.timestep, self._res,
+                                    np.random.default_rng([config.seed, 8, config.run]))
         self._q_read = self._q_meas
         self._seq = 0
         self._build()
@@ -230,9 +211,7 @@ class SimRobot:
         self._drive.reset()
         # the servo commands nominal torque; the true torque constant delivers the hold
         self._servo.reset(self._quantise(q0), hold / self.truth.drive.torque_constant_scale)
-        self._q_jittered[:] = self._q_meas
-        if self._delay is not None:
-            self._delay.clear()
+        self._timing.reset(self._q_meas)
         self._q_cmd[:] = q0
         self._qd_ff[:] = 0.0
         self._i_true[:] = self._servo.current
@@ -275,10 +254,11 @@ class SimRobot:
         current = self._servo.update(q_meas, self._q_cmd, self._qd_ff, dt)
         self._i_true[:] = current
         np.abs(d.qvel, out=self._speed)
-        if self._delay is None:
+        if not self._timing.late:
             self._i_meas[:] = self._sensor.read(current, self._speed)
         else:
-            self._sample_late(current)
+            self._i_meas[:] = self._timing.read_late(self._sensor, current, self._speed, d.qpos,
+                                                     d.qvel)
         np.multiply(current, self._tpa, out=self._tau_motor)
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
         mujoco.mj_step1(m, d)
@@ -308,30 +288,8 @@ class SimRobot:
         Raises:
             SimulationError: Out of range.
         """
-        dt = self.config.timestep
-        if not (np.isfinite(jitter_s) and 0.0 <= jitter_s <= dt):
-            raise SimulationError("out of range", field="sample_jitter_s", value=jitter_s,
-                                  expected=f"0 <= jitter <= {dt:g} s (one timestep)")
-        self._jitter_steps = jitter_s / dt
-        if self._delay is None and jitter_s > 0.0:
-            self._delay = DelayLine(self.robot.n, MAX_LAG_S / dt)
-        self._q_read = self._q_jittered if jitter_s > 0.0 else self._q_meas
-
-    def _sample_late(self, current: Array) -> None:
-        """Measured current of a lagged (and jittered) instant; jittered positions."""
-        assert self._delay is not None
-        self._delay.push(current)
-        early = self._jitter_steps * self._rng_jitter.uniform() if self._jitter_steps else 0.0
-        self._i_meas[:] = self._sensor.read(self._delay.delayed(self._lag_steps + early),
-                                            self._speed)
-        if self._jitter_steps:
-            d = self.mj_data
-            q = self._q_jittered
-            np.multiply(d.qvel, -early * self.config.timestep, out=q)
-            q += d.qpos
-            q *= self._inv_res
-            np.rint(q, out=q)
-            q *= self._res
+        self._timing.set_jitter(jitter_s)
+        self._q_read = self._timing.q_jittered if jitter_s > 0.0 else self._q_meas
 
     def _add_cogging(self, q: Array, out: Array) -> None:
         """out += A·sin(k·R·q + ϕ), the motors' cogging torque at the joints."""

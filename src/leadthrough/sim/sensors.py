@@ -1,4 +1,5 @@
-"""Sensors of the simulated robot at 1 kHz: motor encoders and motor-current measurement.
+"""Sensors of the simulated robot at 1 kHz: motor encoders and motor-current measurement, when
+they sample, and what a controller reports of them (:class:`Feedback`).
 
 * Position: the true joint angle quantised to the motor encoder's resolution
   2π / (counts · R) [rad].
@@ -18,7 +19,8 @@ positions, drawn per robot instance within ``current_lag_s`` (0–2 ms); a drive
 for sample-time jitter (:meth:`leadthrough.sim.robot.SimRobot.set_sample_jitter`): each sample
 is then taken a random time up to the jitter before the instant it is reported for. Both read
 the true current at fractional delays from a short ring buffer (:class:`DelayLine`, linear
-interpolation between 1 ms samples).
+interpolation between 1 ms samples; :class:`SampleTiming` keeps the lag, the jitter and the
+buffer).
 
 Why this shape: real logs show far less current noise at rest than model residuals in motion.
 The UR5 of ``../shared/data/ur5-ft`` at standstill has current-derived torque σ 0.08–0.19 N·m
@@ -39,9 +41,26 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import SimulationError
 
-__all__ = ["CurrentSensor", "DelayLine", "SensorConfig"]
+__all__ = ["CurrentSensor", "DelayLine", "Feedback", "SampleTiming", "SensorConfig"]
 
 Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Feedback:
+    """One sample as a real controller reports it.
+
+    Attributes:
+        t: Time [s].
+        q: Encoder joint positions [rad], shape (n,).
+        current: Measured motor currents [A], shape (n,).
+        sequence: Sample counter.
+    """
+
+    t: float
+    q: Array
+    current: Array
+    sequence: int
 
 
 @dataclass(frozen=True)
@@ -207,3 +226,85 @@ class CurrentSensor:
         v *= self.lsb
         np.clip(v, -self._full, self._full, out=v)
         return v
+
+
+class SampleTiming:
+    """When the sensors sample (the module's "Timing"): the current a fixed lag behind the
+    positions, and with a jitter both a random time up to the jitter before the instant they
+    are reported for.
+
+    Args:
+        n: Joints.
+        lag_s: The current's lag behind the positions [s], 0 to :data:`MAX_LAG_S`.
+        timestep: The simulator's step [s].
+        resolution: The encoders' resolution per joint [rad], shape (n,).
+        rng: Random generator of the jitter (owned).
+    """
+
+    def __init__(self, n: int, lag_s: float, timestep: float, resolution: Array,
+                 rng: np.random.Generator) -> None:
+        self._n, self._dt = n, timestep
+        self._res = resolution
+        self._inv_res = 1.0 / resolution
+        self._lag_steps = lag_s / timestep
+        self._jitter_steps = 0.0
+        self._rng = rng
+        self._delay = None if lag_s == 0.0 else DelayLine(n, MAX_LAG_S / timestep)
+        #: Encoder positions of the last jittered instant [rad], shape (n,) (with a jitter).
+        self.q_jittered = np.zeros(n)
+
+    @property
+    def late(self) -> bool:
+        """Whether a sample is read from the past (a lag, or a jitter asked for)."""
+        return self._delay is not None
+
+    def reset(self, q: Array) -> None:
+        """A restart at rest at the encoder positions ``q`` [rad], shape (n,)."""
+        self.q_jittered[:] = q
+        if self._delay is not None:
+            self._delay.clear()
+
+    def set_jitter(self, jitter_s: float) -> None:
+        """Take each sample a random time within [0, ``jitter_s``] before its instant.
+
+        Args:
+            jitter_s: Largest timing error [s], from 0 (none) to one timestep.
+
+        Raises:
+            SimulationError: Out of range.
+        """
+        dt = self._dt
+        if not (np.isfinite(jitter_s) and 0.0 <= jitter_s <= dt):
+            raise SimulationError("out of range", field="sample_jitter_s", value=jitter_s,
+                                  expected=f"0 <= jitter <= {dt:g} s (one timestep)")
+        self._jitter_steps = jitter_s / dt
+        if self._delay is None and jitter_s > 0.0:
+            self._delay = DelayLine(self._n, MAX_LAG_S / dt)
+
+    def read_late(self, sensor: CurrentSensor, current: Array, speed: Array, q: Array,
+                  qd: Array) -> Array:
+        """Measured current of a lagged (and jittered) instant; jittered positions into
+        :attr:`q_jittered` (with a jitter). Only when :attr:`late`.
+
+        Args:
+            sensor: The current sensor.
+            current: True current now [A], shape (n,).
+            speed: Joint speeds |q̇| now [rad/s], shape (n,).
+            q: True joint positions now [rad], shape (n,).
+            qd: True joint velocities now [rad/s], shape (n,).
+
+        Returns:
+            The measured current [A], shape (n,) (the sensor's buffer).
+        """
+        assert self._delay is not None
+        self._delay.push(current)
+        early = self._jitter_steps * self._rng.uniform() if self._jitter_steps else 0.0
+        measured = sensor.read(self._delay.delayed(self._lag_steps + early), speed)
+        if self._jitter_steps:
+            qj = self.q_jittered
+            np.multiply(qd, -early * self._dt, out=qj)
+            qj += q
+            qj *= self._inv_res
+            np.rint(qj, out=qj)
+            qj *= self._res
+        return measured

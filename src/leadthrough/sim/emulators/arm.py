@@ -35,7 +35,8 @@ from numpy.typing import NDArray
 
 from leadthrough.robot.description import Robot
 from leadthrough.sim.emulators.operator import EmulatedOperator
-from leadthrough.sim.robot import Feedback, SimConfig, SimRobot
+from leadthrough.sim.robot import SimConfig, SimRobot
+from leadthrough.sim.sensors import Feedback
 
 __all__ = ["ArmPhase", "CommandRecord", "EmulatedArm", "MotionLimits", "StopKind"]
 
