@@ -23,7 +23,7 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ComputeTimes", "PeriodClock"]
+__all__ = ["ComputeTimes", "PeriodClock", "sleep_until"]
 
 
 class PeriodClock:
@@ -111,3 +111,10 @@ class ComputeTimes:
         times = self.ring[idx % size]
         cycle = idx % every == 0
         return times[cycle], times[~cycle]
+
+
+def sleep_until(deadline: float) -> None:
+    """Sleep until ``deadline`` (``time.perf_counter`` seconds), at once if past."""
+    remaining = deadline - time.perf_counter()
+    if remaining > 0:
+        time.sleep(remaining)

@@ -33,7 +33,7 @@ from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
 from leadthrough.session.watchdog import DriverWatchdog
 
-__all__ = ["ServoLoop", "sleep_until", "transition_event", "zero_velocity_update"]
+__all__ = ["ServoLoop", "transition_event", "zero_velocity_update"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
@@ -377,7 +377,6 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
     return None
 
 
-
 def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
                           cycle_s: float, samples: int) -> None:
     """Re-zero the estimator once the commanded motion has been at rest for ``settle_s``
@@ -394,10 +393,3 @@ def transition_event(e: Event) -> SessionEvent:
     cause = e.cause.name if e.fault.name == "NONE" else f"{e.cause.name}:{e.fault.name}"
     return SessionEvent(t=e.t, kind="transition",
                         label=f"{e.from_state.name}->{e.to_state.name}", cause=cause)
-
-
-def sleep_until(deadline: float) -> None:
-    """Sleep until ``deadline`` (``time.perf_counter`` seconds), at once if past."""
-    remaining = deadline - time.perf_counter()
-    if remaining > 0:
-        time.sleep(remaining)

@@ -19,8 +19,9 @@ from leadthrough.control.interpolation import JointInterpolator
 from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
 from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
+from leadthrough.session.pacing import sleep_until
 from leadthrough.session.record import SessionEvent, SessionLog
-from leadthrough.session.servo_loop import sleep_until, zero_velocity_update
+from leadthrough.session.servo_loop import zero_velocity_update
 
 __all__ = ["ServoPeriods", "SessionBuffers"]
 
