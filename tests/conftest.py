@@ -1,6 +1,18 @@
 """Shared fixtures."""
+# ruff: noqa: E402  (the environment is set before numpy is imported)
 
 from __future__ import annotations
+
+import os
+
+# One BLAS/LAPACK thread for the tests and the processes they start (set before numpy loads
+# OpenBLAS; a value the caller set is kept). The suite's linear algebra is small matrices: on a
+# 2-core machine shared with the processes the tests spawn, OpenBLAS's worker threads spin
+# against them, and one excitation design took 113 s instead of 2.4 s single-threaded
+# (2026-11-28, under load). The tests' assertions are unchanged; only the summation order of
+# the BLAS kernels differs (the design's condition number 43.10893 vs 43.10960).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import numpy as np
 import pytest
