@@ -23,7 +23,11 @@ from leadthrough.identification.api import identify_with_sweep
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.calibration_set import (
+    CalibrationSet,
+    record_calibration_set,
+    record_friction_sweep,
+)
 
 
 @pytest.fixture(scope="session")
@@ -44,13 +48,25 @@ def nominal_params(er20: Robot) -> ParamsFile:
                       noise_mean=np.zeros(n), noise_std=np.full(n, 1.0), J=0.0)
 
 
+#: The calibration sets' excitation design (short: one start, 60 iterations).
+CAL_EXCITATION = ExcitationConfig(starts=1, max_iterations=60)
+
+
+@pytest.fixture(scope="session")
+def ideal_calibration_set(er20: Robot) -> CalibrationSet:
+    """The simulated er20 (seed 1) on the ideal plant (the paper's model class): the
+    calibration set of 2 × 30 s, recorded once for the modules that only read it (Table II's
+    ordering, the friction sweep's bounds)."""
+    return record_calibration_set(er20, seed=1, duration=30.0, excitation_config=CAL_EXCITATION,
+                                  plant="ideal")
+
+
 @pytest.fixture(scope="session")
 def sweep_calibration(er20: Robot) -> tuple[object, object, object]:
     """The simulated er20 (seed 1) calibrated with the friction sweep: the calibration set,
     the sweep, and the consistent identification (shared by the test modules that need a robot
     that follows a hand)."""
-    cal = record_calibration_set(er20, seed=1, duration=30.0,
-                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60))
+    cal = record_calibration_set(er20, seed=1, duration=30.0, excitation_config=CAL_EXCITATION)
     sweep = record_friction_sweep(er20, seed=1, run=2, q_start=guide_start_pose(er20))
     return cal, sweep, identify_with_sweep(cal.identification.measured, sweep.measured, er20)
 
