@@ -14,7 +14,6 @@ from leadthrough.cli import main
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.friction import StribeckParameters, stribeck_friction
 from leadthrough.errors import DataError
-from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig, design_friction_sweep
 from leadthrough.excitation.trajectory_file import load_trajectory
 from leadthrough.identification.api import identify, identify_with_sweep
@@ -23,7 +22,7 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.calibration_set import CalibrationSet, record_friction_sweep
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import (
     SimSessionConfig,
@@ -100,12 +99,11 @@ def test_too_few_passes_is_a_clear_error(er20: Robot) -> None:
 
 
 @pytest.fixture(scope="module")
-def sweep_calibration(er20: Robot) -> tuple[object, object, object]:
+def sweep_calibration(er20: Robot, ideal_calibration_set: CalibrationSet
+                      ) -> tuple[object, object, object]:
     # overrides conftest's: the ideal plant, whose bounds these are (eq. 15 + a 1 % load part;
     # issue 24)
-    cal = record_calibration_set(er20, seed=1, duration=30.0,
-                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60),
-                                 plant="ideal")
+    cal = ideal_calibration_set
     sweep = record_friction_sweep(er20, seed=1, run=2, q_start=guide_start_pose(er20),
                                   plant="ideal")
     return cal, sweep, identify_with_sweep(cal.identification.measured, sweep.measured, er20)

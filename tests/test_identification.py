@@ -18,14 +18,13 @@ from leadthrough.dynamics import (
     standard_parameters,
 )
 from leadthrough.errors import DataError
-from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.excitation.fourier import FourierTrajectory
 from leadthrough.identification.api import IdentifyConfig, evaluate, identify
 from leadthrough.identification.comparison import compare_methods, noise_floor
 from leadthrough.identification.params_file import load_params, save_params
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot import Robot, load_robot
-from leadthrough.sim.calibration_set import record_calibration_set
+from leadthrough.sim.calibration_set import CalibrationSet
 from leadthrough.sim.link_truth import true_link_inertias
 
 
@@ -133,15 +132,15 @@ def test_params_file_round_trip(tmp_path: Path, er20: Robot) -> None:
     assert e.value.field == "meta.robot"
 
 
-def test_table_ii_ordering_on_the_simulated_robot(er20: Robot) -> None:
+def test_table_ii_ordering_on_the_simulated_robot(er20: Robot,
+                                                  ideal_calibration_set: CalibrationSet
+                                                  ) -> None:
     """Paper's ordering J(proposed) < J(ols-cbrt) < J(ols-cv), ratio <= 0.8, near the floor, on
     the ideal plant (the paper's model class: eq. 15 friction, links inside the box). On the
     realistic plant the identification-data J of ``proposed`` (held to the ±30 % box) is above
     ols-cbrt's (seed 1: 49.5 vs 44.8 N·m; README, Limitations); on held-out data the order
     holds there too (the quick demo's Table II)."""
-    cal = record_calibration_set(er20, seed=1, duration=30.0,
-                                 excitation_config=ExcitationConfig(starts=1, max_iterations=60),
-                                 plant="ideal")
+    cal = ideal_calibration_set  # conftest's: seed 1, 2 × 30 s, starts=1, 60 iterations
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60, polish_iterations=200))
     comp = compare_methods(er20, cal.identification.measured,
                            {"held-out": cal.held_out.measured},
