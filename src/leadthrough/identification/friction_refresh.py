@@ -153,7 +153,7 @@ def refresh_friction(params: DriveModelParameters, check: Recording,
                             expected="2 or more speeds (excite --friction-check)")
         level, viscous = _split(params, robot, v, float(gravity[j]), j)
         a[j], b[j], separable[j] = _fit(level, viscous, f)
-        if not MIN_SCALE * 1.001 < a[j] < MAX_SCALE * 0.999:
+        if _at_bound(a[j]):
             raise DataError("the friction changed beyond a drift", source=check.source,
                             field=f"{robot.joint_names[j]} friction scale",
                             value=round(a[j], 3),
@@ -166,8 +166,13 @@ def refresh_friction(params: DriveModelParameters, check: Recording,
                                   qd_sg=s.qd_sg.copy(), f4=s.f4 * b)
     load = params.load_friction * a if params.load_friction.size else params.load_friction
     new = replace(params, stribeck=stribeck, load_friction=load)
-    at_bound = separable & ((b <= MIN_SCALE * 1.001) | (b >= MAX_SCALE * 0.999))
+    at_bound = separable & np.array([_at_bound(x) for x in b], dtype=bool)
     return FrictionRefresh(new, a, b, points, before, after, separable, at_bound)
+
+
+def _at_bound(scale: float) -> bool:
+    """Whether a fitted scale ended at (within 0.1 % of) a bound of [MIN_SCALE, MAX_SCALE]."""
+    return not MIN_SCALE * 1.001 < scale < MAX_SCALE * 0.999
 
 
 def _rel_rms(model: Array, measured: Array) -> float:
