@@ -199,7 +199,7 @@ def test_push_x_40n_moves_along_x_capped_then_stops_on_stopping_friction(er20: R
     rng = np.random.default_rng(9)
     w = np.zeros((k_n, 6))
     w[:, 1:] = rng.uniform(-10.0, 10.0, size=(k_n, 5))         # estimator noise, below δ
-    w[:release, 0] = 40.0
+    w[1:release, 0] = 40.0     # from the press (before it the estimate is no push)
     tr = run(GuidingController(er20, GuidingConfig(hand_release=PAPER_LAW)), q0, w)
     vx = tr.twist_base[:, 0]
     assert np.all(tr.fault == Fault.NONE)
@@ -344,15 +344,15 @@ def test_deadman_release_stops_at_the_limit_then_idle(er20: Robot) -> None:
 
 
 def test_deadman_held_at_start_needs_a_new_press(er20: Robot) -> None:
-    w = np.zeros((50, 6))
-    w[:, 0] = 80.0
-    held = np.ones(50, dtype=bool)
-    held[20:25] = False
+    w = np.zeros((60, 6))
+    w[:20, 0] = w[35:, 0] = 80.0    # pushes while held, lets go, pushes from the new press
+    held = np.ones(60, dtype=bool)
+    held[20:35] = False
     tr = run(GuidingController(er20), Q_WORK, w, deadman=held, interpolate=False)
-    assert np.all(tr.state[:25] == State.IDLE) and np.all(tr.twist_base[:25] == 0.0)
-    assert np.all(tr.state[25:] == State.GUIDING) and tr.twist_base[-1, 0] > 0.0
+    assert np.all(tr.state[:35] == State.IDLE) and np.all(tr.twist_base[:35] == 0.0)
+    assert np.all(tr.state[35:] == State.GUIDING) and tr.twist_base[-1, 0] > 0.0
     no_edge = GuidingConfig(safety=SafetyConfig(require_deadman_edge=False))
-    tr = run(GuidingController(er20, no_edge), Q_WORK, w, deadman=np.ones(50, dtype=bool),
+    tr = run(GuidingController(er20, no_edge), Q_WORK, w, deadman=np.ones(60, dtype=bool),
              interpolate=False)
     assert np.all(tr.state == State.GUIDING)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from leadthrough.control import GuidingConfig, GuidingController, VirtualFrictionConfig
+from leadthrough.control.safety_states import State
 from leadthrough.robot import Robot
 from test_control_guiding import DT, PAPER_LAW, Q_WORK, run
 
@@ -63,3 +64,45 @@ def test_letting_go_of_a_light_hold_moves_nothing(er20: Robot) -> None:
     w[350:, 0] = w[349, 0] * np.exp(-np.arange(250) * DT / TAU)
     tr = run(GuidingController(er20, _config()), Q_WORK, w, interpolate=False)
     assert np.all(tr.twist_base == 0.0)
+
+
+def test_a_press_after_a_drift_while_released_moves_only_on_a_push(er20: Robot) -> None:
+    """The enabling device released for 10 s while the estimate drifts at 8 N/s (to 80 N, the
+    drives after a seam's release), then pressed with no hand: the tool stays exactly at rest
+    (before, the baseline was 0 while not guiding and the law broke away at once). A hand that
+    then grips with 30 N (a step through the 3 Hz filter) moves it within the filter's time.
+    With the paper's law while guiding (no baseline), the drift that goes on after the press
+    breaks away once it has added δ = 15 N, 15/8 s after the press, not at the press."""
+    k_n, press, grip = 1600, 1050, 1300
+    w = _ramp(k_n, 8.0)
+    held = np.zeros(k_n, dtype=bool)
+    held[1:50] = held[press:] = True
+    w[grip:, 0] += 30.0 * (1.0 - np.exp(-np.arange(k_n - grip) * DT / TAU))
+    tr = run(GuidingController(er20, _config()), Q_WORK, w, deadman=held, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    assert tr.state[press] == State.GUIDING and tr.state[press - 1] == State.IDLE
+    assert np.all(tr.twist_base[:grip] == 0.0) and np.all(tr.q[:grip] == Q_WORK)
+    assert 0 < int(np.argmax(vx[grip:] > 0.0)) * DT <= 4 * TAU
+    paper = run(GuidingController(er20, _config(drift_s=0.0)), Q_WORK, w, deadman=held,
+                interpolate=False)
+    first = int(np.argmax(paper.twist_base[:, 0] > 0.0))
+    assert abs(first - (press + 15.0 / 8.0 / DT)) <= 6
+
+
+def test_a_push_held_through_the_press_must_rise_by_delta(er20: Robot) -> None:
+    """A hand that already pushes 40 N when the device is pressed (it gripped while
+    released): no motion until it pushes δ = 15 N more; letting go then moves nothing (the law
+    sees the smaller of w and w - b)."""
+    k_n, press, more, off = 900, 300, 500, 700
+    w = np.zeros((k_n, 6))
+    w[50:, 0] = 40.0 * (1.0 - np.exp(-np.arange(k_n - 50) * DT / TAU))
+    w[more:, 0] += 20.0 * (1.0 - np.exp(-np.arange(k_n - more) * DT / TAU))
+    w[off:, 0] = w[off - 1, 0] * np.exp(-np.arange(k_n - off) * DT / TAU)
+    held = np.zeros(k_n, dtype=bool)
+    held[1:20] = held[press:] = True
+    tr = run(GuidingController(er20, _config()), Q_WORK, w, deadman=held, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    assert np.all(vx[:more] == 0.0)
+    assert 0 < int(np.argmax(vx[more:] > 0.0)) * DT <= 4 * TAU
+    stop = off + int(np.argmax(vx[off:] == 0.0))
+    assert stop > off and np.all(tr.twist_base[stop:] == 0.0)

@@ -34,6 +34,7 @@ from leadthrough.session.metrics import (
 from leadthrough.session.record import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.sim.driver import InjectedFault as Fault
 from leadthrough.sim.driver import InjectedFaultKind as FaultKind
+from leadthrough.sim.guiding_params import shipped_guiding_params
 from leadthrough.sim.session import (
     SimSessionConfig,
     light_guiding,
@@ -110,6 +111,27 @@ def test_releasing_the_enabling_device_stops_at_the_limit(er20: Robot,
     assert (np.linalg.norm(np.diff(cycles, axis=0), axis=1) / 0.01).max() <= LIMIT_ACC + 1e-9
     assert np.all(log.twist_cmd_base[log.time > 3.5] == 0.0)
     assert np.all(log.state[log.time > 3.5] == int(State.IDLE))
+
+
+def test_a_new_press_after_a_pause_does_not_move_on_the_drives_drift(er20: Robot) -> None:
+    """Calibrated robot instance 1: a push-x session, the enabling device released at 6 s and
+    pressed again at 18 s with no hand on the tool. Over the pause the estimate drifts far past
+    δ (the drives' torque settling against the gears' static friction); the press must not
+    take that for a push: the command stays exactly where it was (before the fix the tool
+    moved by itself at the press)."""
+    cfg = SimSessionConfig(operator="push-x", seed=1, duration_s=21.0,
+                           enable_held_s=((1.0, 6.0), (18.0, math.inf)),
+                           loop=LoopConfig(guiding=light_guiding(100.0)))
+    log = run_sim_session(er20, shipped_guiding_params(er20), cfg).result.log
+    presses = [e.t for e in log.events if e.cause == "DEADMAN_PRESSED"]
+    assert presses == pytest.approx([1.0, 18.0], abs=0.011)
+    after = log.time >= presses[1]
+    force = np.linalg.norm(log.wrench_base[:, :3], axis=1)
+    assert force[np.argmax(after)] > 3 * 15.0       # the drift the press must ignore
+    assert np.all(log.state[after & (log.time < 20.9)] == int(State.GUIDING))
+    assert np.all(log.twist_cmd_base[after] == 0.0)
+    assert np.all(log.q_cmd[after] == log.q_cmd[np.argmax(after)])
+    assert np.abs(log.twist_cmd_base[log.time < 6.0, 0]).max() > 0.1   # the push did move it
 
 
 def test_no_enabling_input_means_no_guiding(er20: Robot, nominal_params: ParamsFile) -> None:

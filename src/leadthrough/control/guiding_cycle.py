@@ -166,13 +166,16 @@ def _law_wrench(wrench_base: Array, rotation: Array, tool: bool, finite: bool, m
 @njit(cache=True, nogil=True)
 def _rest_wrench(ctl: Record, guiding: bool) -> None:
     """The virtual-friction law's input: guiding at rest, the estimate less its drift at rest
-    (:mod:`leadthrough.control.rest_drift`); moving, the estimate (the baseline relaxes);
-    not guiding, the estimate (the baseline restarts from 0)."""
-    at_rest = guiding and _is_zero(ctl.twist) and ctl.law == Law.VIRTUAL_FRICTION
+    (:mod:`leadthrough.control.rest_drift`); moving, the estimate (the baseline relaxes, and
+    restarts from 0 when not guiding); not guiding and at rest (IDLE, a stop or a fault come
+    to rest), the estimate, with the baseline at its level: what it reads before a press is
+    no push, so a press moves the tool only on a rise over it."""
+    resting = _is_zero(ctl.twist) and ctl.law == Law.VIRTUAL_FRICTION
     drift_step(ctl.wrench, ctl.friction, ctl.drift_rate, ctl.release_drop, ctl.dt,
                ctl.drift_alpha_fast,
                ctl.drift_alpha_slow, ctl.drift_span_s, ctl.drift_decay if guiding else 0.0,
-               at_rest, ctl.drift_fast, ctl.drift_slow, ctl.rest_baseline, ctl.rest_wrench)
+               guiding and resting, resting and not guiding, ctl.drift_fast, ctl.drift_slow,
+               ctl.rest_baseline, ctl.rest_wrench)
 
 
 @njit(cache=True, nogil=True)
