@@ -13,11 +13,18 @@ States (:mod:`leadthrough.control.safety_states`)::
   :meth:`SafetySupervisor.clear_fault`.
 * Faults (:class:`Fault`): non-finite input; measured position or current out of range; stale
   feedback (sequence number not advancing for N cycles); following error (measured vs commanded
-  joint position); estimated wrench above a collision threshold; a joint near its limit and
+  joint position); estimated wrench above a collision threshold (while guiding or stopping:
+  see below); a joint near its limit and
   moving toward it; the workspace box (the TCP plus its braking distance would come closer to
   a face than a small margin); singularity (manipulability below a stop threshold and falling;
   below a higher threshold the speed is scaled down); the IK not reaching its target. The first
   fault is latched with the offending value and index; later ones are not recorded.
+* The collision threshold is not checked in IDLE. The robot then holds still with the enabling
+  device released: there is no motion to stop, and the estimate drifts at rest with the drives'
+  torque against the gears' static friction (:mod:`leadthrough.control.rest_drift`). On the
+  simulated er20 over FANUC J519 it passed 150 N 9 s after a seam's release and latched a
+  COLLISION that nobody had caused, to be cleared by the operator. A press with the estimate
+  still above the threshold trips COLLISION in the next cycle: guiding never starts on it.
 
 Every transition is logged as an :class:`Event` (time, from, to, cause, fault, value, index).
 The log is a preallocated ring of the last ``max_events`` transitions (older ones dropped,
@@ -288,7 +295,8 @@ class SafetySupervisor:
     # ----------------------------------------------------------------- checks
     def check_feedback(self, t: float, sequence: int, q: Array, current: Array, wrench: Array,
                        q_commanded: Array) -> None:
-        """Input faults: non-finite, stale, out of range, following error, collision.
+        """Input faults: non-finite, stale, out of range, following error, collision (not in
+        IDLE: module docstring).
 
         Args:
             t: Time [s].

@@ -234,8 +234,10 @@ def check_feedback(sup: Record, events: Events, t: float, sequence: int, q: Arra
                    current: Array, wrench: Array, q_commanded: Array) -> None:
     """Input faults, in order: non-finite (or wrong size), stale, position and current range,
     following error, collision (see :meth:`SafetySupervisor.check_feedback
-    <leadthrough.control.safety.SafetySupervisor.check_feedback>`)."""
+    <leadthrough.control.safety.SafetySupervisor.check_feedback>`); collision not in IDLE."""
     fault = feedback_fault(sup, q, current, wrench, q_commanded)
+    if fault == Fault.COLLISION and sup.state == State.IDLE:
+        fault = Fault.NONE
     finite = math.isfinite(t) and fault != Fault.NONFINITE_INPUT
     sup.inputs_finite = finite
     if sup.state == State.FAULT:
