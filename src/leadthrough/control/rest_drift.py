@@ -36,7 +36,8 @@ the enabling device is released. So while not guiding at rest (IDLE, or a stop o
 come to rest) b is the estimate's level (its fast smoothing), and a press starts guiding from
 there: the law sees only what rises over the level at the press. On the simulated er20 the
 estimate rose from 9 N to 69 N over the 8 s after a push-x session's enabling device was
-released, and 60-170 N over the 13 s after a seam's; with b at 0 while not guiding (as it
+released, and read 37-171 N 13 s after a seam's (24 runs over J519, UR and RSI); with b at 0
+while not guiding (as it
 was), a press with no hand on the tool moved it by itself (4.3 mm at 0.035 m/s after the
 push-x, 10.8 mm at 0.053 m/s after a seam). A hand that already pushes when the device is
 pressed must add δ to move the tool, as a hand resting on the still tool must; letting go then
