@@ -4,10 +4,11 @@ Numba keys a cached function (``@njit(cache=True)``) on its own source file only
 calls from another file is compiled into the caller, and a change to that file does not
 invalidate the caller's cache ("Notes on Caching", Cache limitations: "changes in symbols
 defined in another file are not recognised"; numba/numba PR #8396 would extend the
-invalidation, still open). So after an update that changes ``control/safety_rules.py`` but not
-``control/guiding_cycle.py``, the guiding cycle would go on running the old safety rules from
-its cache: that happened while this module was written (the collision rule's change did not
-show until the caches were deleted).
+invalidation; Numba 0.68.1 does not, as ``tests/test_compiled_cache.py`` shows). So after an
+update that changes ``control/safety_rules.py`` but not ``control/guiding_cycle.py``, the
+guiding cycle would go on running the old safety rules from its cache: that happened while
+this module was written (the collision rule's change did not show until the caches were
+deleted).
 
 :func:`refresh_compiled_cache` (run when the package is imported, before any compiled function
 is loaded) hashes every ``.py`` file of the package and compares the digest with the one it
