@@ -75,3 +75,17 @@ def test_refresh_deletes_caches_only_when_the_source_changed(tmp_path: Path) -> 
     digest = source_digest(pkg)
     (pkg / "a.py").rename(pkg / "c.py")                      # a rename is a change
     assert source_digest(pkg) != digest
+
+
+def test_the_digest_skips_hidden_files_and_survives_unreadable_ones(tmp_path: Path) -> None:
+    """An editor's lock file (a dangling symlink named .#x.py) and an unreadable file must not
+    stop the package from importing: the digest never raises for a file."""
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "a.py").write_text("x = 1\n")
+    digest = source_digest(pkg)
+    (pkg / ".#a.py").symlink_to(pkg / "missing.py")
+    assert source_digest(pkg) == digest                      # hidden: not hashed
+    (pkg / "b.py").symlink_to(pkg / "missing.py")            # unreadable, not hidden
+    assert source_digest(pkg) != digest
+    assert refresh_compiled_cache(pkg)

@@ -167,18 +167,19 @@ def test_singularity_fault_stops_and_latches(er20: Robot) -> None:
 
 def test_no_collision_in_idle_but_at_the_press(er20: Robot) -> None:
     """An estimate of 300 N (the drives' drift at rest) while the enabling device is released
-    latches nothing; pressed with it still there, COLLISION trips in the next cycle and the
-    tool never moves."""
+    latches nothing; pressed with it still there, COLLISION trips in the press's cycle instead
+    of guiding, and the tool never moves: with the virtual-friction law and with the velocity
+    law [14], which has no dead band."""
     w = np.zeros((70, 6))
     w[:, 0] = np.minimum(np.arange(70) * 15.0, 300.0)
     held = np.zeros(70, dtype=bool)
     held[50:] = True
-    tr = run(GuidingController(er20, GuidingConfig(virtual_friction=LIGHT)), Q_WORK, w,
-             deadman=held, interpolate=False)
-    assert np.all(tr.state[:50] == State.IDLE) and np.all(tr.fault[:50] == Fault.NONE)
-    assert tr.state[50] == State.GUIDING
-    assert np.all(tr.state[51:] == State.FAULT) and np.all(tr.fault[51:] == Fault.COLLISION)
-    assert np.all(tr.twist_base == 0.0) and np.all(tr.q == Q_WORK)
+    for law in ("virtual-friction", "velocity"):
+        cfg = GuidingConfig(virtual_friction=LIGHT, controller=law)
+        tr = run(GuidingController(er20, cfg), Q_WORK, w, deadman=held, interpolate=False)
+        assert np.all(tr.state[:50] == State.IDLE) and np.all(tr.fault[:50] == Fault.NONE)
+        assert np.all(tr.state[50:] == State.FAULT) and np.all(tr.fault[50:] == Fault.COLLISION)
+        assert np.all(tr.twist_base == 0.0) and np.all(tr.q == Q_WORK)
 
 
 def test_clear_fault_only_at_rest_then_idle(er20: Robot) -> None:

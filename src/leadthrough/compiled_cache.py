@@ -15,9 +15,14 @@ is loaded) hashes every ``.py`` file of the package and compares the digest with
 wrote last to ``__pycache__/compiled-source.sha256`` at the package root. When they differ,
 it deletes the package's cache files (``*.nbi``, ``*.nbc`` under its ``__pycache__``
 folders), then writes the new digest: every function compiles again on its next first call,
-from the source as it is now. Where the package folder is read-only (numba then caches in the
-user's cache folder, beyond this module's reach) it does nothing; a running process keeps what
-it has loaded (Numba tolerates cache files that vanish).
+from the source as it is now. The digest is written only once every cache file is gone, so a
+file that could not be deleted is tried again at the next import.
+
+What it does not cover: where the package folder is read-only, or ``NUMBA_CACHE_DIR`` is set,
+Numba caches in another folder, beyond this module's reach; and a process that was already
+running when the source changed, and compiles a caller only afterwards, writes that caller's
+cache from the code it had loaded (the digest then matches the new source, so only the next
+change deletes it). After updating, restart the processes that use leadthrough.
 """
 
 from __future__ import annotations
@@ -33,13 +38,21 @@ STAMP = "compiled-source.sha256"
 
 
 def source_digest(root: Path) -> str:
-    """SHA-256 over the relative path and content of every ``.py`` file under ``root``, in
-    sorted order (hex)."""
+    """SHA-256 over the relative path and content of every ``.py`` file under ``root`` (not
+    hidden ones, such as an editor's lock files), in sorted order (hex). A file that cannot be
+    read counts by its name and a marker, so that reading it later changes the digest; this
+    never raises for a file."""
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
-        h.update(path.relative_to(root).as_posix().encode())
+        rel = path.relative_to(root)
+        if any(part.startswith(".") for part in rel.parts):
+            continue
+        h.update(rel.as_posix().encode())
         h.update(b"\0")
-        h.update(path.read_bytes())
+        try:
+            h.update(path.read_bytes())
+        except OSError:
+            h.update(b"\0unreadable")
         h.update(b"\0")
     return h.hexdigest()
 
@@ -61,11 +74,20 @@ def refresh_compiled_cache(root: Path) -> bool:
             return False
     except OSError:
         pass    # no digest yet, or unreadable: refresh
+    complete = True
     try:
-        for cache in root.rglob("__pycache__"):
-            for f in cache.iterdir():
-                if f.suffix in (".nbi", ".nbc"):
-                    f.unlink(missing_ok=True)
+        caches = [f for d in root.rglob("__pycache__") for f in d.iterdir()
+                  if f.suffix in (".nbi", ".nbc")]
+    except OSError:
+        return False    # a read-only or vanishing tree: numba caches elsewhere
+    for f in caches:
+        try:
+            f.unlink(missing_ok=True)
+        except OSError:
+            complete = False    # e.g. open in another process on Windows: next import
+    if not complete:
+        return True     # no digest: the next import deletes what is left
+    try:
         stamp.parent.mkdir(exist_ok=True)
         tmp = stamp.with_name(f"{STAMP}.{os.getpid()}.tmp")
         tmp.write_text(digest + "\n")

@@ -93,10 +93,12 @@ class GuidingConfig:
         drift_s: At rest the force estimate drifts as the servo's integral loads the gears'
             static friction; a change of the estimate on an axis by its δ over ``drift_s`` or
             more slowly is taken for that drift, not a hand, and the rest threshold of eq. 33
-            counts from it (:mod:`leadthrough.control.rest_drift`) [s]; 0 disables (the
-            paper's law). Default 1.5 s, δ/drift_s = 10 N/s with δ = 15 N: above the drift
-            measured on the simulated er20 (~8 N/s, issue 24), below a hand's grip (δ within
-            the estimator's 3 Hz filter and a 0.1 s onset, ~60 N/s).
+            counts from it (:mod:`leadthrough.control.rest_drift`) [s]; 0: nothing is
+            followed while guiding (the paper's law at rest, but the estimate's level at a
+            press of the enabling device is still no push). Default 1.5 s, δ/drift_s =
+            10 N/s with δ = 15 N: above the drift measured on the simulated er20 (~8 N/s,
+            issue 24), below a hand's grip (δ within the estimator's 3 Hz filter and a 0.1 s
+            onset, ~60 N/s).
         hand_release: The stop after the hand lets go of the moving tool
             (:mod:`leadthrough.control.hand_release`; virtual friction only: the velocity
             baseline [14] runs as published).

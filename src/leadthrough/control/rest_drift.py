@@ -24,9 +24,12 @@ as long as that smoothing is within δ_i/2 of it (the release detector's
 :data:`~leadthrough.control.release.RELEASE_DROP`: a change that it counts as a hand's). A
 hand's grip or letting go is faster: b holds while it happens and does not take up the level
 it leaves, until the estimate comes back to within δ_i/2 of b (the hand lets go). The
-threshold of eq. 33 counts from b: the law at rest sees w − b, or w where that is smaller (the
-baseline only ever holds the tool where the paper's law would move it, never moves it where
-the paper's law would not: estimator noise below δ still produces no motion at all). In
+threshold of eq. 33 counts from b: the law at rest sees w − b, or w where that is smaller in
+magnitude (estimator noise below δ still produces no motion at all). Mostly the baseline only
+holds the tool where the paper's law would move it; but with b above 2δ, an estimate between
+b/2 and b − δ reads as a push of more than δ against b's sign, and the tool moves that way,
+where the paper's law would move it the other way or not at all (right if b is the drives'
+and the hand pulls; not, if b took up a hand's push). In
 motion the law is the paper's (it sees w) and b relaxes to 0 over ``drift_s`` (the gears slip
 and their friction is the sliding one the model describes), so that a single cycle of motion
 does not forget it.
@@ -42,8 +45,11 @@ was), a press with no hand on the tool moved it by itself (4.3 mm at 0.035 m/s a
 push-x, 10.8 mm at 0.053 m/s after a seam). A hand that already pushes when the device is
 pressed must add δ to move the tool, as a hand resting on the still tool must; letting go then
 leaves w − b larger in magnitude than w, and the law sees w. While the commanded motion is
-not at rest and not guiding (a stop), b restarts from 0. With the stop after letting go
-(:mod:`leadthrough.control.hand_release`) the guiding cycle restarts b from the level the
+not at rest and not guiding (a stop), b restarts from 0. With ``drift_s`` 0 the baseline
+follows nothing while guiding, but the level at a press is still taken. The velocity law [14]
+has no baseline and no dead band: there the estimate at a press moves the tool, and only the
+collision check at the press (``safety_rules.deadman``) guards it. With the stop after
+letting go (:mod:`leadthrough.control.hand_release`) the guiding cycle restarts b from the level the
 estimate settled to, and a rise of δ over b resumes guiding.
 
 What this costs and what it does not cover: a push that rises more slowly than δ/drift_s

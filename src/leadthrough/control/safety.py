@@ -24,7 +24,7 @@ States (:mod:`leadthrough.control.safety_states`)::
   torque against the gears' static friction (:mod:`leadthrough.control.rest_drift`). On the
   simulated er20 over FANUC J519 it passed 150 N 9 s after a seam's release and latched a
   COLLISION that nobody had caused, to be cleared by the operator. A press with the estimate
-  still above the threshold trips COLLISION in the next cycle: guiding never starts on it.
+  still above the threshold trips COLLISION instead of starting guiding.
 
 Every transition is logged as an :class:`Event` (time, from, to, cause, fault, value, index).
 The log is a preallocated ring of the last ``max_events`` transitions (older ones dropped,

@@ -82,6 +82,7 @@ def supervisor_dtype(n: int) -> np.dtype[Any]:
         ("event_count", i8),      # transitions logged since construction
         ("mu_previous", f8),
         ("check_value", f8), ("check_index", i8),   # the first failed feedback check's
+        ("idle_collision", b1),   # the last check found a collision-level wrench in IDLE
     ])
 
 
@@ -142,10 +143,13 @@ def clear_fault(sup: Record, events: Events, t: float, at_rest: bool) -> bool:
 @njit(cache=True, nogil=True)
 def deadman(sup: Record, events: Events, t: float, held: bool) -> None:
     """IDLE → GUIDING on a press (once armed), GUIDING → STOPPING on a release; a release
-    arms the next press."""
+    arms the next press. A press while this cycle's check found a collision-level wrench in
+    IDLE (``check_feedback``) trips COLLISION instead: guiding never starts on it."""
     state = sup.state
     if state == State.IDLE and held:
-        if sup.armed:
+        if sup.armed and sup.idle_collision:
+            trip(sup, events, t, Fault.COLLISION, sup.check_value, sup.check_index)
+        elif sup.armed:
             transition(sup, events, t, State.GUIDING, Cause.DEADMAN_PRESSED, Fault.NONE,
                        math.nan, -1)
         return
@@ -236,7 +240,8 @@ def check_feedback(sup: Record, events: Events, t: float, sequence: int, q: Arra
     following error, collision (see :meth:`SafetySupervisor.check_feedback
     <leadthrough.control.safety.SafetySupervisor.check_feedback>`); collision not in IDLE."""
     fault = feedback_fault(sup, q, current, wrench, q_commanded)
-    if fault == Fault.COLLISION and sup.state == State.IDLE:
+    sup.idle_collision = fault == Fault.COLLISION and sup.state == State.IDLE
+    if sup.idle_collision:      # held at rest: the press trips it (deadman)
         fault = Fault.NONE
     finite = math.isfinite(t) and fault != Fault.NONFINITE_INPUT
     sup.inputs_finite = finite
