@@ -166,13 +166,15 @@ def refresh_friction(params: DriveModelParameters, check: Recording,
                                   qd_sg=s.qd_sg.copy(), f4=s.f4 * b)
     load = params.load_friction * a if params.load_friction.size else params.load_friction
     new = replace(params, stribeck=stribeck, load_friction=load)
-    at_bound = separable & np.array([_at_bound(x) for x in b], dtype=bool)
+    at_bound = separable & _at_bound(b)
     return FrictionRefresh(new, a, b, points, before, after, separable, at_bound)
 
 
-def _at_bound(scale: float) -> bool:
-    """Whether a fitted scale ended at (within 0.1 % of) a bound of [MIN_SCALE, MAX_SCALE]."""
-    return not MIN_SCALE * 1.001 < scale < MAX_SCALE * 0.999
+def _at_bound(scale: float | Array) -> NDArray[np.bool_]:
+    """Whether fitted scales ended at (within 0.1 % of) a bound of [MIN_SCALE, MAX_SCALE]
+    (NaN counts as at a bound), elementwise."""
+    s = np.asarray(scale)
+    return ~((s > MIN_SCALE * 1.001) & (s < MAX_SCALE * 0.999))
 
 
 def _rel_rms(model: Array, measured: Array) -> float:
