@@ -3,7 +3,11 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
 
 # One BLAS/LAPACK thread for the tests and the processes they start (set before numpy loads
 # OpenBLAS; a value the caller set is kept). The suite's linear algebra is small matrices: on a
@@ -76,3 +80,87 @@ def calibrated_params(sweep_calibration: tuple[object, object, object]) -> Param
     """Parameters calibrated on the simulated er20 (seed 1): a push moves it to the cap."""
     sc = sweep_calibration[2]
     return ParamsFile.from_result(sc.result, sim_seed=1)  # type: ignore[attr-defined]
+
+
+
+#: Test modules that run a loop or a controller against the wall clock (emulators on loopback
+#: sockets, the pendant's processes, Chromium).
+REALTIME_MODULES = frozenset({
+    "test_emulator_answer_timing", "test_emulator_operator", "test_guide_driver",
+    "test_loop_faults", "test_loop_requests", "test_pendant_backend", "test_pendant_browser",
+    "test_pendant_parts", "test_pendant_process", "test_record_driver", "test_wire_drivers",
+    "test_wire_fanuc_j519", "test_wire_faults", "test_wire_kuka_rsi", "test_wire_ur_rtde",
+    "test_wire_ur_rtde_reference",
+})
+
+#: The niceness of the worker that runs the other tests under pytest-xdist.
+COMPUTE_NICE = 10
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Two xdist groups (``-n 2 --dist loadgroup`` in pyproject.toml): the wall-clock tests
+    (:data:`REALTIME_MODULES`) and the rest, each run on one worker of its own, so that a
+    loop on loopback never runs beside another (their controllers' watchdogs are real)."""
+    for item in items:
+        group = "realtime" if item.path.stem in REALTIME_MODULES else "compute"
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
+_NICED: list[bool] = [False]
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """On the xdist worker of the ``compute`` group, lower its priority once (niceness
+    :data:`COMPUTE_NICE`, inherited by the processes it starts): where the wall-clock tests
+    wait on a 1-8 ms controller cycle, the CPU-bound tests beside them only use the time they
+    leave. Serial runs (no ``PYTEST_XDIST_WORKER``) are left as they are."""
+    if (os.environ.get("PYTEST_XDIST_WORKER") and not _NICED[0]
+            and item.path.stem not in REALTIME_MODULES):
+        os.nice(COMPUTE_NICE)
+        _NICED[0] = True
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "exclusive: a wall-clock test that must not run beside the compute tests "
+        "under pytest-xdist (they pause while it runs; see tests/conftest.py)")
+
+
+@pytest.fixture(autouse=True)
+def _exclusive_of_compute(request: pytest.FixtureRequest,
+                          tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist, a test marked ``exclusive`` runs on an otherwise idle machine: it
+    raises a flag and takes a lock that every compute test holds shared while it runs, so the
+    compute worker finishes its current test and waits until the exclusive one is done.
+    Those are the wall-clock tests that a loaded 2-core machine made fail in trial runs (J519
+    refuses a late command; the browser renders on the CPU). Serial runs: nothing happens."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        yield
+        return
+    shared = tmp_path_factory.getbasetemp().parent
+    flag, lock = shared / "exclusive.flag", shared / "exclusive.lock"
+    if request.node.get_closest_marker("exclusive") is not None:
+        flag.touch()
+        with lock.open("a") as f:
+            fcntl.flock(f, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                flag.unlink(missing_ok=True)
+                fcntl.flock(f, fcntl.LOCK_UN)
+        return
+    if request.node.path.stem in REALTIME_MODULES:
+        yield
+        return
+    _wait_while(flag)
+    with lock.open("a") as f:
+        fcntl.flock(f, fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _wait_while(flag: Path) -> None:
+    while flag.exists():
+        time.sleep(0.1)

@@ -144,6 +144,25 @@ def test_an_answer_time_that_is_only_an_upper_bound_is_not_blamed_on_the_client(
     assert (c.in_time, c.late, c.late_with_lag) == (1, 1, 1)
 
 
+def _wait_for_arrival_stamps(rx_sock: socket.socket, tx_sock: socket.socket) -> None:
+    """Until the kernel stamps datagrams as they arrive. Enabling ``SO_TIMESTAMPNS`` switches
+    the system's receive stamping on through deferred work (``net_enable_timestamp``,
+    net/core/dev.c); a datagram that arrives before it has run is stamped when it is read
+    (``__sock_recv_timestamp``, net/socket.c: "Race occurred between timestamp enabling and
+    packet receiving"), which on a loaded machine took 30 ms here. A probe read 5 ms after it
+    became readable tells which: stamped on arrival, or on the read."""
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        tx_sock.sendto(b"probe", rx_sock.getsockname())
+        select.select([rx_sock], [], [], 1.0)
+        readable = time.time()
+        time.sleep(0.005)
+        _, _, rx, _ = recv_stamped(rx_sock)
+        if rx <= readable + 1e-4:
+            return
+    raise AssertionError("the kernel did not stamp datagrams on arrival within 2 s")
+
+
 @linux_only
 def test_the_udp_receive_time_is_the_kernels_not_when_the_emulator_read_it() -> None:
     """A datagram read 30 ms after it arrived carries its arrival time. Arrival is when the
@@ -155,6 +174,7 @@ def test_the_udp_receive_time_is_the_kernels_not_when_the_emulator_read_it() -> 
     with rx_sock, tx_sock:
         rx_sock.bind(("127.0.0.1", 0))
         assert enable_rx_stamps(rx_sock)
+        _wait_for_arrival_stamps(rx_sock, tx_sock)
         before = time.time()
         tx_sock.sendto(b"answer", rx_sock.getsockname())
         readable, _, _ = select.select([rx_sock], [], [], 1.0)

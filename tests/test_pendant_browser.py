@@ -72,6 +72,18 @@ def _until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
         time.sleep(0.05)
 
 
+def _at_rest(app: Pendant, hold_s: float, timeout_s: float) -> None:
+    """Until the commanded speed has been 0 for ``hold_s``."""
+    deadline = time.monotonic() + timeout_s
+    since = time.monotonic()
+    while time.monotonic() - since < hold_s:
+        if time.monotonic() > deadline:
+            pytest.fail(f"the robot did not come to rest within {timeout_s} s")
+        time.sleep(0.05)
+        if app.live.snapshot().speed != 0.0:
+            since = time.monotonic()
+
+
 def _screen(camera: Any, point: np.ndarray) -> tuple[float, float]:
     """Pixel of a world point [m] in the browser's view (viser's camera: OpenCV axes, +z
     forward, +y down; ``fov`` vertical)."""
@@ -96,6 +108,7 @@ def pendant(er20: Robot, tmp_path: Path) -> Iterator[tuple[Pendant, SimulatedPen
         sim.live.stop()
 
 
+@pytest.mark.exclusive
 def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSession],
                                       tmp_path: Path) -> None:
     from playwright.sync_api import sync_playwright
@@ -125,6 +138,8 @@ def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSe
             assert moved > 0.05, f"the robot moved {moved * 1e3:.0f} mm under the mouse's push"
             assert not app.scene.dragging and not sim.hand.force_base.any()
 
+            # the hand let go: the robot brakes and the drives settle; P2 is marked at rest
+            _at_rest(app, 0.5, 10)
             at_p2 = app.scene.tcp_m.copy()
             page.get_by_role("button", name="P2", exact=True).click()
             _until(lambda: "P2" in [p.label for p in app.points.points], 5, "P2 marked")
@@ -176,8 +191,8 @@ def _dismiss_notifications(page: Any) -> None:
 
 def _check_export(folder: Path, at_p1: np.ndarray, at_p2: np.ndarray) -> None:
     """The export holds the session, the two points where the robot stood when they were
-    marked (the page's TCP when the button was pressed: within 2 mm, the drives still settle
-    after the hand lets go), and the welding line between them."""
+    marked (the page's TCP when the button was pressed, the robot at rest: within 2 mm), and
+    the welding line between them."""
     assert (folder / "session.parquet").is_file()
     points = json.loads((folder / "points.json").read_text())["points"]
     assert [p["label"] for p in points] == ["P1", "P2"]
