@@ -161,6 +161,12 @@ def _exclusive_of_compute(request: pytest.FixtureRequest,
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
+#: The longest a compute test waits for an exclusive one [s] (a worker that died inside one
+#: leaves its flag behind; the suite then goes on rather than hang).
+EXCLUSIVE_WAIT_S = 300.0
+
+
 def _wait_while(flag: Path) -> None:
-    while flag.exists():
+    deadline = time.monotonic() + EXCLUSIVE_WAIT_S
+    while flag.exists() and time.monotonic() < deadline:
         time.sleep(0.1)
