@@ -106,18 +106,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         item.add_marker(pytest.mark.xdist_group(group))
 
 
-_NICED: list[bool] = [False]
-
-
 def pytest_runtest_setup(item: pytest.Item) -> None:
     """On the xdist worker of the ``compute`` group, lower its priority once (niceness
     :data:`COMPUTE_NICE`, inherited by the processes it starts): where the wall-clock tests
     wait on a 1-8 ms controller cycle, the CPU-bound tests beside them only use the time they
     leave. Serial runs (no ``PYTEST_XDIST_WORKER``) are left as they are."""
-    if (os.environ.get("PYTEST_XDIST_WORKER") and not _NICED[0]
-            and item.path.stem not in REALTIME_MODULES):
-        os.nice(COMPUTE_NICE)
-        _NICED[0] = True
+    if (os.environ.get("PYTEST_XDIST_WORKER") and item.path.stem not in REALTIME_MODULES
+            and os.nice(0) < COMPUTE_NICE):
+        os.nice(COMPUTE_NICE - os.nice(0))
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -32,7 +32,13 @@ from leadthrough.drivers.controllers import DEFAULT_PORTS
 from leadthrough.session.record import SessionLog, load_session
 from leadthrough.sim.emulators.kuka_rsi import IPOC_START
 from leadthrough.sim.guiding_params import shipped_params_path
-from wire_helpers import POSE, free_loopback_address, spawn_emulator, stop_process
+from wire_helpers import (
+    POSE,
+    free_loopback_address,
+    spawn_emulator,
+    stop_process,
+    wait_for_line,
+)
 
 KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
 PRESSES = [(1.0 + 2 * k, 2.0 + 2 * k) for k in range(60)]
@@ -53,19 +59,6 @@ def _guide(kind: str, host: str, out: Path, *extra: str) -> subprocess.Popen[str
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _wait_for_line(proc: subprocess.Popen[str], start: str, timeout: float) -> str:
-    assert proc.stderr is not None
-    deadline = time.monotonic() + timeout
-    lines = []
-    while time.monotonic() < deadline:
-        line = proc.stderr.readline()
-        lines.append(line)
-        if line.startswith(start) or (not line and proc.poll() is not None):
-            break
-    assert lines[-1].startswith(start), "".join(lines)
-    return "".join(lines)
-
-
 def _guiding_starts_and_ends(log: SessionLog) -> tuple[list[float], list[float]]:
     guiding = log.state == int(State.GUIDING)
     edges = np.diff(guiding.astype(int))
@@ -79,7 +72,7 @@ def test_guide_against_the_emulator_until_ctrl_c(kind: str, tmp_path: Path) -> N
     out = tmp_path / "session.parquet"
     if kind == "kuka-rsi":      # the PC listens: start it first, then the robot sends to it
         guide = _guide(kind, host, out)
-        _wait_for_line(guide, "compiling the loop done", 120)
+        wait_for_line(guide, "compiling the loop done", 120)
         # RSI's 12 ms (IPO) mode: at 4 ms a machine as loaded as a shared CI runner answers
         # late now and then, which is a refused command and a latched fault (correctly)
         emu = spawn_emulator(kind, "er20", host, port, "--cycle-ms", "12", *_emulator_args())
@@ -87,7 +80,7 @@ def test_guide_against_the_emulator_until_ctrl_c(kind: str, tmp_path: Path) -> N
         emu = spawn_emulator(kind, "er20", host, port, *_emulator_args())
         guide = _guide(kind, host, out)
     try:
-        _wait_for_line(guide, "leadthrough: guiding", 120)
+        wait_for_line(guide, "leadthrough: guiding", 120)
         time.sleep(6.0)                          # three presses
         guide.send_signal(signal.SIGINT)
         stdout, stderr = guide.communicate(timeout=60)
@@ -203,10 +196,10 @@ def test_a_fault_is_reset_from_its_input_and_guiding_needs_a_fresh_press(
     guide = _guide(kind, host, out, "--reset-input", "2")   # the PC listens first
     emu = None
     try:
-        _wait_for_line(guide, "compiling the loop done", 120)
+        wait_for_line(guide, "compiling the loop done", 120)
         emu = spawn_emulator(kind, "er20", host, DEFAULT_PORTS[kind], "--cycle-ms", "12",
                              *_reset_emulator_args())
-        _wait_for_line(guide, "leadthrough: guiding", 120)
+        wait_for_line(guide, "leadthrough: guiding", 120)
         time.sleep(14.0)                         # two or three periods
         guide.send_signal(signal.SIGINT)
         stdout, stderr = guide.communicate(timeout=60)

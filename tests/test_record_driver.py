@@ -6,7 +6,6 @@ command broke its limits."""
 from __future__ import annotations
 
 import json
-import select
 import signal
 import subprocess
 import sys
@@ -38,7 +37,14 @@ from leadthrough.session.trajectory_recording import (
     record_trajectory,
 )
 from leadthrough.sim.emulators import EmulatorOptions, FaultPlan, RunningEmulator, Window, start
-from wire_helpers import DIRECTION, POSE, free_loopback_address, spawn_emulator, stop_process
+from wire_helpers import (
+    DIRECTION,
+    POSE,
+    free_loopback_address,
+    spawn_emulator,
+    stop_process,
+    wait_for_line,
+)
 
 KINDS = ("fanuc-j519", "ur-rtde", "kuka-rsi")
 ROBOT = {"fanuc-j519": "er20", "ur-rtde": "ur5", "kuka-rsi": "er20"}
@@ -242,7 +248,9 @@ def test_record_rsi_beyond_the_correction_range_exits_2_and_emulate_checks_q0(
                             "kuka-rsi", "--host", host, "--robot", "er20", "--trajectory",
                             str(traj), "-o", str(out)],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _wait_until_listening(rec, "kuka-rsi")
+    # RSI's robot sends first and ends the element after 100 unanswered documents (0.4 s):
+    # the PC listens first (its first line; the bind follows within milliseconds)
+    wait_for_line(rec, "recording on kuka-rsi", 120)
     emu = spawn_emulator("kuka-rsi", "er20", host, port, "--q0", *map(str, POSE))
     try:
         _, stderr = rec.communicate(timeout=120)
@@ -308,18 +316,6 @@ def test_the_approach_keeps_within_its_share_of_the_limits(delta: list[float],
     np.testing.assert_allclose(np.gradient(q, t, axis=0), qd, atol=1e-3 * (1 + np.abs(qd).max()))
 
 
-def _wait_until_listening(rec: subprocess.Popen[str], kind: str) -> None:
-    """Until ``record --driver kuka-rsi`` has imported and opens its socket (its first line;
-    the bind follows within milliseconds). RSI's robot sends first and ends the element after
-    100 unanswered documents (0.4 s at 4 ms): a PC that is not yet listening when the robot
-    starts is a failed start, on a real controller as on the emulator, so the PC starts first
-    (the emulator then takes seconds to import)."""
-    assert rec.stderr is not None
-    ready, _, _ = select.select([rec.stderr], [], [], 120.0)
-    line = rec.stderr.readline() if ready else ""
-    assert line.startswith(f"recording on {kind}"), line
-
-
 @pytest.mark.parametrize("kind", KINDS)
 def test_leadthrough_record_driver_against_emulate_in_its_own_process(
         kind: str, tmp_path: Path) -> None:
@@ -332,7 +328,7 @@ def test_leadthrough_record_driver_against_emulate_in_its_own_process(
            "--robot", ROBOT[kind], "--trajectory", str(traj), "-o", str(out), "--json"]
     if kind == "kuka-rsi":  # the PC listens: start it first, then the robot that sends to it
         rec = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        _wait_until_listening(rec, kind)
+        wait_for_line(rec, f"recording on {kind}", 120)   # listening: then the robot
         emu = spawn_emulator(kind, ROBOT[kind], host, port, "--q0", *map(str, POSE))
     else:
         emu = spawn_emulator(kind, ROBOT[kind], host, port, "--q0", *map(str, POSE))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 import time
 from collections.abc import Callable
 from typing import TypeVar
@@ -15,6 +16,21 @@ from leadthrough.sim.emulators.process import (  # noqa: F401 (re-exported)
 )
 
 T = TypeVar("T")
+
+
+def wait_for_line(proc: subprocess.Popen[str], start: str, timeout: float) -> str:
+    """Read a process's stderr until a line starts with ``start`` (or it ends, or
+    ``timeout`` [s] passed between lines); assert that one did. Returns the lines read."""
+    assert proc.stderr is not None
+    deadline = time.monotonic() + timeout
+    lines = []
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        lines.append(line)
+        if line.startswith(start) or (not line and proc.poll() is not None):
+            break
+    assert lines[-1].startswith(start), "".join(lines)
+    return "".join(lines)
 
 POSE = (0.3, -0.6, 0.4, 0.5, 0.8, 0.2)
 DIRECTION = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
