@@ -23,7 +23,7 @@ from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot
 from leadthrough.session.loop import run_session
-from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
+from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
 from leadthrough.session.metrics import (
     faults_without_hand,
     force_error_in_motion,
@@ -61,6 +61,26 @@ def test_rest_session_commands_exactly_zero(er20: Robot, nominal_params: ParamsF
     # on the scripted operator's press of the enabling device once the loop is ready (1 s)
     pressed = [e for e in log.events if e.cause == "DEADMAN_PRESSED"]
     assert len(pressed) == 1 and 1.0 <= pressed[0].t < 1.01
+
+
+def test_inspect_loop_sees_the_parts_that_run(er20: Robot, nominal_params: ParamsFile) -> None:
+    """``inspect_loop`` is called once, before the first sample, with the estimator,
+    controller and interpolator the session then runs (a probe can read their state)."""
+    seen: list[tuple[int, LoopParts]] = []
+
+    def inspect(parts: LoopParts) -> None:
+        seen.append((int(parts.estimator.record["samples"][0]), parts))
+
+    s = run_sim_session(er20, nominal_params, SimSessionConfig(operator="rest", duration_s=0.5),
+                        inspect_loop=inspect)
+    assert len(seen) == 1
+    samples_before, parts = seen[0]
+    assert samples_before == 0
+    # the same estimator produced the log: its last output is the log's last estimate (the
+    # nominal model reads a force at rest, so that estimate is not zero)
+    assert np.any(s.result.log.wrench_base[-1] != 0.0)
+    assert np.array_equal(parts.estimator.record["last_wrench"][0], s.result.log.wrench_base[-1])
+    assert int(parts.estimator.record["samples"][0]) >= s.result.log.n
 
 
 #: push-x (40 N from 1 s to 4 s) with a light virtual mass and the estimator ready at 0.5 s

@@ -32,7 +32,7 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import LoopResult, run_session
-from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
+from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
 from leadthrough.session.metrics import SessionSummary, summarize
 from leadthrough.session.record import SessionLog
 from leadthrough.session.requests import LoopRequests
@@ -196,7 +196,8 @@ def sim_robot_seed(requested: int | None, params: ParamsFile) -> int:
 def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
                     record_feedback: bool = False,
                     wrap_driver: Callable[[Driver], Driver] | None = None, *,
-                    requests: LoopRequests | None = None) -> SimSession:
+                    requests: LoopRequests | None = None,
+                    inspect_loop: Callable[[LoopParts], None] | None = None) -> SimSession:
     """Run one guiding session on the simulated robot.
 
     Args:
@@ -207,6 +208,9 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
             :func:`replay_session`).
         wrap_driver: Wraps the driver the loop talks to (e.g. to probe every servo period).
         requests: Requests into the loop from other threads, and its snapshot (a pendant).
+        inspect_loop: Called with the loop's estimator, controller and interpolator once they
+            are built, before the session starts (to read their state as it runs, e.g.
+            ``benchmarks/force_error_budget.py``); it must not change them.
 
     Returns:
         The session and its summary.
@@ -237,6 +241,8 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     if wrap_driver is not None:
         driver = wrap_driver(driver)
     parts = build_loop(robot, params, config.loop, driver.dt)
+    if inspect_loop is not None:
+        inspect_loop(parts)
     est_cfg, guiding = parts.estimator.config, parts.controller.config
     settings: dict[str, object] = {
         "operator": config.operator, "controller": guiding.controller, "seed": config.seed,
