@@ -1,7 +1,11 @@
 """Where the force estimate's error in motion comes from (issue 24, must show 4), per source.
 
     python benchmarks/force_error_budget.py [--instances 3,4,5] [--operators push-x,seam]
-                                            [--plant realistic|ideal] [--cache DIR]
+                                            [--plant realistic|ideal] [--hand-release]
+                                            [--cache DIR]
+
+(``--operators random:14 --hand-release``: ``run_on.py``'s random session with operator seed
+14.)
 
 Each robot instance is calibrated as ``benchmarks/run_on.py`` does (60 s excitation and a
 friction sweep, ``consistent``; cached under ``--cache``), then runs the guiding benchmark's
@@ -33,13 +37,14 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.protocol import Driver, DriverFeedback, WrappedDriver
 from leadthrough.estimation.estimator import ExternalForceEstimator
 from leadthrough.estimation.wrench import wrench_from_torque
@@ -236,8 +241,13 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
                   friction_joint=tuple(joint))
 
 
-def run(robot: Robot, seed: int, operator: str, plant: str, cache: Path) -> Budget:
-    """Calibrate instance ``seed`` (cached), run one session and split its error."""
+def run(robot: Robot, seed: int, operator: str, plant: str, cache: Path,
+        hand_release: bool = False) -> Budget:
+    """Calibrate instance ``seed`` (cached), run one session and split its error.
+
+    ``operator`` is a scripted operator's name, or ``random:K`` for the ``random`` operator
+    with operator seed K (``run_on.py``'s sessions); ``hand_release``: with the stop after
+    letting go, as ``run_on.py``."""
     params = calibrated(robot, seed, plant, cache)
     samples = Samples()
     probes: list[BudgetProbe] = []
@@ -249,8 +259,13 @@ def run(robot: Robot, seed: int, operator: str, plant: str, cache: Path) -> Budg
     def inspect(parts: LoopParts) -> None:
         probes[-1].estimator = parts.estimator
 
-    config = SimSessionConfig(operator=operator, seed=seed, plant=plant,
-                              loop=LoopConfig(guiding=light_guiding()))
+    name, _, op_seed = operator.partition(":")
+    guiding = light_guiding()
+    if hand_release:
+        guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
+    config = SimSessionConfig(operator=name, seed=seed, plant=plant,
+                              operator_seed=int(op_seed) if op_seed else None,
+                              loop=LoopConfig(guiding=guiding))
     session = run_sim_session(robot, params, config, wrap_driver=wrap, inspect_loop=inspect)
     estimator = probes[-1].estimator
     assert estimator is not None   # set by inspect_loop before the run
@@ -262,6 +277,8 @@ def main() -> None:
     ap.add_argument("--instances", default="3,4,5")
     ap.add_argument("--operators", default="push-x,seam")
     ap.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0])
+    ap.add_argument("--hand-release", action="store_true",
+                    help="the stop after letting go (run_on.py's setting)")
     ap.add_argument("--cache", type=Path,
                     default=Path(tempfile.gettempdir()) / "leadthrough-run-on")
     args = ap.parse_args()
@@ -272,7 +289,7 @@ def main() -> None:
     budgets = []
     for seed in (int(s) for s in args.instances.split(",")):
         for op in args.operators.split(","):
-            b = run(robot, seed, op, args.plant, args.cache)
+            b = run(robot, seed, op, args.plant, args.cache, args.hand_release)
             budgets.append((f"{seed}, {op}", b))
             if not b.moving:
                 print(f"{f'{seed}, {op}':<20} {'—':>6} | the TCP never reached "
