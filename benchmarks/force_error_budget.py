@@ -9,9 +9,10 @@
 
 Each robot instance is calibrated as ``benchmarks/run_on.py`` does (60 s excitation and a
 friction sweep, ``consistent``; cached under ``--cache``), then runs the guiding benchmark's
-sessions (``benchmarks/guiding.py`` sections 2 and 3: the paper's law, 100 kg translational
-virtual mass). Every servo period the simulator's truth is read beside the estimator's state,
-and the estimate's joint-torque error τ̂_ext − τ_ext splits exactly into three parts:
+sessions with its settings (``benchmarks/guiding.py`` sections 2 and 3: the paper's law; push-x
+with 100 kg translational virtual mass, the diagonal and the seam with the defaults). Every
+servo period the simulator's truth is read beside the estimator's state, and the estimate's
+joint-torque error τ̂_ext − τ_ext splits exactly into three parts:
 
 * **friction**: the estimator's friction torque τ̂_f minus the plant's (bristles, Coulomb,
   Stribeck, load, ripple and viscous), through the estimator's output low-pass;
@@ -61,6 +62,9 @@ Array = NDArray[np.float64]
 
 #: The parts, in print order.
 PARTS = ("friction", "rigid body + drive", "output filter", "force fit")
+
+#: Sessions that ``benchmarks/guiding.py`` runs with the default guiding settings (section 3).
+PATHS = ("diagonal", "seam")
 
 #: A joint slower than this [rad/s] is near standstill or reversing: its friction is in its
 #: presliding transient or held, not on the steady curve the sweep measured.
@@ -260,7 +264,9 @@ def run(robot: Robot, seed: int, operator: str, plant: str, cache: Path,
         probes[-1].estimator = parts.estimator
 
     name, _, op_seed = operator.partition(":")
-    guiding = light_guiding()
+    # guiding.py's settings: the push and the random pushes with the lighter mass, the paths
+    # (diagonal, seam) with the defaults
+    guiding = LoopConfig().guiding if name in PATHS else light_guiding()
     if hand_release:
         guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
     config = SimSessionConfig(operator=name, seed=seed, plant=plant,
