@@ -8,6 +8,7 @@ import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 # One BLAS/LAPACK thread for the tests and the processes they start (set before numpy loads
 # OpenBLAS; a value the caller set is kept). The suite's linear algebra is small matrices: on a
@@ -20,6 +21,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np
 import pytest
+from xdist.scheduler import LoadScopeScheduling
 
 from leadthrough.dynamics import nominal_drive_parameters
 from leadthrough.excitation.design import ExcitationConfig
@@ -97,13 +99,28 @@ REALTIME_MODULES = frozenset({
 COMPUTE_NICE = 10
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Two xdist groups (``-n 2 --dist loadgroup`` in pyproject.toml): the wall-clock tests
-    (:data:`REALTIME_MODULES`) and the rest, each run on one worker of its own, so that a
-    loop on loopback never runs beside another (their controllers' watchdogs are real)."""
-    for item in items:
-        group = "realtime" if item.path.stem in REALTIME_MODULES else "compute"
-        item.add_marker(pytest.mark.xdist_group(group))
+class TwoGroupScheduling(LoadScopeScheduling):
+    """pytest-xdist scheduling in two work units: the wall-clock tests
+    (:data:`REALTIME_MODULES`) and the rest, each run on one worker of its own
+    (``-n 2 --dist loadgroup`` in pyproject.toml), so that a loop on loopback never runs beside
+    another (their controllers' watchdogs are real).
+
+    The unit of a test is read from its node id's module here, in the controller's scheduler.
+    ``xdist_group`` marks added at collection do not work on pytest 9.2: xdist 3.8 writes the
+    group into the item's old ``_nodeid`` field, which pytest 9.2's structured node ids no
+    longer read, so every test went its own way (pytest-dev/pytest-xdist#1386, fix pending in
+    #1388)."""
+
+    def _split_scope(self, nodeid: str) -> str:
+        module = nodeid.split("::", 1)[0]
+        return "realtime" if Path(module).stem in REALTIME_MODULES else "compute"
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """``--dist loadgroup`` schedules :class:`TwoGroupScheduling`; other modes are xdist's."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    return TwoGroupScheduling(config, log)
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
@@ -122,20 +139,24 @@ def pytest_configure(config: pytest.Config) -> None:
         "under pytest-xdist (they pause while it runs; see tests/conftest.py)")
 
 
-@pytest.fixture(autouse=True)
-def _exclusive_of_compute(request: pytest.FixtureRequest,
-                          tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
     """Under pytest-xdist, a test marked ``exclusive`` runs on an otherwise idle machine: it
     raises a flag and takes a lock that every compute test holds shared while it runs, so the
     compute worker finishes its current test and waits until the exclusive one is done.
     Those are the wall-clock tests that a loaded 2-core machine made fail in trial runs (J519
-    refuses a late command; the browser renders on the CPU). Serial runs: nothing happens."""
+    refuses a late command; the browser renders on the CPU). The lock spans the whole test,
+    its fixtures' set-up and teardown included (a compute test's session fixture, such as a
+    calibration, is built in its set-up). Serial runs: nothing happens."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         yield
         return
-    shared = tmp_path_factory.getbasetemp().parent
+    # the workers' base temporary folders share this parent (pytest keeps the last three);
+    # the tmp_path_factory fixture is this same object
+    factory: pytest.TempPathFactory = item.config._tmp_path_factory  # type: ignore[attr-defined]
+    shared = factory.getbasetemp().parent
     flag, lock = shared / "exclusive.flag", shared / "exclusive.lock"
-    if request.node.get_closest_marker("exclusive") is not None:
+    if item.get_closest_marker("exclusive") is not None:
         flag.touch()
         with lock.open("a") as f:
             fcntl.flock(f, fcntl.LOCK_EX)
@@ -145,7 +166,7 @@ def _exclusive_of_compute(request: pytest.FixtureRequest,
                 flag.unlink(missing_ok=True)
                 fcntl.flock(f, fcntl.LOCK_UN)
         return
-    if request.node.path.stem in REALTIME_MODULES:
+    if item.path.stem in REALTIME_MODULES:
         yield
         return
     _wait_while(flag)
