@@ -191,7 +191,10 @@ def test_stream_follows_a_trajectory_and_reports_inputs(er20: Robot) -> None:
     assert all(v & 1 for _, v in marks)  # enabling device held throughout
     pressed = [t for t, v in marks if v & 2]
     assert pressed and min(pressed) >= 0.28 and max(pressed) <= 0.52
-    assert report.violations == () and report.refused == 0 and report.stop_kind is None
+    # no stop but the client's own: close() sends the stop packet, which the emulator reads or
+    # not before the test stops it (a race of the two processes' schedules)
+    assert report.violations == () and report.refused == 0
+    assert report.stop_kind in (None, "request")
     assert report.accepted == report.commands >= 90
 
 
