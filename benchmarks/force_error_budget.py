@@ -17,7 +17,8 @@ joint-torque error τ̂_ext − τ_ext splits exactly into three parts:
 * **friction**: the estimator's friction torque τ̂_f minus the plant's (bristles, Coulomb,
   Stribeck, load, ripple and viscous), through the estimator's output low-pass;
 * **rigid body and drive, after the re-zero**: the identified links, rotor inertias and
-  offsets at the filtered state minus the plant's link torque, plus the torque the plant's
+  offsets at the filtered state (so the differentiator's lag is in it too) minus the plant's
+  link torque at its true state, plus the torque the plant's
   motors make minus τ̂_j = R·Kt·i (the torque constant's error, cogging, the currents' lag
   and noise), low-passed, plus the identified mean noise τ̄_ω and minus the re-zero's tare
   (which takes up the first two at each re-zero's pose);
@@ -76,8 +77,8 @@ class Samples:
     """Per servo period: the plant's truth after the step, and the estimator's state after its
     update of the same sample (one list entry per period)."""
 
-    motor: list[Array] = field(default_factory=list)       # R·Kt_true·i_true + cogging
     friction: list[Array] = field(default_factory=list)    # all of the plant's friction
+    speed: list[Array] = field(default_factory=list)       # true joint velocities [rad/s]
     external: list[Array] = field(default_factory=list)    # J^T F of the operator
     applied: list[Array] = field(default_factory=list)     # F [N], base axes
     q: list[Array] = field(default_factory=list)           # measured q (to align)
@@ -110,10 +111,8 @@ class BudgetProbe(WrappedDriver):
         fresh = self._driver.read(fb)
         self._reads += 1
         sim, out = self._sim, self._out
-        d = sim.mj_data
-        out.motor.append(sim.true_current * sim.true_torque_per_amp
-                         + sim.true_cogging_torque(d.qpos))
-        out.friction.append(sim.true_friction_torque - d.qfrc_passive)
+        out.friction.append(sim.true_total_friction)
+        out.speed.append(np.array(sim.mj_data.qvel))
         out.external.append(sim.true_external_torque)
         out.applied.append(sim.applied_wrench[:3].copy())
         out.q.append(np.array(fb.q))
@@ -181,14 +180,17 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
     state_q = np.array([s["last_q"] for s in st])
     if not np.array_equal(truth_q[1:], state_q[1:]):   # 0: the set-up's dry updates
         raise RuntimeError("the truth and the estimator's samples are not aligned")
-    motor, fr_true = np.array(samples.motor[:N]), np.array(samples.friction[:N])
+    cfg = est.config
+    if cfg.axes != "force" or cfg.frame != "base" or cfg.method != "direct":
+        raise ValueError("the budget splits the direct estimator's force-only fit in base "
+                         "axes (the guiding loop's)")
+    fr_true = np.array(samples.friction[:N])
     ext, applied = np.array(samples.external[:N]), np.array(samples.applied[:N])
-    link_true = motor - fr_true + ext
     mdl = est.model
     rec = est.record[0]
     rotor, offset, alpha = rec["rotor_inertia"], rec["offset"], float(rec["low_pass_alpha"])
     frame = pin.LOCAL_WORLD_ALIGNED
-    link, jac = np.empty_like(motor), np.empty((N, 6, robot.n))
+    link, jac = np.empty_like(ext), np.empty((N, 6, robot.n))
     for k, s in enumerate(st):
         qf, qdf, qddf = s["q_filtered"], s["qd_filtered"], s["qdd_filtered"]
         link[k] = pin.rnea(mdl.model, mdl.data, qf, qdf, qddf) + rotor * qddf + offset
@@ -198,9 +200,13 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
     # update k subtracts the tare as it was before it (a re-zero's end updates it after)
     shift = np.array([s["noise_mean"] - p["tare"] for s, p in zip(st, st[:1] + st[:-1],
                                                                    strict=True)])
+    # The plant's motors balance its links, friction and the hand: R·Kt·i + cogging =
+    # (M q̈ + bias) + friction − τ_ext. The rigid body and drive part, the identified links
+    # minus the plant's plus the plant's motor torque minus R·Kt_file·i, is then
+    # link + friction_true − τ_ext − τ̂_j, without the plant's motor torque (which cancels).
     tau_parts = {
         "friction": _low_pass(fr_est - fr_true, alpha),
-        "rigid body + drive": _low_pass(link - link_true + motor - drive, alpha) + shift,
+        "rigid body + drive": _low_pass(link + fr_true - ext - drive, alpha) + shift,
         "output filter": _low_pass(ext, alpha) - ext,
     }
     tau_est = np.array([s["last_tau_ext"] for s in st])
@@ -215,15 +221,16 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
     # once that start has decayed (1 s: (1 - α)^1000 < 1e-8 at 3 Hz and 1 ms)
     settled = slice(round(1.0 / est.config.dt), None)
     closure = float(np.abs(sum(forces.values()) - error)[settled].max())
-    if np.abs(sum(tau_parts.values()) + ext - tau_est)[settled].max() > 1e-6:
-        raise RuntimeError("the torque parts do not add up to the estimate")
+    if np.abs(sum(tau_parts.values()) + ext - tau_est)[settled].max() > 1e-6 or closure > 1e-6:
+        raise RuntimeError("the parts do not add up to the estimate")
     moving = _commanded_speed(log, f_est) >= moving_speed
+    moving[:settled.start] = False     # the parts close from then on
 
     def rms(x: Array) -> float:
         return float(np.sqrt(np.mean(np.sum(x[moving] ** 2, axis=1)))) if moving.any() else 0.0
 
     fric = tau_parts["friction"]
-    slow = np.abs(np.array([s["qd_filtered"] for s in st])) < SLOW_JOINT
+    slow = np.abs(np.array(samples.speed[:N])) < SLOW_JOINT
     idx = np.flatnonzero(moving)
 
     def fit_moving(tau: Array) -> Array:

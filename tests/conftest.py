@@ -6,7 +6,7 @@ from __future__ import annotations
 import fcntl
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Generator
 from pathlib import Path
 from typing import Any
 
@@ -139,8 +139,9 @@ def pytest_configure(config: pytest.Config) -> None:
         "under pytest-xdist (they pause while it runs; see tests/conftest.py)")
 
 
-@pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None
+                            ) -> Generator[None, object, object]:
     """Under pytest-xdist, a test marked ``exclusive`` runs on an otherwise idle machine: it
     raises a flag and takes a lock that every compute test holds shared while it runs, so the
     compute worker finishes its current test and waits until the exclusive one is done.
@@ -149,8 +150,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
     its fixtures' set-up and teardown included (a compute test's session fixture, such as a
     calibration, is built in its set-up). Serial runs: nothing happens."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
-        yield
-        return
+        return (yield)
     # the workers' base temporary folders share this parent (pytest keeps the last three);
     # the tmp_path_factory fixture is this same object
     factory: pytest.TempPathFactory = item.config._tmp_path_factory  # type: ignore[attr-defined]
@@ -161,29 +161,36 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
         with lock.open("a") as f:
             fcntl.flock(f, fcntl.LOCK_EX)
             try:
-                yield
+                return (yield)
             finally:
                 flag.unlink(missing_ok=True)
                 fcntl.flock(f, fcntl.LOCK_UN)
-        return
     if item.path.stem in REALTIME_MODULES:
-        yield
-        return
-    _wait_while(flag)
+        return (yield)
     with lock.open("a") as f:
-        fcntl.flock(f, fcntl.LOCK_SH)
+        _lock_after_exclusive(flag, f.fileno())
         try:
-            yield
+            return (yield)
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-#: The longest a compute test waits for an exclusive one [s] (a worker that died inside one
-#: leaves its flag behind; the suite then goes on rather than hang).
-EXCLUSIVE_WAIT_S = 300.0
+#: How long a raised flag may go without its exclusive lock before it counts as left behind
+#: by a worker that died inside an exclusive test (the kernel freed its lock) [s].
+STALE_FLAG_S = 2.0
 
 
-def _wait_while(flag: Path) -> None:
-    deadline = time.monotonic() + EXCLUSIVE_WAIT_S
-    while flag.exists() and time.monotonic() < deadline:
+def _lock_after_exclusive(flag: Path, fd: int) -> None:
+    """Take the shared lock once no exclusive test runs: wait while the flag is up (an
+    exclusive test waits for the lock or holds it); a flag whose lock can be had shared
+    ``STALE_FLAG_S`` after it was seen is a dead worker's, and is ignored."""
+    seen = time.monotonic()
+    while flag.exists():
+        if time.monotonic() - seen > STALE_FLAG_S:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+                return
+            except BlockingIOError:
+                pass
         time.sleep(0.1)
+    fcntl.flock(fd, fcntl.LOCK_SH)

@@ -340,6 +340,13 @@ class SimRobot:
         return self._drive.friction.copy()
 
     @property
+    def true_total_friction(self) -> Array:
+        """All of the drive train's friction torque of the last step, the linear viscous part
+        (MuJoCo's joint damping, in its passive force) included, against the motion [N·m]
+        (truth)."""
+        return np.asarray(self._drive.friction - self.mj_data.qfrc_passive)
+
+    @property
     def true_external_torque(self) -> Array:
         """Joint torque of the operator's wrench in the last step, J^T·F [N·m] (truth)."""
         return self._tau_ext.copy()
