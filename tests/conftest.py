@@ -116,6 +116,7 @@ class TwoGroupScheduling(LoadScopeScheduling):
         return "realtime" if Path(module).stem in REALTIME_MODULES else "compute"
 
 
+@pytest.hookimpl(optionalhook=True)   # no such hook with -p no:xdist
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """``--dist loadgroup`` schedules :class:`TwoGroupScheduling`; other modes are xdist's."""
     if config.getvalue("dist") != "loadgroup":

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -364,3 +365,29 @@ def test_bad_realistic_settings_name_their_field(make: object, field: str) -> No
     with pytest.raises(SimulationError) as e:
         make()  # type: ignore[operator]
     assert e.value.field is not None and e.value.field.startswith(field)
+
+
+def test_true_total_friction_closes_mujocos_equation_of_motion(er20: Robot) -> None:
+    """``true_total_friction`` is all the friction the step applied: with the motors' torque,
+    cogging and the hand it closes the step's equation of motion, M·q̈ + bias =
+    τ_motor + cogging − friction + τ_ext (the joints' linear damping is MuJoCo's passive
+    force, −D·q̇, which the total friction holds; no constraint acts on the arm)."""
+    q0 = np.array([0.2, -0.4, 0.3, 0.1, 0.5, -0.2])
+    sim = SimRobot(er20, SimConfig(seed=3), q0=q0,
+                   operator=ConstantWrench((20.0, -10.0, 15.0, 0.0, 0.0, 0.0), t_start=0.05))
+    m, d = sim.mj_model, sim.mj_data
+    worst, damping, scale = 0.0, 0.0, 0.0
+    for k in range(300):
+        sim.command(q0 + 0.05 * np.sin(0.02 * k), np.full(6, 1.0))
+        q_before = d.qpos.copy()
+        sim.step()
+        lhs = np.zeros(er20.n)
+        mujoco.mj_mulM(m, d, lhs, d.qacc)
+        lhs += d.qfrc_bias
+        rhs = (sim.true_current * sim.true_torque_per_amp + sim.true_cogging_torque(q_before)
+               - sim.true_total_friction + sim.true_external_torque)
+        worst = max(worst, float(np.abs(lhs - rhs).max()))
+        damping = max(damping, float(np.abs(d.qfrc_passive).max()))
+        scale = max(scale, float(np.abs(sim.true_total_friction).max()))
+    assert scale > 1.0 and damping > 0.1    # friction and damping are there to be checked
+    assert worst < 1e-9 * scale
