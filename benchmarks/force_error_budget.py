@@ -12,21 +12,23 @@ friction sweep, ``consistent``; cached under ``--cache``), then runs the guiding
 sessions with its settings (``benchmarks/guiding.py`` sections 2 and 3: the paper's law; push-x
 with 100 kg translational virtual mass, the diagonal and the seam with the defaults). Every
 servo period the simulator's truth is read beside the estimator's state, and the estimate's
-joint-torque error τ̂_ext − τ_ext splits exactly into three parts:
+joint-torque error τ̂_ext − τ_ext splits exactly into four parts:
 
 * **friction**: the estimator's friction torque τ̂_f minus the plant's (bristles, Coulomb,
   Stribeck, load, ripple and viscous), through the estimator's output low-pass;
 * **rigid body and drive, after the re-zero**: the identified links, rotor inertias and
-  offsets at the filtered state (so the differentiator's lag is in it too) minus the plant's
-  link torque at its true state, plus the torque the plant's
+  offsets minus the plant's link torque, both at the plant's state, plus the torque the
+  plant's
   motors make minus τ̂_j = R·Kt·i (the torque constant's error, cogging, the currents' lag
   and noise), low-passed, plus the identified mean noise τ̄_ω and minus the re-zero's tare
   (which takes up the first two at each re-zero's pose);
+* **state lag**: the identified model at the estimator's filtered q, q̇, q̈ minus at the
+  plant's (the differentiator's lag and noise, the encoder's resolution);
 * **output filter**: the low-pass of the true τ_ext minus τ_ext (the 3 Hz filter's lag).
 
 Each part is mapped to a force by the estimator's own fit at that sample (its per-joint
 weights, Jacobian and damping: the fit is linear in τ for given weights), and the mapping's
-own error (the fit of the true τ_ext against the applied force) is a fourth line. The parts
+own error (the fit of the true τ_ext against the applied force) is a fifth line. The parts
 add up to the estimated minus the applied force; the script checks that they do.
 
 Printed per instance and session: the RMS in motion (commanded TCP speed >= 0.02 m/s, as
@@ -62,7 +64,7 @@ from run_on import calibrated
 Array = NDArray[np.float64]
 
 #: The parts, in print order.
-PARTS = ("friction", "rigid body + drive", "output filter", "force fit")
+PARTS = ("friction", "rigid body + drive", "state lag", "output filter", "force fit")
 
 #: Sessions that ``benchmarks/guiding.py`` runs with the default guiding settings (section 3).
 PATHS = ("diagonal", "seam")
@@ -79,6 +81,7 @@ class Samples:
 
     friction: list[Array] = field(default_factory=list)    # all of the plant's friction
     speed: list[Array] = field(default_factory=list)       # true joint velocities [rad/s]
+    state: list[Array] = field(default_factory=list)       # the step's q, q̇, q̈ (3, n)
     external: list[Array] = field(default_factory=list)    # J^T F of the operator
     applied: list[Array] = field(default_factory=list)     # F [N], base axes
     q: list[Array] = field(default_factory=list)           # measured q (to align)
@@ -112,7 +115,11 @@ class BudgetProbe(WrappedDriver):
         self._reads += 1
         sim, out = self._sim, self._out
         out.friction.append(sim.true_total_friction)
-        out.speed.append(np.array(sim.mj_data.qvel))
+        d, h = sim.mj_data, sim.mj_model.opt.timestep
+        out.speed.append(np.array(d.qvel))
+        # the state the step's dynamics were evaluated at: before the (semi-implicit Euler)
+        # integration, q⁺ = q + h·q̇⁺ and q̇⁺ = q̇ + h·q̈
+        out.state.append(np.array([d.qpos - h * d.qvel, d.qvel - h * d.qacc, d.qacc]))
         out.external.append(sim.true_external_torque)
         out.applied.append(sim.applied_wrench[:3].copy())
         out.q.append(np.array(fb.q))
@@ -190,10 +197,13 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
     rec = est.record[0]
     rotor, offset, alpha = rec["rotor_inertia"], rec["offset"], float(rec["low_pass_alpha"])
     frame = pin.LOCAL_WORLD_ALIGNED
-    link, jac = np.empty_like(ext), np.empty((N, 6, robot.n))
+    link, at_truth = np.empty_like(ext), np.empty_like(ext)
+    jac = np.empty((N, 6, robot.n))
     for k, s in enumerate(st):
         qf, qdf, qddf = s["q_filtered"], s["qd_filtered"], s["qdd_filtered"]
         link[k] = pin.rnea(mdl.model, mdl.data, qf, qdf, qddf) + rotor * qddf + offset
+        q, qd, qdd = samples.state[k]
+        at_truth[k] = pin.rnea(mdl.model, mdl.data, q, qd, qdd) + rotor * qdd + offset
         jac[k] = pin.computeFrameJacobian(mdl.model, mdl.data, qf, robot.tcp_frame_id, frame)
     fr_est = np.array([s["friction_torque"] for s in st])
     drive = np.array([s["drive_torque"] for s in st])
@@ -201,12 +211,14 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
     shift = np.array([s["noise_mean"] - p["tare"] for s, p in zip(st, st[:1] + st[:-1],
                                                                    strict=True)])
     # The plant's motors balance its links, friction and the hand: R·Kt·i + cogging =
-    # (M q̈ + bias) + friction − τ_ext. The rigid body and drive part, the identified links
-    # minus the plant's plus the plant's motor torque minus R·Kt_file·i, is then
-    # link + friction_true − τ_ext − τ̂_j, without the plant's motor torque (which cancels).
+    # (M q̈ + bias) + friction − τ_ext. The rigid body and drive part, the identified links at
+    # the plant's state minus the plant's plus the plant's motor torque minus R·Kt_file·i, is
+    # then at_truth + friction_true − τ_ext − τ̂_j (the plant's motor torque cancels); the
+    # state lag is the identified model at the filtered state minus at the plant's.
     tau_parts = {
         "friction": _low_pass(fr_est - fr_true, alpha),
-        "rigid body + drive": _low_pass(link + fr_true - ext - drive, alpha) + shift,
+        "rigid body + drive": _low_pass(at_truth + fr_true - ext - drive, alpha) + shift,
+        "state lag": _low_pass(link - at_truth, alpha),
         "output filter": _low_pass(ext, alpha) - ext,
     }
     tau_est = np.array([s["last_tau_ext"] for s in st])
