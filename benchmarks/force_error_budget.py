@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+import scipy.signal
 from numpy.typing import NDArray
 
 from leadthrough.control.hand_release import HandReleaseConfig
@@ -80,7 +81,6 @@ class Samples:
     update of the same sample (one list entry per period)."""
 
     friction: list[Array] = field(default_factory=list)    # all of the plant's friction
-    speed: list[Array] = field(default_factory=list)       # true joint velocities [rad/s]
     state: list[Array] = field(default_factory=list)       # the step's q, q̇, q̈ (3, n)
     external: list[Array] = field(default_factory=list)    # J^T F of the operator
     applied: list[Array] = field(default_factory=list)     # F [N], base axes
@@ -116,7 +116,6 @@ class BudgetProbe(WrappedDriver):
         sim, out = self._sim, self._out
         out.friction.append(sim.true_total_friction)
         d, h = sim.mj_data, sim.mj_model.opt.timestep
-        out.speed.append(np.array(d.qvel))
         # the state the step's dynamics were evaluated at: before the (semi-implicit Euler)
         # integration, q⁺ = q + h·q̇⁺ and q̇⁺ = q̇ + h·q̈
         out.state.append(np.array([d.qpos - h * d.qvel, d.qvel - h * d.qacc, d.qacc]))
@@ -144,13 +143,9 @@ class Budget:
 
 
 def _low_pass(x: Array, alpha: float) -> Array:
-    """The estimator's first-order low-pass (from 0), per column."""
-    y = np.empty_like(x)
-    acc = np.zeros(x.shape[1])
-    for k in range(x.shape[0]):
-        acc += alpha * (x[k] - acc)
-        y[k] = acc
-    return y
+    """The estimator's first-order low-pass, y_k = y_(k-1) + α·(x_k − y_(k-1)) from 0, per
+    column."""
+    return np.asarray(scipy.signal.lfilter([alpha], [1.0, alpha - 1.0], x, axis=0))
 
 
 def _fit(est: ExternalForceEstimator, jac: Array, weight: Array, tau: Array) -> Array:
@@ -242,7 +237,7 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
         return float(np.sqrt(np.mean(np.sum(x[moving] ** 2, axis=1)))) if moving.any() else 0.0
 
     fric = tau_parts["friction"]
-    slow = np.abs(np.array(samples.speed[:N])) < SLOW_JOINT
+    slow = np.abs(np.array(samples.state[:N])[:, 1]) < SLOW_JOINT
     idx = np.flatnonzero(moving)
 
     def fit_moving(tau: Array) -> Array:

@@ -84,7 +84,6 @@ def calibrated_params(sweep_calibration: tuple[object, object, object]) -> Param
     return ParamsFile.from_result(sc.result, sim_seed=1)  # type: ignore[attr-defined]
 
 
-
 #: Test modules that run a loop or a controller against the wall clock (emulators on loopback
 #: sockets, the pendant's processes, Chromium).
 REALTIME_MODULES = frozenset({
@@ -97,6 +96,11 @@ REALTIME_MODULES = frozenset({
 
 #: The niceness of the worker that runs the other tests under pytest-xdist.
 COMPUTE_NICE = 10
+
+
+def _realtime(module: str | Path) -> bool:
+    """Whether a test module (its path) is one of :data:`REALTIME_MODULES`."""
+    return Path(module).stem in REALTIME_MODULES
 
 
 class TwoGroupScheduling(LoadScopeScheduling):
@@ -112,8 +116,7 @@ class TwoGroupScheduling(LoadScopeScheduling):
     #1388)."""
 
     def _split_scope(self, nodeid: str) -> str:
-        module = nodeid.split("::", 1)[0]
-        return "realtime" if Path(module).stem in REALTIME_MODULES else "compute"
+        return "realtime" if _realtime(nodeid.split("::", 1)[0]) else "compute"
 
 
 @pytest.hookimpl(optionalhook=True)   # no such hook with -p no:xdist
@@ -122,16 +125,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     if config.getvalue("dist") != "loadgroup":
         return None
     return TwoGroupScheduling(config, log)
-
-
-def pytest_runtest_setup(item: pytest.Item) -> None:
-    """On the xdist worker of the ``compute`` group, lower its priority once (niceness
-    :data:`COMPUTE_NICE`, inherited by the processes it starts): where the wall-clock tests
-    wait on a 1-8 ms controller cycle, the CPU-bound tests beside them only use the time they
-    leave. Serial runs (no ``PYTEST_XDIST_WORKER``) are left as they are."""
-    if (os.environ.get("PYTEST_XDIST_WORKER") and item.path.stem not in REALTIME_MODULES
-            and os.nice(0) < COMPUTE_NICE):
-        os.nice(COMPUTE_NICE - os.nice(0))
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -143,7 +136,12 @@ def pytest_configure(config: pytest.Config) -> None:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None
                             ) -> Generator[None, object, object]:
-    """Under pytest-xdist, a test marked ``exclusive`` runs on an otherwise idle machine: it
+    """Under pytest-xdist, the worker of the ``compute`` group lowers its priority once
+    (niceness :data:`COMPUTE_NICE`, inherited by the processes it starts): where the
+    wall-clock tests wait on a 1-8 ms controller cycle, the CPU-bound tests beside them only
+    use the time they leave.
+
+    And a test marked ``exclusive`` runs on an otherwise idle machine: it
     raises a flag and takes a lock that every compute test holds shared while it runs, so the
     compute worker finishes its current test and waits until the exclusive one is done.
     Those are the wall-clock tests that a loaded 2-core machine made fail in trial runs (J519
@@ -166,8 +164,10 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None
             finally:
                 flag.unlink(missing_ok=True)
                 fcntl.flock(f, fcntl.LOCK_UN)
-    if item.path.stem in REALTIME_MODULES:
+    if _realtime(item.path):
         return (yield)
+    if os.nice(0) < COMPUTE_NICE:
+        os.nice(COMPUTE_NICE - os.nice(0))
     with lock.open("a") as f:
         _lock_after_exclusive(flag, f.fileno())
         try:

@@ -19,8 +19,8 @@ T = TypeVar("T")
 
 
 def wait_for_line(proc: subprocess.Popen[str], start: str, timeout: float) -> str:
-    """Read a process's stderr until a line starts with ``start`` (or it ends, or
-    ``timeout`` [s] passed between lines); assert that one did. Returns the lines read."""
+    """Read a process's stderr until a line starts with ``start`` (or it ends, or ``timeout``
+    [s] has passed, checked after each line); assert that one did. Returns the lines read."""
     assert proc.stderr is not None
     deadline = time.monotonic() + timeout
     lines = []
@@ -31,6 +31,7 @@ def wait_for_line(proc: subprocess.Popen[str], start: str, timeout: float) -> st
             break
     assert lines[-1].startswith(start), "".join(lines)
     return "".join(lines)
+
 
 POSE = (0.3, -0.6, 0.4, 0.5, 0.8, 0.2)
 DIRECTION = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
