@@ -45,9 +45,7 @@ import numpy as np
 
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.errors import TeachError
-from leadthrough.excitation.design import ExcitationConfig, design_excitation
 from leadthrough.excitation.friction_sweep import FRICTION_CHECK
-from leadthrough.identification.api import IdentifyConfig, identify_with_sweep
 from leadthrough.identification.friction_refresh import refresh_friction
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot import Robot, load_robot
@@ -62,9 +60,9 @@ from leadthrough.session.metrics import (
     release_overruns,
     rest_drift,
 )
-from leadthrough.sim.calibration_set import record_excitation, record_friction_sweep
-from leadthrough.sim.plant import PLANT_NAMES, plant_preset
-from leadthrough.sim.robot import SimConfig
+from leadthrough.sim.calibration_set import record_friction_sweep
+from leadthrough.sim.guiding_params import calibrate_for_guiding
+from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import SimSession, SimSessionConfig, light_guiding, run_sim_session
 from leadthrough.teach.program import teach_session
 
@@ -75,16 +73,12 @@ SEAM_RUNS = (500, 1, 2, 3, 4, 5, 6, 10, 11, 12)
 
 def calibrated(robot: Robot, seed: int, plant: str, cache: Path) -> ParamsFile:
     """Guiding parameters of simulated instance ``seed``, identified from its recordings
-    (60 s excitation + friction sweep); read from ``cache`` when made before."""
-    path = cache / f"{robot.name}_{plant}_seed{seed}_guiding.toml"
+    (60 s excitation, friction sweep and presliding test: ``calibrate_for_guiding``); read
+    from ``cache`` when made before."""
+    path = cache / f"{robot.name}_{plant}_seed{seed}_guiding_z0.toml"
     if not path.is_file():
         t0 = time.perf_counter()
-        exc = design_excitation(robot, ExcitationConfig(starts=2, seed=0, max_iterations=100))
-        rec = record_excitation(robot, exc, 60.0,
-                                SimConfig(seed=seed, run=0, plant=plant_preset(plant)))
-        sweep = record_friction_sweep(robot, seed=seed, run=2, q_start=guide_start_pose(robot),
-                                      plant=plant)
-        cal = identify_with_sweep(rec.measured, sweep.measured, robot, IdentifyConfig())
+        cal = calibrate_for_guiding(robot, seed, plant=plant)
         cache.mkdir(parents=True, exist_ok=True)
         save_params(path, robot, "consistent", cal.result.params, cal.result.stats,
                     sim_seed=seed, friction_sweep=True)

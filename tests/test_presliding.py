@@ -242,3 +242,61 @@ def test_estimator_play_operator_ignores_encoder_chatter_at_rest(er20: Robot) ->
             assert np.all(friction < 5.0)      # the chatter has worn the state down
         else:
             np.testing.assert_allclose(friction, 10.0 * (1 - np.exp(-5.0)), rtol=1e-3)
+
+
+def _command_friction(er20: Robot, params: DriveModelParameters, q_path: np.ndarray,
+                      qd_cmd: np.ndarray, config: EstimatorConfig) -> np.ndarray:
+    """τ_ext of an estimator fed ``q_path`` and the commands ``qd_cmd`` with no current."""
+    est = ExternalForceEstimator(er20, params, np.zeros(er20.n), config)
+    inp, out = est.make_input(), est.make_output()
+    est.reset(q_path[0])
+    rows = []
+    for k, (qk, ck) in enumerate(zip(q_path, qd_cmd, strict=True)):
+        inp.t, inp.q[:], inp.current[:], inp.qd_cmd[:] = k * 1e-3, qk, 0.0, ck
+        est.update(inp, out)
+        rows.append(out.tau_ext.copy())
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("measured_z0", [True, False])
+def test_a_creeping_joint_keeps_the_friction_its_encoder_says(er20: Robot,
+                                                              measured_z0: bool) -> None:
+    """slow_command_velocity: a joint that slid forward and is then commanded back at a creep,
+    while its encoder stands still (the gear sticks), keeps its forward friction; once the
+    encoder moves back by x·z₀ (its measured z₀), the friction turns by the Dahl step over
+    that displacement. Without a measured z₀ the setting does nothing: the command turns it."""
+    n, j, g = er20.n, 4, 10.0
+    z0 = np.full(n, 2e-4)
+    params = replace(nominal_drive_parameters(er20), coulomb=np.full(n, g),
+                     viscous=np.zeros(n), presliding=z0 if measured_z0 else np.empty(0))
+    q0 = guide_start_pose(er20)
+    slide, stick, back = 200, 300, 300
+    steps = slide + stick + back
+    qd_cmd = np.zeros((steps, n))
+    qd_cmd[:slide, j] = 0.05                       # slides forward: friction +g
+    qd_cmd[slide:, j] = -0.005                     # then a creeping command back
+    path = np.tile(q0, (steps, 1))
+    path[:slide, j] += 0.05 * 1e-3 * np.arange(slide)
+    path[slide:, j] = path[slide - 1, j]           # the gear sticks
+    x = 3.0
+    path[slide + stick:, j] -= np.linspace(0.0, x * 2e-4, back)   # then follows, x·z₀
+    cfg = EstimatorConfig(friction_velocity="command", warm_up_s=0.0, output_cutoff_hz=400.0,
+                          presliding_play_counts=0.0, slow_command_velocity=0.01)
+    frictionless = replace(params, coulomb=np.zeros(n))
+    # τ̂_d differs by the friction term only
+    friction = (_command_friction(er20, params, path, qd_cmd, cfg)
+                - _command_friction(er20, frictionless, path, qd_cmd, cfg))
+    at = slide + stick - 1
+    if measured_z0:
+        assert friction[at, j] == pytest.approx(g, rel=1e-3)     # still the forward friction
+        turned = g - 2.0 * g * (1.0 - np.exp(-x))                 # Dahl over x·z₀ toward −g
+        assert friction[-1, j] == pytest.approx(turned, rel=2e-2)
+    else:
+        # 0.3 s at −0.005 rad/s is 7.5 z₀ of commanded motion: the command has turned it
+        assert friction[at, j] < -0.9 * g
+
+
+def test_slow_command_velocity_must_be_finite_and_not_negative() -> None:
+    for bad in (-0.01, float("nan"), float("inf")):
+        with pytest.raises(DataError, match="slow_command_velocity"):
+            EstimatorConfig(slow_command_velocity=bad)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,7 @@ from leadthrough.identification.api import METHODS, IdentifyConfig, identify_wit
 from leadthrough.identification.comparison import Table2, ratio_summary, table2, table2_markdown
 from leadthrough.identification.params_file import ParamsFile, save_params
 from leadthrough.identification.plots import plot_torque_fit
+from leadthrough.identification.presliding import fit_presliding
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
@@ -48,6 +49,7 @@ from leadthrough.sim.calibration_set import (
     compare_on_calibration_set,
     record_calibration_set,
     record_friction_sweep,
+    record_presliding_test,
 )
 from leadthrough.sim.checks import check_hold, check_push, check_regressor
 from leadthrough.sim.robot import SimConfig
@@ -112,9 +114,9 @@ def run_demo(robot: Robot, seed: int, out: Path, quick: bool,
     say("[1/6] excitation design (after checking the model and the simulator) ...")
     _checks(res, robot, seed, quick, say)
     say("[2/6] recordings at 1 kHz (identification and held-out trajectories) ...")
-    cal, sweep = _recordings(res, robot, seed, quick, out, say)
+    cal, sweep, pre = _recordings(res, robot, seed, quick, out, say)
     say("[3/6] calibration: " + ", ".join(METHODS) + " ...")
-    params, guiding_params = _calibration(res, robot, seed, quick, out, cal, sweep, say)
+    params, guiding_params = _calibration(res, robot, seed, quick, out, cal, sweep, pre, say)
     say("[4/6] payload test (Table III): weight from motion with the unloaded model ...")
     res.payload = payload_table(robot, cal, {m: pf.params for m, pf in params.items()}, seed,
                                 20.0 if quick else PAYLOAD_RUN_S)
@@ -156,8 +158,10 @@ def _checks(res: DemoResult, robot: Robot, seed: int, quick: bool,
 
 
 def _recordings(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Path,
-                say: Callable[[str], None]) -> tuple[CalibrationSet, SimRecording]:
-    """Step 2: the excitation, its held-out twin and the friction sweep, recorded."""
+                say: Callable[[str], None]
+                ) -> tuple[CalibrationSet, SimRecording, SimRecording]:
+    """Step 2: the excitation, its held-out twin, the friction sweep and the presliding test,
+    recorded."""
     duration = 20.0 if quick else 60.0
     exc_cfg = ExcitationConfig(starts=1 if quick else 2, seed=0,
                                max_iterations=60 if quick else 100)
@@ -173,14 +177,19 @@ def _recordings(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Path
                                                            out / "friction_sweep.parquet")
     say(f"      friction sweep recorded: {sweep.measured.duration:.0f} s, "
         f"{len(FrictionSweepConfig().speeds)} speeds out and back")
-    return cal, sweep
+    pre = record_presliding_test(robot, seed=seed, run=3, q_start=guide_start_pose(robot))
+    res.files["presliding-test recording"] = save_recording(pre.measured,
+                                                            out / "presliding_test.parquet")
+    say(f"      presliding test recorded: {pre.measured.duration:.0f} s")
+    return cal, sweep, pre
 
 
 def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Path,
-                 cal: CalibrationSet, sweep: SimRecording, say: Callable[[str], None]
-                 ) -> tuple[dict[str, ParamsFile], ParamsFile]:
+                 cal: CalibrationSet, sweep: SimRecording, pre: SimRecording,
+                 say: Callable[[str], None]) -> tuple[dict[str, ParamsFile], ParamsFile]:
     """Step 3: Table II with all methods, Fig. 3, and the guiding parameters (with the
-    sweep). Returns the params of Table III's methods and the guiding params."""
+    sweep, z₀ from the presliding test). Returns the params of Table III's methods and the
+    guiding params."""
     # Table II compares the methods on eq. 21 as the paper writes it: no load-dependent friction
     # (``proposed`` has none), so every method fits the same model
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=60 if quick else 150,
@@ -201,12 +210,16 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
         res.files[f"params ({m})"] = path
         params[m] = ParamsFile.from_result(r, path, seed)
     guided = identify_with_sweep(cal.identification.measured, sweep.measured, robot, cfg)
+    z0 = fit_presliding(pre.measured, robot).presliding
+    guided = replace(guided, result=replace(
+        guided.result, params=replace(guided.result.params, presliding=z0)))
     path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
                        guided.result.params, guided.result.stats, seed, friction_sweep=True)
     res.files["params (guiding: consistent + friction sweep)"] = path
     res.sweep_rms = guided.sweep.rms.tolist()
     say("      guiding parameters: consistent with the friction sweep (fit RMS "
-        + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m)")
+        + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m), z0 "
+        + ", ".join(f"{1e4 * v:.2f}" for v in z0) + " e-4 rad")
     held = preprocess(cal.held_out.measured, robot, cfg.preprocess)
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},

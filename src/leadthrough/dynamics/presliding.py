@@ -66,8 +66,9 @@ def dahl_step(state: float, displacement: float, level: float, presliding: float
 
 @njit(cache=True, nogil=True)
 def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: Array,
-                             dt: float, command_presliding: Array, rest_presliding: Array,
-                             state: Array, out: Array, level: Array) -> None:
+                             dt: float, slow: Array, command_presliding: Array,
+                             rest_presliding: Array, state: Array, out: Array,
+                             level: Array) -> None:
     """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
 
     The Coulomb + Stribeck part F follows dF = k·(dq − |dq|·F/g(q̇)), with g(q̇) the eq. 15
@@ -78,13 +79,17 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
     standstill (a stopped gear still carries the friction it had when it stopped, not the static
     peak). In steady sliding F = g·sgn(q̇), eq. 15 itself. Two drives:
 
-    * a joint commanded to move (q̇ ≠ 0): dq = q̇·dt with ``command_presliding`` (z₀ plus the
-      servo's lag behind the command), the level at the commanded speed;
-    * a joint commanded to stand still (q̇ = 0): the measured displacement ``increment`` (play
-      operator on the encoder, :func:`play_step`) with the joint's own z₀ (identified by a
-      presliding test, :mod:`leadthrough.identification.presliding`), the static level g(0).
-      A push at rest deflects the drive by a fraction of z₀, and how much of the push the
-      current then carries follows from that displacement.
+    * a joint commanded to move faster than ``slow`` (|q̇| > slow): dq = q̇·dt with
+      ``command_presliding`` (z₀ plus the servo's lag behind the command), the level at the
+      commanded speed;
+    * a joint commanded to stand still or to creep (|q̇| <= slow): the measured displacement
+      ``increment`` (play operator on the encoder, :func:`play_step`) with the joint's own z₀
+      (identified by a presliding test, :mod:`leadthrough.identification.presliding`), the
+      static level g(0). A push at rest deflects the drive by a fraction of z₀, and how much of
+      the push the current then carries follows from that displacement. A creeping command
+      (a wrist reversing, or dithering about zero, while the TCP moves) does not say where
+      the gear is: its servo builds the torque to move it over many samples, and the gear
+      stays in presliding meanwhile, which the encoder sees and the command does not.
 
     Each step is the exact solution for a constant rate. The viscous (and cube-root) terms of
     the commanded velocity are added as usual.
@@ -92,12 +97,14 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
     Args:
         qd: Joint velocities commanded to the servo [rad/s], shape (n,) (0: at rest).
         increment: Measured displacement of this step, after the play operator [rad], shape
-            (n,) (used where ``qd`` is 0).
+            (n,) (used where |``qd``| <= ``slow``).
         fp: The friction parameters (a record of :func:`~leadthrough.dynamics.friction.
             friction_dtype`).
         load_torque: τ_load of the load-dependent Coulomb level [N·m], shape (n,) (not read
             where f_cL = 0).
         dt: Step [s].
+        slow: Per joint, the commanded speed at or below which the encoder drives F [rad/s],
+            shape (n,) (0: only a joint commanded to stand still).
         command_presliding: z₀ per joint of the commanded motion [rad], shape (n,).
         rest_presliding: z₀ per joint at rest [rad], shape (n,).
         state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
@@ -114,7 +121,7 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
             g0 += stribeck_terms(0.0, fp.motor_stribeck[j], fp.motor_rate[j],
                                  fp.gear_stribeck[j], fp.gear_rate[j])
         level[j] = g
-        if v != 0.0:
+        if abs(v) > slow[j]:
             if g > 0.0:
                 target = g if v > 0.0 else -g
                 state[j] = target + (state[j] - target) * np.exp(

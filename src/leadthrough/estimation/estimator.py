@@ -162,7 +162,9 @@ class ExternalForceEstimator:
         s.offset = mdl.offset
         s.noise_mean = noise_mean if cfg.remove_mean_noise else 0.0
         s.rest_presliding = presliding_lengths(params.presliding, n, None)
-        s.command_presliding = presliding_lengths(params.presliding, n, cfg.presliding_length)
+        s.command_presliding = presliding_lengths(np.empty(0), n, cfg.presliding_length)
+        # the encoder drives a creeping joint's friction only with a measured z₀
+        s.slow_command = cfg.slow_command_velocity if params.presliding.size else 0.0
         s.play_half_width = 0.5 * cfg.presliding_play_counts * robot.encoder_resolution
         lag = params.command_lag if cfg.command_lag is None else cfg.command_lag
         s.command_delay = command_delay_samples(lag, cfg.dt)

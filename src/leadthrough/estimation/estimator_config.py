@@ -66,15 +66,18 @@ class EstimatorConfig:
             ``presliding_kernels.presliding_friction_step``): after a stop, the drives keep the
             friction they had while moving, and so does the model.
         presliding_length: z₀ of the ``"command"`` friction while a joint is commanded to move
-            [rad], and at rest where the params carry no identified z₀: the friction turns over
-            a commanded displacement of a few z₀, the gear's presliding plus the servo's lag. A
-            smaller z₀ turns the model's friction ahead of the gear's, a larger one behind it.
-            None (the default): each joint's z₀ measured by a presliding test
+            [rad]: the friction turns over a commanded displacement of a few z₀, the gear's
+            presliding plus the servo's lag. A smaller z₀ turns the model's friction ahead of
+            the gear's, a larger one behind it. None (the default):
+            :data:`DEFAULT_PRESLIDING_RAD`. The presliding test's z₀
             (``DriveModelParameters.presliding``, :func:`leadthrough.identification.presliding.
-            fit_presliding`; the params file's ``joints.*.presliding``) where the params carry
-            it, else :data:`DEFAULT_PRESLIDING_RAD`. Nothing here comes from the simulator's
-            own bristle lengths (issue 24). A joint commanded to stand still is driven by its
-            measured displacement with the same z₀.
+            fit_presliding`; the params file's ``joints.*.presliding``) measures the gear's part
+            alone. It is used where the encoder drives the friction (else
+            :data:`DEFAULT_PRESLIDING_RAD`): at rest, and at or below
+            ``slow_command_velocity``. On the simulated er20's tuning instances 1-2, the
+            measured 1-3e-4 rad for the command as well made the force in motion worse (push-x
+            17.5/13.8 → 20.0/17.2 N RMS). Nothing here comes from the simulator's own bristle
+            lengths (issue 24).
         command_lag: The ``"command"`` friction follows the commanded velocity this much later
             [s], rounded to whole samples of ``dt``: the time a command takes to show in the
             measured position (the interface's transport and the servo). Sent at once, the
@@ -88,6 +91,16 @@ class EstimatorConfig:
         presliding_play_counts: Width of the play operator on the encoder that drives the
             friction at rest [encoder counts] (``presliding_kernels.play_step``): chatter
             within it moves nothing. 0 passes every count.
+        slow_command_velocity: With ``"command"`` friction, a joint commanded no faster than
+            this [rad/s] (and not at rest) has its friction driven by its encoder, as at rest,
+            with its measured z₀; faster, by the command. A joint that creeps, reverses slowly
+            or dithers about zero while the TCP moves (a wrist, typically) sticks while its
+            servo builds the torque to move it, so its gear stays in presliding, which the
+            encoder sees and the command does not. Applied only where the params carry a
+            presliding test's z₀ (without it, the encoder's turnover length is a guess, and a
+            start from rest can stall). 0 (the default here; the guiding loop's default is
+            0.01 rad/s, ``leadthrough.session.loop_config``): only a joint commanded to stand
+            still.
         friction_weighting: κ of the ``axes="force"`` fit with ``"command"`` friction: each
             joint's weight 1/σ_j becomes 1/√(σ_j² + (κ·u_j)²), u_j the friction's uncertainty
             (see ``kernels.friction_weights``), held over two time constants of the output
@@ -114,6 +127,7 @@ class EstimatorConfig:
     command_lag: float | None = None
     presliding_play_counts: float = 2.5
     friction_weighting: float = 0.0
+    slow_command_velocity: float = 0.0
 
     def __post_init__(self) -> None:
         check_fields("estimator", self, [
@@ -141,6 +155,8 @@ class EstimatorConfig:
              f"None or 0 to {MAX_COMMAND_LAG_S:g} s"),
             ("presliding_play_counts", 0 <= self.presliding_play_counts < 1e6,
              "0 <= width < 1e6 counts"),
+            ("slow_command_velocity", 0 <= self.slow_command_velocity < np.inf,
+             "a finite value >= 0 rad/s"),
             ("friction_weighting",
              0 <= self.friction_weighting < np.inf
              and (self.friction_weighting == 0

@@ -101,6 +101,7 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("manipulability_threshold", f8), ("max_damping", f8), ("min_force_lever", f8),
         ("friction_follows_command", b1),     # friction with memory, driven by qd_cmd
         ("command_presliding", *joints),      # its z₀ while commanded to move [rad]
+        ("slow_command", *joints),            # at or below it the encoder drives it [rad/s]
         ("command_delay", i8),                # samples the friction's command is delayed by
         ("weigh_by_friction", b1), ("friction_weighting", f8), ("envelope_decay", f8),
         ("warm_up_samples", i8),

@@ -6,7 +6,8 @@ Two models, chosen by ``EstimatorConfig.friction_velocity``:
   :func:`~leadthrough.dynamics.presliding.presliding_friction_step`), driven while a joint is
   commanded to move by the commanded joint velocity of a few samples ago
   (:func:`delay_command`: the interface's command-to-position lag, below
-  :data:`COMMAND_HISTORY` samples) and at rest by the encoder (through the play operator,
+  :data:`COMMAND_HISTORY` samples) and at rest, or commanded to creep
+  (``EstimatorConfig.slow_command_velocity``), by the encoder (through the play operator,
   :func:`~leadthrough.dynamics.presliding.play_step`); its Coulomb level load-dependent
   (:func:`leadthrough.dynamics.friction.coulomb_level`). Beside it, the same friction as the
   encoder alone would turn it (:func:`encoder_friction_step`): where the two disagree, the
@@ -50,20 +51,20 @@ COMMAND_HISTORY = 128
 @njit(cache=True, nogil=True)
 def sample_friction(inp: Record, est: Record) -> None:
     """τ_f: with memory, driven by the command while a joint moves and by the measured motion
-    at rest (and the force fit's weights from its uncertainty); or eq. 15 of the measured
-    velocity with the smoothed sign sat(q̇/v_ε)."""
+    at rest or creeping (and the force fit's weights from its uncertainty); or eq. 15 of the
+    measured velocity with the smoothed sign sat(q̇/v_ε)."""
     fp = est.friction
     if est.friction_follows_command:
         play_step(inp.q, est.play_half_width, est.play, est.play_increment)
         delay_command(inp.qd_cmd, est)
         presliding_friction_step(est.friction_command, est.play_increment, fp,
-                                 est.load_torque, est.dt,
+                                 est.load_torque, est.dt, est.slow_command,
                                  est.command_presliding, est.rest_presliding,
                                  est.friction_state, est.friction_torque, est.friction_level)
         if est.weigh_by_friction:
-            encoder_friction_step(est.play_increment, est.friction_command, est.friction_level,
-                                  est.rest_presliding, est.friction_state,
-                                  est.encoder_friction)
+            encoder_friction_step(est.play_increment, est.friction_command, est.slow_command,
+                                  est.friction_level, est.rest_presliding,
+                                  est.friction_state, est.encoder_friction)
             friction_weights(est.friction_level, est.friction_state, est.encoder_friction,
                              est.envelope_decay, est.friction_weighting, est.noise_std,
                              est.friction_envelope, est.joint_weight)
@@ -73,26 +74,29 @@ def sample_friction(inp: Record, est: Record) -> None:
 
 
 @njit(cache=True, nogil=True)
-def encoder_friction_step(increment: Array, command: Array, level: Array, presliding: Array,
-                          state: Array, out: Array) -> None:
+def encoder_friction_step(increment: Array, command: Array, slow: Array, level: Array,
+                          presliding: Array, state: Array, out: Array) -> None:
     """The Coulomb + Stribeck friction as the encoder alone would turn it over, one step: while
     a joint is commanded to move, a Dahl state driven by the measured displacement (through
     the play operator) toward the level of the commanded speed. Not the friction the estimate
     uses (turned by the command, see ``presliding_friction_step``): where the two disagree, a
     joint that the command says has reversed has not yet moved back, and its friction is in
-    doubt (``friction_weights``). At rest the estimate's friction is the encoder's already: the
-    state is set to it, and the next motion starts from there.
+    doubt (``friction_weights``). At rest, or commanded no faster than ``slow``, the
+    estimate's friction is the encoder's already: the state is set to it, and the next motion
+    starts from there.
 
     Args:
         increment: Measured displacement of this step, after the play operator [rad], (n,).
         command: The commanded velocity the friction follows [rad/s], shape (n,) (0: at rest).
+        slow: Per joint, the commanded speed at or below which the estimate's friction is the
+            encoder's [rad/s], shape (n,).
         level: The eq. 15 level g at the commanded speed [N·m], shape (n,).
         presliding: z₀ per joint [rad], shape (n,).
         state: The estimate's friction state F after this step [N·m], shape (n,).
         out: The encoder's state F_enc [N·m] (in place), shape (n,).
     """
     for j in range(increment.size):
-        if command[j] == 0.0:
+        if abs(command[j]) <= slow[j]:
             out[j] = state[j]
         elif increment[j] != 0.0 and level[j] > 0.0:
             out[j] = dahl_step(out[j], increment[j], level[j], presliding[j])

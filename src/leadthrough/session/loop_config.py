@@ -22,7 +22,12 @@ from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstim
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_INPUT_BIT", "LoopConfig", "LoopOptions", "LoopParts", "build_loop"]
+__all__ = ["MAX_INPUT_BIT", "SLOW_COMMAND_VELOCITY", "LoopConfig", "LoopOptions", "LoopParts",
+           "build_loop"]
+
+#: The guiding estimator's ``slow_command_velocity`` [rad/s]: chosen on the simulated er20's
+#: tuning instances 1-2 (0.005 and 0.01 rad/s both helped, 0.0025 less so), not from the plant.
+SLOW_COMMAND_VELOCITY = 0.01
 
 #: Highest digital input bit a driver can report (a 64-bit field).
 MAX_INPUT_BIT = 63
@@ -30,7 +35,7 @@ MAX_INPUT_BIT = 63
 
 def _guiding_estimator() -> EstimatorConfig:
     return EstimatorConfig(axes="force", tare_s=0.5, friction_velocity="command",
-                           friction_weighting=1.0)
+                           friction_weighting=1.0, slow_command_velocity=SLOW_COMMAND_VELOCITY)
 
 
 @dataclass(frozen=True)
@@ -41,8 +46,10 @@ class LoopConfig:
         estimator: Estimator settings; its ``dt`` and ``frame`` are set by :func:`build_loop`
             (the driver's period, the base frame). The default guides: a pure force at the TCP
             (a hand on a handle), tared at the start, the friction following the commanded
-            velocity (see ``EstimatorConfig.friction_velocity``) and the force fit weighing the
-            joints by their friction's uncertainty (``friction_weighting``).
+            velocity (see ``EstimatorConfig.friction_velocity``), or the encoder where a joint
+            creeps and the params carry a presliding test (``slow_command_velocity``), and the
+            force fit weighing the joints by their friction's uncertainty
+            (``friction_weighting``).
         guiding: Controller settings (the law: ``guiding.controller``).
     """
 

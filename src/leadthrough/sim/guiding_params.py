@@ -4,12 +4,12 @@ Guiding the simulator takes what guiding a real robot takes: parameters identifi
 recordings, never the simulator's truth. The nominal (CAD) parameters are not enough: on the
 simulated er20 a 40 N push with them is estimated at up to 290 N once the arm has moved, a
 collision fault. The demo identifies the guiding parameters in its step 3 (``consistent`` with
-the friction sweep, ``params_guiding.toml``), which takes minutes on a small machine. So that
-``leadthrough pendant`` starts at once, the result of :func:`calibrate_for_guiding` on the
-built-in er20, instance :data:`~leadthrough.sim.session.DEFAULT_SIM_SEED`, is shipped
-(``sim/data/``); ``python -m leadthrough.sim.guiding_params`` makes it again
-(``tests/test_pendant_backend.py`` checks that it still guides the simulator: a push moves the
-arm, at rest it stays put).
+the friction sweep, z₀ from a presliding test, ``params_guiding.toml``), which takes minutes
+on a small machine. So that ``leadthrough pendant`` starts at once, the result of
+:func:`calibrate_for_guiding` on the built-in er20, instance
+:data:`~leadthrough.sim.session.DEFAULT_SIM_SEED`, is shipped (``sim/data/``);
+``python -m leadthrough.sim.guiding_params`` makes it again (``tests/test_pendant_backend.py``
+checks that it still guides the simulator: a push moves the arm, at rest it stays put).
 """
 
 from __future__ import annotations
@@ -17,15 +17,22 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
 from leadthrough.identification.api import IdentifyConfig, SweepCalibration, identify_with_sweep
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
+from leadthrough.identification.presliding import fit_presliding
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
-from leadthrough.sim.calibration_set import record_excitation, record_friction_sweep
+from leadthrough.sim.calibration_set import (
+    record_excitation,
+    record_friction_sweep,
+    record_presliding_test,
+)
+from leadthrough.sim.plant import PlantPreset, plant_preset
 from leadthrough.sim.robot import SimConfig
 from leadthrough.sim.session import DEFAULT_SIM_SEED
 
@@ -56,23 +63,33 @@ def shipped_guiding_params(robot: Robot, seed: int = DEFAULT_SIM_SEED) -> Params
 
 
 def calibrate_for_guiding(robot: Robot, seed: int = DEFAULT_SIM_SEED, duration_s: float = 60.0,
-                          progress: Callable[[str], None] | None = None) -> SweepCalibration:
-    """The demo's guiding calibration: an optimised excitation and a friction sweep recorded
-    on simulated instance ``seed``, identified with ``consistent`` and the sweep's friction.
+                          progress: Callable[[str], None] | None = None,
+                          plant: PlantPreset | str = PlantPreset.REALISTIC) -> SweepCalibration:
+    """The demo's guiding calibration: an optimised excitation, a friction sweep and a
+    presliding test recorded on simulated instance ``seed``, identified with ``consistent`` and
+    the sweep's friction, with each joint's z₀ from the presliding test (as ``leadthrough
+    identify --friction-sweep S --presliding-test P`` does).
 
     Args:
         robot: The robot.
         seed: Simulated robot instance.
         duration_s: Length of the excitation recording [s].
         progress: Called with a line of text after each step.
+        plant: Simulated plant (:mod:`leadthrough.sim.plant`).
     """
     say = progress if progress is not None else (lambda _: None)
     exc = design_excitation(robot, ExcitationConfig(starts=2, seed=0, max_iterations=100))
     say(f"excitation designed: cond = {exc.condition_number:.1f}")
-    rec = record_excitation(robot, exc, duration_s, SimConfig(seed=seed, run=0))
-    sweep = record_friction_sweep(robot, seed=seed, run=2, q_start=guide_start_pose(robot))
-    say("recorded the excitation and the friction sweep")
-    return identify_with_sweep(rec.measured, sweep.measured, robot, IdentifyConfig())
+    rec = record_excitation(robot, exc, duration_s,
+                            SimConfig(seed=seed, run=0, plant=plant_preset(plant)))
+    start = guide_start_pose(robot)
+    sweep = record_friction_sweep(robot, seed=seed, run=2, q_start=start, plant=plant)
+    pre = fit_presliding(record_presliding_test(robot, seed=seed, run=3, q_start=start,
+                                                plant=plant).measured, robot)
+    say("recorded the excitation, the friction sweep and the presliding test")
+    cal = identify_with_sweep(rec.measured, sweep.measured, robot, IdentifyConfig())
+    params = replace(cal.result.params, presliding=pre.presliding)
+    return replace(cal, result=replace(cal.result, params=params))
 
 
 def main() -> None:
