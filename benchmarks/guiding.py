@@ -1,6 +1,7 @@
 """Force following on the simulated er20 (issue 6): rest, push +x (Fig. 4), diagonal and seam
 (Fig. 5), and the full cycle time. Parameters come from calibration (consistent method on a
-60 s excitation with a friction sweep, seed 1), never from the simulator's truth.
+60 s excitation with a friction sweep, z₀ from a presliding test, seed 1), never from the
+simulator's truth.
 
     python benchmarks/guiding.py [--poses 20] [--rest-seconds 10] [--random 24]
                                  [--out benchmarks/out]
@@ -40,13 +41,18 @@ from leadthrough.drivers.replay import FeedbackTrace
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.identification.api import identify_with_sweep
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
+from leadthrough.identification.presliding import fit_presliding
 from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import force_error_in_motion, phantom_forces, release_overruns
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
 from leadthrough.session.record import SessionLog
-from leadthrough.sim.calibration_set import record_calibration_set, record_friction_sweep
+from leadthrough.sim.calibration_set import (
+    record_calibration_set,
+    record_friction_sweep,
+    record_presliding_test,
+)
 from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import (
     PUSH_MASS_KG,
@@ -111,13 +117,18 @@ def main() -> None:
                                      plant=args.plant)
         sweep = record_friction_sweep(robot, seed=args.seed, run=2, q_start=guide_start_pose(robot),
                                       plant=args.plant)
+        pre = fit_presliding(record_presliding_test(robot, seed=args.seed, run=3,
+                                                    q_start=guide_start_pose(robot),
+                                                    plant=args.plant).measured, robot)
         sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
         r = sc.result
-        path = save_params(args.out / "guiding_params.toml", robot, r.method, r.params,
-                           r.stats, sim_seed=args.seed, friction_sweep=True)
+        path = save_params(args.out / "guiding_params.toml", robot, r.method,
+                           replace(r.params, presliding=pre.presliding), r.stats,
+                           sim_seed=args.seed, friction_sweep=True)
         pf = load_params(path, robot)
-        print("Parameters: consistent + friction sweep; sweep fit RMS per joint "
-              + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + f" N·m -> {path}")
+        print("Parameters: consistent + friction sweep + presliding test; sweep fit RMS per "
+              "joint " + ", ".join(f"{v:.2f}" for v in sc.sweep.rms) + " N·m, z0 "
+              + ", ".join(f"{1e4 * v:.2f}" for v in pre.presliding) + f" e-4 rad -> {path}")
     if "1" in args.sections:
         section_rest(robot, pf, args.poses, args.rest_seconds, args.plant)
     if "2" in args.sections:
