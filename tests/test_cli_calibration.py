@@ -308,3 +308,24 @@ def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
     assert not bad.exists()
     assert main(["excite", "--sweep", "--presliding", "-o", str(tmp_path / "x.csv")]) == 2
     assert "--sweep or --presliding" in _err(capsys)
+
+
+def test_guide_notes_params_without_a_presliding_test(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """Guiding params with no presliding test still guide, with a note that a creeping joint
+    keeps the command's friction; the shipped params (which carry one) get no note."""
+    from leadthrough.sim.guiding_params import shipped_params_path
+
+    shipped = shipped_params_path("er20")
+    stripped = tmp_path / "no_z0.toml"
+    stripped.write_text("".join(line for line in shipped.read_text().splitlines(True)
+                                if not line.startswith("presliding =")))
+    for params, noted in ((shipped, False), (stripped, True)):
+        capsys.readouterr()
+        assert main(["guide", "--params", str(params), "--operator", "rest", "--duration", "1",
+                     "-o", str(tmp_path / f"{params.stem}.parquet")]) == 0
+        err = capsys.readouterr().err
+        assert ("carries no presliding test" in err) is noted
+        if noted:
+            assert str(stripped) in err and "--presliding-test" in err

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ from leadthrough.errors import DataError
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot.description import load_robot
-from leadthrough.session.loop_config import LoopConfig
+from leadthrough.session.loop_config import SLOW_COMMAND_VELOCITY, LoopConfig
 from leadthrough.session.record import save_session
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES
 from leadthrough.sim.plant import PLANT_NAMES
@@ -110,6 +111,11 @@ def run(args: argparse.Namespace) -> int:
                      "and identify with --method consistent --friction-sweep; or pass "
                      "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
                      " low at guiding speeds: a 40 N push barely moves the robot)")
+    if not pf.params.presliding.size:
+        print(f"leadthrough: note: {pf.path} carries no presliding test (joints.*.presliding):"
+              f" a joint commanded slower than {SLOW_COMMAND_VELOCITY:g} rad/s keeps the "
+              "command's friction (record one: excite --presliding, then identify "
+              "--presliding-test)", file=sys.stderr, flush=True)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     guiding = replace(guiding, controller=args.controller, friction_mode=args.friction)
     if args.hand_release:
