@@ -17,7 +17,7 @@ from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.errors import DataError
 from leadthrough.fileio import require_folder
-from leadthrough.identification.params_file import load_params
+from leadthrough.identification.params_file import ParamsFile, load_params
 from leadthrough.robot.description import load_robot
 from leadthrough.session.loop_config import SLOW_COMMAND_VELOCITY, LoopConfig
 from leadthrough.session.record import save_session
@@ -99,6 +99,16 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _note_missing_presliding(pf: ParamsFile) -> None:
+    """A note on stderr when ``pf`` carries no presliding test (after the input's checks, so
+    that bad input gets its one error line only)."""
+    if not pf.params.presliding.size:
+        print(f"leadthrough: note: {pf.path} carries no presliding test (joints.*.presliding):"
+              f" a joint commanded slower than {SLOW_COMMAND_VELOCITY:g} rad/s keeps the "
+              "command's friction (record one: excite --presliding, then identify "
+              "--presliding-test)", file=sys.stderr, flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
@@ -111,21 +121,18 @@ def run(args: argparse.Namespace) -> int:
                      "and identify with --method consistent --friction-sweep; or pass "
                      "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
                      " low at guiding speeds: a 40 N push barely moves the robot)")
-    if not pf.params.presliding.size:
-        print(f"leadthrough: note: {pf.path} carries no presliding test (joints.*.presliding):"
-              f" a joint commanded slower than {SLOW_COMMAND_VELOCITY:g} rad/s keeps the "
-              "command's friction (record one: excite --presliding, then identify "
-              "--presliding-test)", file=sys.stderr, flush=True)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     guiding = replace(guiding, controller=args.controller, friction_mode=args.friction)
     if args.hand_release:
         guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
     require_folder(args.output)
     if args.driver is not None:
+        _note_missing_presliding(pf)
         return guide_on_robot(args, robot, pf, guiding)
     refuse_settings(args, ("enable_input", "mark_input", "reset_input", "host", "port"),
                     "a robot setting given for the simulator",
                     "--driver D with it (the simulator scripts its inputs)")
+    _note_missing_presliding(pf)
     args.operator = args.operator or "push-x"
     seed = sim_robot_seed(args.seed, pf)
     loop = LoopConfig(guiding=guiding)
