@@ -183,16 +183,18 @@ def test_params_file_keeps_presliding_and_refuses_bad_values(er20: Robot, tmp_pa
                        er20).params.presliding.size == 0
 
 
-def _rest_friction(er20: Robot, params: DriveModelParameters, q_path: np.ndarray,
-                   config: EstimatorConfig) -> np.ndarray:
-    """τ_ext of an estimator fed ``q_path`` with no current and no command: −friction − τ̂_d
-    of the rigid body; returned relative to the first sample's."""
+def _tau_ext_without_current(er20: Robot, params: DriveModelParameters, q_path: np.ndarray,
+                             config: EstimatorConfig, qd_cmd: np.ndarray | None = None
+                             ) -> np.ndarray:
+    """τ_ext of an estimator fed ``q_path`` with no current and the commands ``qd_cmd`` (shape
+    of ``q_path``; None: none): friction + τ̂_d of the rigid body, per sample."""
     est = ExternalForceEstimator(er20, params, np.zeros(er20.n), config)
     inp, out = est.make_input(), est.make_output()
     est.reset(q_path[0])
+    commands = np.zeros_like(q_path) if qd_cmd is None else qd_cmd
     rows = []
-    for k, qk in enumerate(q_path):
-        inp.t, inp.q[:], inp.current[:], inp.qd_cmd[:] = k * 1e-3, qk, 0.0, 0.0
+    for k, (qk, ck) in enumerate(zip(q_path, commands, strict=True)):
+        inp.t, inp.q[:], inp.current[:], inp.qd_cmd[:] = k * 1e-3, qk, 0.0, ck
         est.update(inp, out)
         rows.append(out.tau_ext.copy())
     return np.array(rows)
@@ -215,8 +217,8 @@ def test_estimator_friction_at_rest_follows_the_displacement_with_each_joints_z0
     path[steps:, joint] += x * z0[joint]
     cfg = EstimatorConfig(friction_velocity="command", warm_up_s=0.0, output_cutoff_hz=400.0,
                           presliding_play_counts=0.0)
-    moved = _rest_friction(er20, params, path, cfg)
-    still = _rest_friction(er20, params, np.tile(path[-1], (path.shape[0], 1)), cfg)
+    moved = _tau_ext_without_current(er20, params, path, cfg)
+    still = _tau_ext_without_current(er20, params, np.tile(path[-1], (path.shape[0], 1)), cfg)
     friction = moved[-1, joint] - still[-1, joint]   # τ̂_d differs by the friction only
     assert friction == pytest.approx(10.0 * (1.0 - np.exp(-x)), rel=1e-3)
 
@@ -236,26 +238,12 @@ def test_estimator_play_operator_ignores_encoder_chatter_at_rest(er20: Robot) ->
         cfg = EstimatorConfig(friction_velocity="command", warm_up_s=0.0,
                               output_cutoff_hz=400.0, presliding_play_counts=counts)
         # averaged over the last second: the chatter's acceleration estimate alternates
-        friction = (_rest_friction(er20, params, push, cfg)
-                    - _rest_friction(er20, params, still, cfg))[-1000:].mean(axis=0)
+        friction = (_tau_ext_without_current(er20, params, push, cfg)
+                    - _tau_ext_without_current(er20, params, still, cfg))[-1000:].mean(axis=0)
         if worn:
             assert np.all(friction < 5.0)      # the chatter has worn the state down
         else:
             np.testing.assert_allclose(friction, 10.0 * (1 - np.exp(-5.0)), rtol=1e-3)
-
-
-def _command_friction(er20: Robot, params: DriveModelParameters, q_path: np.ndarray,
-                      qd_cmd: np.ndarray, config: EstimatorConfig) -> np.ndarray:
-    """τ_ext of an estimator fed ``q_path`` and the commands ``qd_cmd`` with no current."""
-    est = ExternalForceEstimator(er20, params, np.zeros(er20.n), config)
-    inp, out = est.make_input(), est.make_output()
-    est.reset(q_path[0])
-    rows = []
-    for k, (qk, ck) in enumerate(zip(q_path, qd_cmd, strict=True)):
-        inp.t, inp.q[:], inp.current[:], inp.qd_cmd[:] = k * 1e-3, qk, 0.0, ck
-        est.update(inp, out)
-        rows.append(out.tau_ext.copy())
-    return np.array(rows)
 
 
 @pytest.mark.parametrize("measured_z0", [True, False])
@@ -284,8 +272,8 @@ def test_a_creeping_joint_keeps_the_friction_its_encoder_says(er20: Robot,
                           presliding_play_counts=0.0, slow_command_velocity=0.01)
     frictionless = replace(params, coulomb=np.zeros(n))
     # τ̂_d differs by the friction term only
-    friction = (_command_friction(er20, params, path, qd_cmd, cfg)
-                - _command_friction(er20, frictionless, path, qd_cmd, cfg))
+    friction = (_tau_ext_without_current(er20, params, path, cfg, qd_cmd)
+                - _tau_ext_without_current(er20, frictionless, path, cfg, qd_cmd))
     at = slide + stick - 1
     if measured_z0:
         assert friction[at, j] == pytest.approx(g, rel=1e-3)     # still the forward friction
