@@ -24,7 +24,6 @@ truth (issue 24); ``--seed`` picks the robot instance.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -74,7 +73,7 @@ def main() -> None:
     poses = [rng.uniform(0.6 * robot.lower_limits, 0.6 * robot.upper_limits)
              for _ in range(args.poses)]
     plain, swept = (res.params, res.stats), (res_sweep.params, res_sweep.stats)
-    tested = (replace(res_sweep.params, presliding=pre.presliding), res_sweep.stats)
+    tested = (pre.applied_to(res_sweep.params), res_sweep.stats)
     variants = {f"{m}/{a} 3 Hz": (*plain, EstimatorConfig(method=m, axes=a))
                 for m in ("direct", "momentum") for a in ("wrench", "force")}
     for m in ("direct", "momentum"):

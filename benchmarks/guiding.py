@@ -123,7 +123,7 @@ def main() -> None:
         sc = identify_with_sweep(cal.identification.measured, sweep.measured, robot)
         r = sc.result
         path = save_params(args.out / "guiding_params.toml", robot, r.method,
-                           replace(r.params, presliding=pre.presliding), r.stats,
+                           pre.applied_to(r.params), r.stats,
                            sim_seed=args.seed, friction_sweep=True)
         pf = load_params(path, robot)
         print("Parameters: consistent + friction sweep + presliding test; sweep fit RMS per "

@@ -75,7 +75,7 @@ def calibrated(robot: Robot, seed: int, plant: str, cache: Path) -> ParamsFile:
     """Guiding parameters of simulated instance ``seed``, identified from its recordings
     (60 s excitation, friction sweep and presliding test: ``calibrate_for_guiding``); read
     from ``cache`` when made before."""
-    path = cache / f"{robot.name}_{plant}_seed{seed}_guiding_z0.toml"
+    path = cache / f"{robot.name}_{plant}_seed{seed}_guiding_z0r.toml"
     if not path.is_file():
         t0 = time.perf_counter()
         cal = calibrate_for_guiding(robot, seed, plant=plant)

@@ -277,8 +277,8 @@ def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
 
 def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
-    """excite --presliding → record → identify --presliding-test writes each joint's z₀ into
-    the params; the fit is done before the identification, so a bad test file fails first
+    """excite --presliding → record → identify --presliding-test writes each joint's z₀ and
+    relaxation rate into the params; the fit is done before the identification, so a bad test file fails first
     and writes nothing."""
     from leadthrough.identification.params_file import load_params
     from leadthrough.robot import load_robot
@@ -297,8 +297,13 @@ def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
     fit = _json(capsys)["presliding"]
     assert fit["pairs"] >= 30
     z0 = [fit["joints"][f"joint_{k}"]["z0_rad"] for k in range(1, 7)]
-    np.testing.assert_array_equal(load_params(out, load_robot("er20")).params.presliding, z0)
+    rate = [fit["joints"][f"joint_{k}"]["relaxation_per_s"] for k in range(1, 7)]
+    written = load_params(out, load_robot("er20")).params
+    np.testing.assert_array_equal(written.presliding, z0)
+    np.testing.assert_array_equal(written.presliding_relaxation, rate)
     assert all(1e-4 < z < 3e-4 for z in z0)
+    # the ideal plant's wrists relax at rest too (its servo dithers them the same way)
+    assert all(0.03 < r < 0.3 for r in rate[3:])
     # the identification recording is no presliding test: exit 2, nothing written
     bad = tmp_path / "bad.toml"
     assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
@@ -314,18 +319,23 @@ def test_guide_notes_params_without_a_presliding_test(tmp_path: Path,
                                                        capsys: pytest.CaptureFixture[str]
                                                        ) -> None:
     """Guiding params with no presliding test still guide, with a note that a creeping joint
-    keeps the command's friction; the shipped params (which carry one) get no note."""
+    keeps the command's friction; params whose test lacks the relaxation at rest get a note
+    of their own; the shipped params (which carry both) get none."""
     from leadthrough.sim.guiding_params import shipped_params_path
 
     shipped = shipped_params_path("er20")
     stripped = tmp_path / "no_z0.toml"
     stripped.write_text("".join(line for line in shipped.read_text().splitlines(True)
-                                if not line.startswith("presliding =")))
-    for params, noted in ((shipped, False), (stripped, True)):
+                                if not line.startswith("presliding")))
+    older = tmp_path / "no_relaxation.toml"
+    older.write_text("".join(line for line in shipped.read_text().splitlines(True)
+                             if not line.startswith("presliding_relaxation")))
+    for params, note in ((shipped, ""), (stripped, "carries no presliding test"),
+                         (older, "carries no relaxation of the friction at rest")):
         capsys.readouterr()
         assert main(["guide", "--params", str(params), "--operator", "rest", "--duration", "1",
                      "-o", str(tmp_path / f"{params.stem}.parquet")]) == 0
         err = capsys.readouterr().err
-        assert ("carries no presliding test" in err) is noted
-        if noted:
-            assert str(stripped) in err and "--presliding-test" in err
+        assert ("leadthrough: note:" in err) is bool(note)
+        if note:
+            assert note in err and str(params) in err and "--presliding-test" in err

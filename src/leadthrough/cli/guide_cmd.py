@@ -100,13 +100,19 @@ def register(sub: Any) -> None:
 
 
 def _note_missing_presliding(pf: ParamsFile) -> None:
-    """A note on stderr when ``pf`` carries no presliding test (after the input's checks, so
-    that bad input gets its one error line only)."""
+    """A note on stderr when ``pf`` carries no presliding test, or one without the friction's
+    relaxation at rest (after the input's checks, so that bad input gets its one error line
+    only)."""
     if not pf.params.presliding.size:
         print(f"leadthrough: note: {pf.path} carries no presliding test (joints.*.presliding):"
               f" a joint commanded slower than {SLOW_COMMAND_VELOCITY:g} rad/s keeps the "
               "command's friction (record one: excite --presliding, then identify "
               "--presliding-test)", file=sys.stderr, flush=True)
+    elif not pf.params.presliding_relaxation.size:
+        print(f"leadthrough: note: {pf.path} carries no relaxation of the friction at rest "
+              "(joints.*.presliding_relaxation, fitted since 2026-11-28): the estimate at "
+              "rest drifts about twice as fast (identify --presliding-test again)",
+              file=sys.stderr, flush=True)
 
 
 def run(args: argparse.Namespace) -> int:

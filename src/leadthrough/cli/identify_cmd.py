@@ -189,8 +189,7 @@ def run_identify(args: argparse.Namespace) -> int:
     else:
         result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
     bar.close(f"J = {result.J:.3f}")
-    params = result.params if pre is None else replace(result.params,
-                                                       presliding=pre.presliding)
+    params = result.params if pre is None else pre.applied_to(result.params)
     lag = measure_command_lag(rec)  # None where the recording logged no commands
     if lag is not None:
         params = replace(params, command_lag=lag.lag_s)
@@ -220,6 +219,8 @@ def run_identify(args: argparse.Namespace) -> int:
         if pre is not None:
             print(f"  presliding test ({pre.pairs.first.size} rest pairs): z0 [1e-4 rad] "
                   + ", ".join(f"{1e4 * z:.2f}" for z in pre.presliding)
+                  + "; relaxation at rest [1/s] "
+                  + ", ".join(f"{r:.3f}" for r in pre.relaxation)
                   + "; level at rest [N·m] " + ", ".join(f"{g:.3g}" for g in pre.level))
         if lag is not None:
             print(f"  command lag {1e3 * lag.lag_s:.1f} ms (the recording's commands to its "
@@ -249,6 +250,8 @@ def _presliding_json(robot: Robot, fit: PreslidingFit) -> dict[str, Any]:
     """The presliding fit per joint, for --json."""
     joints = {jn: {"z0_rad": float(fit.presliding[k]),
                    "z0_std_rad": float(fit.presliding_std[k]),
+                   "relaxation_per_s": float(fit.relaxation[k]),
+                   "relaxation_std_per_s": float(fit.relaxation_std[k]),
                    "level_Nm": float(fit.level[k]), "rms_Nm": float(fit.rms[k])}
               for k, jn in enumerate(robot.joint_names)}
     return {"pairs": int(fit.pairs.first.size), "joints": joints}

@@ -210,16 +210,17 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
         res.files[f"params ({m})"] = path
         params[m] = ParamsFile.from_result(r, path, seed)
     guided = identify_with_sweep(cal.identification.measured, sweep.measured, robot, cfg)
-    z0 = fit_presliding(pre.measured, robot).presliding
+    fit = fit_presliding(pre.measured, robot)
     guided = replace(guided, result=replace(
-        guided.result, params=replace(guided.result.params, presliding=z0)))
+        guided.result, params=fit.applied_to(guided.result.params)))
     path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
                        guided.result.params, guided.result.stats, seed, friction_sweep=True)
     res.files["params (guiding: consistent + friction sweep)"] = path
     res.sweep_rms = guided.sweep.rms.tolist()
     say("      guiding parameters: consistent with the friction sweep (fit RMS "
         + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m), z0 "
-        + ", ".join(f"{1e4 * v:.2f}" for v in z0) + " e-4 rad")
+        + ", ".join(f"{1e4 * v:.2f}" for v in fit.presliding) + " e-4 rad, relaxation "
+        + ", ".join(f"{v:.3f}" for v in fit.relaxation) + " 1/s")
     held = preprocess(cal.held_out.measured, robot, cfg.preprocess)
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},

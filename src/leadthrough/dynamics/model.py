@@ -34,12 +34,17 @@ from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
 __all__ = ["MAX_COMMAND_LAG_S", "MAX_LOAD_FRICTION", "MAX_PRESLIDING_RAD",
+           "MAX_PRESLIDING_RELAXATION",
            "DriveModelParameters", "FrictionModel", "model_torque", "nominal_drive_parameters"]
 
 Array = NDArray[np.float64]
 
 #: Largest presliding length z₀ accepted anywhere [rad] (gear presliding is ≲ 1e-3)
 MAX_PRESLIDING_RAD = 0.1
+
+#: Largest relaxation rate of the friction carried at rest accepted anywhere [1/s] (a time
+#: constant of 0.1 s: faster than that, the friction would not outlast a guiding cycle's stop).
+MAX_PRESLIDING_RELAXATION = 10.0
 
 #: Largest command-to-position lag accepted anywhere [s]: a controller interface's transport
 #: and servo delay is a few of its 1-8 ms cycles.
@@ -78,6 +83,11 @@ class DriveModelParameters:
             the displacement over which the friction of a joint at rest turns over
             (:mod:`leadthrough.identification.presliding`); the estimator's friction at rest
             uses it.
+        presliding_relaxation: Rate at which the friction carried at rest relaxes toward zero
+            [1/s], shape (n,), or empty for none (only with ``presliding``): the servo's
+            dither of a joint held still wears its friction state down, by a motion far below
+            one encoder count (:mod:`leadthrough.identification.presliding`). 0 <= rate <=
+            :data:`MAX_PRESLIDING_RELAXATION`.
         load_friction: f_cL per joint [-], shape (n,), or empty for none (zeros): the Coulomb
             level is f_c0 + f_cL·|τ_load| (f_c0 is ``stribeck.f1`` or ``coulomb``). Not in
             eq. 21 (see the module docstring). 0 <= f_cL < :data:`MAX_LOAD_FRICTION`.
@@ -97,6 +107,7 @@ class DriveModelParameters:
     cbrt: Array = field(default_factory=lambda: np.zeros(0))
     offset: Array = field(default_factory=lambda: np.zeros(0))
     presliding: Array = field(default_factory=lambda: np.zeros(0))
+    presliding_relaxation: Array = field(default_factory=lambda: np.zeros(0))
     load_friction: Array = field(default_factory=lambda: np.zeros(0))
     command_lag: float = 0.0
 
@@ -111,6 +122,13 @@ class DriveModelParameters:
             raise DataError("presliding lengths out of range", field="presliding",
                             value=z0.tolist(),
                             expected=f"{n} values in (0, {MAX_PRESLIDING_RAD:g}] rad, or none")
+        rr = np.asarray(self.presliding_relaxation, dtype=float)
+        if rr.size and (rr.shape != (n,) or not z0.size or not np.all(
+                (rr >= 0) & (rr <= MAX_PRESLIDING_RELAXATION))):
+            raise DataError("presliding relaxation out of range", field="presliding_relaxation",
+                            value=rr.tolist(),
+                            expected=f"{n} values in [0, {MAX_PRESLIDING_RELAXATION:g}] 1/s "
+                                     "with the presliding lengths, or none")
         fl = np.asarray(self.load_friction, dtype=float)
         if fl.size and (fl.shape != (n,) or not np.all((fl >= 0) & (fl < MAX_LOAD_FRICTION))):
             raise DataError("load-dependent friction out of range", field="load_friction",

@@ -67,8 +67,8 @@ def dahl_step(state: float, displacement: float, level: float, presliding: float
 @njit(cache=True, nogil=True)
 def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: Array,
                              dt: float, slow: Array, command_presliding: Array,
-                             rest_presliding: Array, state: Array, out: Array,
-                             level: Array) -> None:
+                             rest_presliding: Array, rest_decay: Array, state: Array,
+                             out: Array, level: Array) -> None:
     """Friction with memory, one step: eq. 15 as the steady state of a LuGre/Dahl model.
 
     The Coulomb + Stribeck part F follows dF = k·(dq − |dq|·F/g(q̇)), with g(q̇) the eq. 15
@@ -90,6 +90,10 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
       (a wrist reversing, or dithering about zero, while the TCP moves) does not say where
       the gear is: its servo builds the torque to move it over many samples, and the gear
       stays in presliding meanwhile, which the encoder sees and the command does not.
+      Meanwhile F relaxes toward zero by the factor ``rest_decay`` per step
+      (e^{−r·dt}, r the params' ``presliding_relaxation``): the servo's dither of a joint
+      held still, far below one count, wears the friction down where the encoder sees no
+      motion.
 
     Each step is the exact solution for a constant rate. The viscous (and cube-root) terms of
     the commanded velocity are added as usual.
@@ -107,6 +111,8 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
             shape (n,) (0: only a joint commanded to stand still).
         command_presliding: z₀ per joint of the commanded motion [rad], shape (n,).
         rest_presliding: z₀ per joint at rest [rad], shape (n,).
+        rest_decay: Per joint, the factor F is multiplied by every step at rest or creeping
+            [-], shape (n,), in (0, 1] (1: no relaxation).
         state: F, the Coulomb + Stribeck part [N·m] (in place), shape (n,).
         out: Friction torque [N·m], shape (n,).
         level: The eq. 15 level g(q̇) [N·m] (written), shape (n,).
@@ -126,8 +132,10 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
                 target = g if v > 0.0 else -g
                 state[j] = target + (state[j] - target) * np.exp(
                     -g0 * abs(v) * dt / (command_presliding[j] * g))
-        elif increment[j] != 0.0 and g0 > 0.0:
-            state[j] = dahl_step(state[j], increment[j], g0, rest_presliding[j])
+        else:
+            if increment[j] != 0.0 and g0 > 0.0:
+                state[j] = dahl_step(state[j], increment[j], g0, rest_presliding[j])
+            state[j] *= rest_decay[j]
         f = state[j] + v * fp.viscous[j]
         if not fp.stribeck:
             f += fp.cbrt[j] * np.cbrt(v)

@@ -162,6 +162,8 @@ class ExternalForceEstimator:
         s.offset = mdl.offset
         s.noise_mean = noise_mean if cfg.remove_mean_noise else 0.0
         s.rest_presliding = presliding_lengths(params.presliding, n, None)
+        s.rest_decay = np.exp(-cfg.dt * params.presliding_relaxation) \
+            if params.presliding_relaxation.size else 1.0
         s.command_presliding = presliding_lengths(np.empty(0), n, cfg.presliding_length)
         # the encoder drives a creeping joint's friction only with a measured z₀
         s.slow_command = cfg.slow_command_velocity if params.presliding.size else 0.0

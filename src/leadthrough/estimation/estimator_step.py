@@ -111,6 +111,7 @@ def estimator_dtype(n: int) -> np.dtype[Any]:
         ("torque_per_amp", *joints), ("noise_std", *joints), ("rotor_inertia", *joints),
         ("offset", *joints), ("noise_mean", *joints),
         ("rest_presliding", *joints),         # z₀ at rest [rad]
+        ("rest_decay", *joints),              # e^{−r·dt}: its relaxation at rest per sample
         ("play_half_width", *joints),         # of the play operator on the encoder [rad]
         # state: the differentiator, the last sample
         ("q_filtered", *joints), ("qd_filtered", *joints), ("qdd_filtered", *joints),

@@ -60,7 +60,8 @@ def sample_friction(inp: Record, est: Record) -> None:
         presliding_friction_step(est.friction_command, est.play_increment, fp,
                                  est.load_torque, est.dt, est.slow_command,
                                  est.command_presliding, est.rest_presliding,
-                                 est.friction_state, est.friction_torque, est.friction_level)
+                                 est.rest_decay, est.friction_state, est.friction_torque,
+                                 est.friction_level)
         if est.weigh_by_friction:
             encoder_friction_step(est.play_increment, est.friction_command, est.slow_command,
                                   est.friction_level, est.rest_presliding,

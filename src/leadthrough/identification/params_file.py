@@ -48,6 +48,7 @@ from leadthrough.dynamics.model import (
     MAX_COMMAND_LAG_S,
     MAX_LOAD_FRICTION,
     MAX_PRESLIDING_RAD,
+    MAX_PRESLIDING_RELAXATION,
     DriveModelParameters,
     FrictionModel,
 )
@@ -159,6 +160,8 @@ def save_params(
             lines.append(f"offset = {_fmt(params.offset[k])}")
         if params.presliding.size:
             lines.append(f"presliding = {_fmt(params.presliding[k])}")
+        if params.presliding_relaxation.size:
+            lines.append(f"presliding_relaxation = {_fmt(params.presliding_relaxation[k])}")
         if params.load_friction.size:
             lines.append(f"load_friction = {_fmt(params.load_friction[k])}")
         for key in keys:
@@ -266,7 +269,9 @@ class _JointTables:
         self.keys = _FRICTION_KEYS[model]
         self.drive = {key: np.zeros(n) for key in (*self.keys, "rotor_inertia")}
         self.offset, self.presliding, self.load = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.relaxation = np.zeros(n)
         self.has_offset, self.presliding_joints, self.load_joints = False, 0, 0
+        self.relaxation_joints = 0
         self.phi = np.zeros(10 * n)
         for table, name in ((joints, "joints"), (links, "links")):
             extra = sorted(set(table) - set(robot.joint_names))
@@ -282,15 +287,21 @@ class _JointTables:
             self._read_joint(k, jn, jt)
             self._read_link(k, jn, lt)
         for key, count in (("presliding", self.presliding_joints),
+                           ("presliding_relaxation", self.relaxation_joints),
                            ("load_friction", self.load_joints)):
             if count not in (0, n):
                 raise DataError(f"{key} given for some joints only", source=path,
                                 field=f"joints.*.{key}", value=count,
                                 expected=f"all {n} joints or none")
+        if self.relaxation_joints and not self.presliding_joints:
+            raise DataError("presliding_relaxation without presliding", source=path,
+                            field="joints.*.presliding_relaxation", value=n,
+                            expected="with the presliding lengths of the same test")
 
     def _read_joint(self, k: int, jn: str, jt: dict[str, Any]) -> None:
         path = self.path
-        _only(path, f"joints.{jn}", jt, {*self.drive, "offset", "presliding", "load_friction"})
+        _only(path, f"joints.{jn}", jt, {*self.drive, "offset", "presliding",
+                                         "presliding_relaxation", "load_friction"})
         if "offset" in jt:
             self.offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
             self.has_offset = True
@@ -300,6 +311,13 @@ class _JointTables:
                 raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
                                 value=z0, expected=f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad")
             self.presliding_joints += 1
+        if "presliding_relaxation" in jt:
+            field = f"joints.{jn}.presliding_relaxation"
+            rate = self.relaxation[k] = _number(path, field, jt["presliding_relaxation"])
+            if not 0 <= rate <= MAX_PRESLIDING_RELAXATION:
+                raise DataError("out of range", source=path, field=field, value=rate,
+                                expected=f"0 <= rate <= {MAX_PRESLIDING_RELAXATION:g} 1/s")
+            self.relaxation_joints += 1
         if "load_friction" in jt:
             fl = self.load[k] = _number(path, f"joints.{jn}.load_friction", jt["load_friction"])
             if not 0 <= fl < MAX_LOAD_FRICTION:
@@ -330,16 +348,19 @@ class _JointTables:
         fr, n = self.drive, self.phi.size // 10
         offset = self.offset if self.has_offset else np.zeros(0)
         presliding = self.presliding if self.presliding_joints else np.zeros(0)
+        relaxation = self.relaxation if self.relaxation_joints else np.zeros(0)
         load = self.load if self.load_joints else np.zeros(0)
         if self.model is FrictionModel.STRIBECK:
             return DriveModelParameters(
                 phi=self.phi, friction_model=self.model, rotor_inertia=fr["rotor_inertia"],
                 stribeck=StribeckParameters(**{key: fr[key] for key in self.keys}),
-                offset=offset, presliding=presliding, load_friction=load)
+                offset=offset, presliding=presliding, presliding_relaxation=relaxation,
+                load_friction=load)
         return DriveModelParameters(
             phi=self.phi, friction_model=self.model, rotor_inertia=fr["rotor_inertia"],
             coulomb=fr["coulomb"], viscous=fr["viscous"], cbrt=fr.get("cbrt", np.zeros(n)),
-            offset=offset, presliding=presliding, load_friction=load)
+            offset=offset, presliding=presliding, presliding_relaxation=relaxation,
+            load_friction=load)
 
 
 def _only(path: Path, where: str, table: dict[str, Any], allowed: set[str]) -> None:

@@ -88,7 +88,7 @@ def calibrate_for_guiding(robot: Robot, seed: int = DEFAULT_SIM_SEED, duration_s
                                                 plant=plant).measured, robot)
     say("recorded the excitation, the friction sweep and the presliding test")
     cal = identify_with_sweep(rec.measured, sweep.measured, robot, IdentifyConfig())
-    params = replace(cal.result.params, presliding=pre.presliding)
+    params = pre.applied_to(cal.result.params)
     return replace(cal, result=replace(cal.result, params=params))
 
 
