@@ -278,8 +278,8 @@ def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
 def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """excite --presliding → record → identify --presliding-test writes each joint's z₀ and
-    relaxation rate into the params; the fit is done before the identification, so a bad test file fails first
-    and writes nothing."""
+    relaxation rate into the params; the fit is done before the identification, so a bad
+    test file fails first and writes nothing."""
     from leadthrough.identification.params_file import load_params
     from leadthrough.robot import load_robot
 
