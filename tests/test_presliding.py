@@ -208,7 +208,7 @@ def test_the_wrists_friction_relaxes_at_rest_on_the_simulator(er20: Robot) -> No
 
 
 @pytest.mark.xfail(strict=True, reason="known bias: with the relaxation the wrists' z₀ reads "
-                   "8-27 % long (20-33 % short without it; README, Limitations)")
+                   "11-22 % long (19-29 % short without it; README, Presliding test)")
 def test_the_wrists_presliding_within_the_main_axes_tolerance(er20: Robot) -> None:
     """The wrists held to joints 1–3's 12 %: fails today (strict), so a fix shows up."""
     rec = record_presliding_test(er20, seed=1, run=3, q_start=guide_start_pose(er20))
