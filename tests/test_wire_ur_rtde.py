@@ -5,6 +5,9 @@ loopback (trajectory, protective stop, watchdog, E-stop, closed socket, lost pac
 from __future__ import annotations
 
 import math
+import socket
+import struct
+import time
 
 import numpy as np
 import pytest
@@ -230,6 +233,29 @@ def test_estop_loss_and_closed_socket_are_seen_for_what_they_are(ur5: Robot) -> 
     assert states[-1].values["safety_status_bits"] & (1 << 7)
     assert client.error is not None and client.error.kind is LinkErrorKind.CLOSED
     assert client.receive(0.01) is None
+
+
+def test_a_reset_by_the_controller_is_a_closed_link() -> None:
+    """A controller that closes while our commands are still unread in its socket answers them
+    with a reset (RST), and recv raises ConnectionResetError: that is the controller closing
+    the connection (LinkErrorKind.CLOSED, as a send into a closed connection is), not a
+    socket fault. Before, which of the two a closed controller gave depended on the race
+    (tests/test_wire_drivers.py::test_nan_and_a_closed_socket failed under load)."""
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        client = RtdeClient("127.0.0.1", server.getsockname()[1])
+        sock = socket.create_connection(server.getsockname())
+        conn, _ = server.accept()
+        sock.sendall(b"\x00" * 64)                     # never read by the controller
+        time.sleep(0.05)
+        conn.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        conn.close()                                    # linger 0: a reset, not a FIN
+        client._sock = sock      # the connection as open() leaves it, without a handshake
+        try:
+            assert client._fill(1.0) is False
+        finally:
+            sock.close()
+    assert client.error is not None and client.error.kind is LinkErrorKind.CLOSED
+    assert "reset" in str(client.error).lower()
 
 
 def test_refused_setups_name_the_variable(ur5: Robot) -> None:

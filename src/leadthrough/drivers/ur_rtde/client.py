@@ -194,7 +194,11 @@ class RtdeClient(Transport):
                 return False
             data = sock.recv(65536)
         except OSError as e:
-            self._link.fail(LinkErrorKind.SOCKET, str(e))
+            # a reset is the peer closing with our commands still unread (its kernel answers
+            # them with RST): closed, as in send_command; anything else is the socket's
+            kind = LinkErrorKind.CLOSED if isinstance(e, ConnectionError) else (
+                LinkErrorKind.SOCKET)
+            self._link.fail(kind, str(e))
             return False
         if not data:
             self._link.fail(LinkErrorKind.CLOSED, "the controller closed the connection")
