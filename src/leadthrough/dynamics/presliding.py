@@ -19,9 +19,26 @@ from numpy.typing import NDArray
 
 from leadthrough.dynamics.friction import coulomb_level, stribeck_terms
 
-__all__ = ["dahl_step", "play_step", "presliding_friction_step"]
+__all__ = ["dahl_step", "play_step", "presliding_friction_step", "relaxation_factor"]
 
 Array = NDArray[np.float64]
+
+
+def relaxation_factor(relaxation: Array, dt: float) -> Array:
+    """The factor e^{−r·dt} by which the friction held at rest relaxes in one step of ``dt``.
+
+    The one discretisation of the relaxation at rest: the estimator's record
+    (:func:`presliding_friction_step`'s ``rest_decay``) and the presliding test's fit
+    (:mod:`leadthrough.identification.presliding`) both take it from here.
+
+    Args:
+        relaxation: r per joint [1/s], shape (n,) (the params' ``presliding_relaxation``).
+        dt: Step [s].
+
+    Returns:
+        The factor per joint, in (0, 1], shape (n,).
+    """
+    return np.exp(-dt * np.asarray(relaxation, dtype=float))
 
 
 @njit(cache=True, nogil=True)
@@ -91,9 +108,9 @@ def presliding_friction_step(qd: Array, increment: Array, fp: Any, load_torque: 
       the gear is: its servo builds the torque to move it over many samples, and the gear
       stays in presliding meanwhile, which the encoder sees and the command does not.
       Meanwhile F relaxes toward zero by the factor ``rest_decay`` per step
-      (e^{−r·dt}, r the params' ``presliding_relaxation``): the servo's dither of a joint
-      held still, far below one count, wears the friction down where the encoder sees no
-      motion.
+      (:func:`relaxation_factor` of the params' ``presliding_relaxation``): the servo's
+      dither of a joint held still, far below one count, wears the friction down where the
+      encoder sees no motion.
 
     Each step is the exact solution for a constant rate. The viscous (and cube-root) terms of
     the commanded velocity are added as usual.

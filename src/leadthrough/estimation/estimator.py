@@ -42,6 +42,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import DriveModelParameters
+from leadthrough.dynamics.presliding import relaxation_factor
 from leadthrough.errors import DataError
 from leadthrough.estimation.estimator_config import (
     DEFAULT_PRESLIDING_RAD,
@@ -162,7 +163,7 @@ class ExternalForceEstimator:
         s.offset = mdl.offset
         s.noise_mean = noise_mean if cfg.remove_mean_noise else 0.0
         s.rest_presliding = presliding_lengths(params.presliding, n, None)
-        s.rest_decay = np.exp(-cfg.dt * params.presliding_relaxation) \
+        s.rest_decay = relaxation_factor(params.presliding_relaxation, cfg.dt) \
             if params.presliding_relaxation.size else 1.0
         s.command_presliding = presliding_lengths(np.empty(0), n, cfg.presliding_length)
         # the encoder drives a creeping joint's friction only with a measured z₀

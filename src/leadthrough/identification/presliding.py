@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.model import MAX_PRESLIDING_RELAXATION, DriveModelParameters
-from leadthrough.dynamics.presliding import dahl_step, play_step
+from leadthrough.dynamics.presliding import dahl_step, play_step, relaxation_factor
 from leadthrough.errors import DataError, check_fields
 from leadthrough.robot.description import Robot
 
@@ -175,8 +175,8 @@ def dahl_states(q: Array, half_width: Array, presliding: Array, decay: Array) ->
         q: Joint positions [rad], shape (N, n).
         half_width: Half width of the play operator per joint [rad], shape (n,).
         presliding: z₀ per joint [rad], shape (n,).
-        decay: Per joint, the factor e^{−r·dt} s is multiplied by every sample [-], shape
-            (n,) (1: no relaxation).
+        decay: Per joint, the factor s is multiplied by every sample [-], shape (n,)
+            (:func:`~leadthrough.dynamics.presliding.relaxation_factor`; 1: no relaxation).
 
     Returns:
         s ∈ [−1, 1], shape (N, n).
@@ -305,7 +305,7 @@ def fit_presliding(recording: Recording, robot: Robot,
     df = pairs.torque_change
 
     def changes(qj: Array, hj: Array, z0: Array, rate: Array) -> Array:
-        return _state_changes(qj, hj, z0, np.exp(-dt * rate), pairs)
+        return _state_changes(qj, hj, z0, relaxation_factor(rate, dt), pairs)
 
     # grid over (log z₀, r), every joint at once
     lo, hi = (math.log(v) for v in cfg.z0_range)
