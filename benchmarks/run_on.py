@@ -1,7 +1,8 @@
 """Run-on after a release (issue 24): does the simulated robot stop when the hand lets go, on
 calibrated parameters and robot instances nobody tuned on?
 
-    python benchmarks/run_on.py [--instances 3,4,5] [--sessions 20] [--seam 5]
+    python benchmarks/run_on.py [--instances 3,4,5] [--sessions 20] [--first-operator 0]
+                                [--seam 5]
                                 [--plant realistic|ideal] [--warm-up MINUTES] [--cache DIR]
                                 [--no-hand-release]
 
@@ -11,13 +12,14 @@ excitation and a friction sweep recorded on it, ``consistent`` with the sweep's 
 system's temporary folder) so that a second run skips the minutes this takes. Then, per
 instance:
 
-1. ``--sessions`` ``random`` sessions (operator seeds 0, 1, …: 8 pushes of 20–60 N in random
-   directions, 100 kg translational mass): the travel after each release beyond the shortest
-   stop at the acceleration limit (``release_overruns``), p90 and max over all releases; the
-   time the robot kept moving after a release beyond that stop (``release_motion_times``);
-   faults latched with no hand on the tool for a stop's length (``faults_without_hand``); the
-   force estimate's error while the TCP moves at least 0.02 m/s (RMS over all sessions, as
-   ``force_error_in_motion``) and the phantom force after each release (``phantom_forces``).
+1. ``--sessions`` ``random`` sessions (operator seeds 0, 1, …, or from ``--first-operator``:
+   8 pushes of 20–60 N in random directions, 100 kg translational mass): the travel after
+   each release beyond the shortest stop at the acceleration limit (``release_overruns``),
+   p90 and max over all releases; the time the robot kept moving after a release beyond
+   that stop (``release_motion_times``); faults latched with no hand on the tool for a
+   stop's length (``faults_without_hand``); the force estimate's error while the TCP moves
+   at least 0.02 m/s (RMS over all sessions, as ``force_error_in_motion``) and the phantom
+   force after each release (``phantom_forces``).
 2. ``--seam`` ``seam`` sessions (the operator stops at P1, marks it, guides along the seam,
    stops at P2): the taught endpoints' distance to the operator's targets.
 3. A ``rest`` session (drift with no hand: exactly 0 expected) and a ``push-x`` session (peak
@@ -113,13 +115,14 @@ class Figures:
 
 
 def random_sessions(robot: Robot, params: ParamsFile, base: SimSessionConfig, sessions: int,
-                    out: Figures) -> None:
+                    out: Figures, first: int = 0) -> None:
     """Overruns, moving times, hand-free faults, force errors and phantoms of ``sessions``
-    random sessions on ``base``'s robot (operator seeds 0, 1, …), added to ``out``."""
+    random sessions on ``base``'s robot (operator seeds ``first``, ``first`` + 1, …), added to
+    ``out``."""
     guiding = light_guiding()
     acc = guiding.limits.max_linear_acceleration
     stop_s = guiding.limits.max_linear_speed / acc
-    for k in range(sessions):
+    for k in range(first, first + sessions):
         s = session(robot, params, replace(base, operator="random", operator_seed=k))
         o = release_overruns(s.result.log, acc)
         m = release_motion_times(s.result.log, acc)
@@ -182,7 +185,7 @@ def rest_and_push(robot: Robot, params: ParamsFile, base: SimSessionConfig,
 def evaluate(robot: Robot, params: ParamsFile, base: SimSessionConfig, args: argparse.Namespace,
              out: Figures) -> None:
     """All of one instance's sessions on ``base``'s robot (its seed, plant and warm-up)."""
-    random_sessions(robot, params, base, args.sessions, out)
+    random_sessions(robot, params, base, args.sessions, out, args.first_operator)
     seam_sessions(robot, params, base, args.seam, out)
     rest_and_push(robot, params, base, out)
 
@@ -234,6 +237,8 @@ def main() -> None:
     parser.add_argument("--instances", default="3,4,5",
                         help="simulated robot instances (seeds), comma separated")
     parser.add_argument("--sessions", type=int, default=20, help="random sessions per instance")
+    parser.add_argument("--first-operator", type=int, default=0, metavar="SEED",
+                        help="operator seed of the first random session (the next ones follow)")
     parser.add_argument("--seam", type=int, default=5,
                         help=f"seam sessions per instance (<= {len(SEAM_RUNS)})")
     parser.add_argument("--plant", choices=PLANT_NAMES, default=PLANT_NAMES[0])
@@ -248,6 +253,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.no_hand_release:
         HAND_RELEASE[0] = HandReleaseConfig(enabled=False)
+    if args.sessions < 0 or args.first_operator < 0:
+        parser.error(f"--sessions {args.sessions} --first-operator {args.first_operator}: "
+                     "expected both >= 0")
     if args.warm_up < 0.0 or (args.warm_up > 0.0 and args.plant != "realistic"):
         parser.error(f"--warm-up {args.warm_up}: expected >= 0 minutes, and 0 on the "
                      f"{args.plant} plant (it has no thermal model)")

@@ -21,9 +21,11 @@ such moves, no faster than the estimator's ``slow_command_velocity``, works). Pe
    every tiny reversal wears the friction state a little (LuGre's drift under vibration,
    Dupont et al., "Single state elastoplastic friction models", IEEE TAC 47(5), 2002; dither
    lowers friction on real drives for the same reason). The encoder cannot see that motion,
-   but the torque at rest shows it: it decays over seconds. On the simulated er20 the wrists'
-   friction relaxes with a time constant of 6–13 s; without r their z₀ read 20–33 % short
-   (the fit made up for the unseen wear by a faster turnover) and the residual was 2–6× larger.
+   but the torque at rest shows it: it decays over seconds. On the simulated er20 (the
+   default realistic plant, tuning instances 1–2; README, "The friction held at rest
+   relaxes") the wrists relax at 0.08–0.14 /s (time constants 7–13 s); without r their z₀
+   read 19–29 % short (the fit made up for the unseen wear by a faster turnover) and the
+   residual was 2–5× larger.
 4. **Fit.** ΔF = g·Δs(z₀, r) over all pairs: for each (z₀, r) of a grid (log z₀, r from 0),
    g is linear least squares (≥ 0); the best grid point is polished by a bounded
    Nelder–Mead search on (log z₀, r). The standard errors come from the Jacobian at the
