@@ -31,6 +31,7 @@ import pytest
 from leadthrough.control.safety_states import State
 from leadthrough.drivers.controllers import DEFAULT_PORTS
 from leadthrough.session.record import SessionLog, load_session
+from leadthrough.sim.emulators import EMULATORS
 from leadthrough.sim.emulators.kuka_rsi import IPOC_START
 from leadthrough.sim.emulators.process import emulator_report
 from leadthrough.sim.guiding_params import shipped_params_path
@@ -67,8 +68,12 @@ def _guiding_starts_and_ends(log: SessionLog) -> tuple[list[float], list[float]]
     return (list(log.time[1:][edges == 1]), list(log.time[1:][edges == -1]))
 
 
-#: The emulators' status periods in these tests [s] (RSI at its 12 ms IPO mode).
-PERIODS = {"fanuc-j519": 0.008, "ur-rtde": 0.002, "kuka-rsi": 0.012}
+#: RSI runs in its 12 ms (IPO) mode here: at 4 ms a machine as loaded as a shared CI runner
+#: answers late now and then, which is a refused command and a latched fault (correctly).
+RSI_CYCLE_MS = 12
+#: The emulators' status periods in these tests [s] (the others at their default cycle).
+PERIODS = {kind: 1e-3 * (RSI_CYCLE_MS if kind == "kuka-rsi" else EMULATORS[kind].default_cycle_ms)
+           for kind in KINDS}
 
 
 def _emulator_stalled(log: SessionLog, report: str, period: float) -> bool:
@@ -98,9 +103,8 @@ def _guide_until_ctrl_c(kind: str, folder: Path) -> tuple[SessionLog, str, Path]
     if kind == "kuka-rsi":      # the PC listens: start it first, then the robot sends to it
         guide = _guide(kind, host, out)
         wait_for_line(guide, "compiling the loop done", 120)
-        # RSI's 12 ms (IPO) mode: at 4 ms a machine as loaded as a shared CI runner answers
-        # late now and then, which is a refused command and a latched fault (correctly)
-        emu = spawn_emulator(kind, "er20", host, port, "--cycle-ms", "12", *_emulator_args())
+        emu = spawn_emulator(kind, "er20", host, port, "--cycle-ms", str(RSI_CYCLE_MS),
+                             *_emulator_args())
     else:
         emu = spawn_emulator(kind, "er20", host, port, *_emulator_args())
         guide = _guide(kind, host, out)
@@ -234,8 +238,8 @@ def test_a_fault_is_reset_from_its_input_and_guiding_needs_a_fresh_press(
     emu = None
     try:
         wait_for_line(guide, "compiling the loop done", 120)
-        emu = spawn_emulator(kind, "er20", host, DEFAULT_PORTS[kind], "--cycle-ms", "12",
-                             *_reset_emulator_args())
+        emu = spawn_emulator(kind, "er20", host, DEFAULT_PORTS[kind], "--cycle-ms",
+                             str(RSI_CYCLE_MS), *_reset_emulator_args())
         wait_for_line(guide, "leadthrough: guiding", 120)
         time.sleep(14.0)                         # two or three periods
         guide.send_signal(signal.SIGINT)

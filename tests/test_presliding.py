@@ -243,7 +243,6 @@ def test_params_file_keeps_presliding_and_refuses_bad_values(er20: Robot, tmp_pa
                        er20).params.presliding.size == 0
 
 
-
 def test_params_file_keeps_the_relaxation_and_refuses_bad_values(er20: Robot, tmp_path: Path
                                                                  ) -> None:
     n = er20.n
