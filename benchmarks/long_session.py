@@ -3,9 +3,9 @@
 
 ``leadthrough emulate`` (its own process; the enabling device pressed for 20 s every 30 s, the
 mark button once per press) and ``leadthrough guide --driver`` (its own process, recording
-streamed to disk) for ``--minutes``; the guide process's resident memory (VmRSS) is read from
-/proc every 10 s. At the end the guide stops by its ``--duration``, then ``leadthrough teach``
-loads the recording. It prints:
+streamed to disk by its writer process) for ``--minutes``; the resident memory (VmRSS) of the
+guide process and of its writer is read from /proc every 10 s. At the end the guide stops by
+its ``--duration``, then ``leadthrough teach`` loads the recording. It prints:
 
 * timing: the servo periods the guide ran and those it ran late (its clock), the controller
   cycles the emulated controller ran without a fresh command (its count: RSI's ``Delay``, J519
@@ -17,7 +17,8 @@ loads the recording. It prints:
   answers in time, late (after send + one cycle) and never answered, and of those the ones
   that coincide with the emulator's own lag; the statuses the emulator sent late (more than
   1 ms behind its schedule) and the cycle slots its resynchronisations skipped;
-* memory: RSS after the first minute (set-up done), at the end, the growth; the file's size;
+* memory: RSS after the first minute (set-up done), at the end, the growth, of the guide and
+  of its session writer process (the chunks they share count in both); the file's size;
   ``teach``'s answer; the emulator's report.
 
 ``--rt-priority P`` runs both processes with ``SCHED_FIFO`` priority P (the guide by its own
@@ -58,6 +59,14 @@ def _rss_mb(pid: int) -> float:
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024.0
     return float("nan")
+
+
+def _children(pid: int) -> list[int]:
+    """The processes ``pid`` started (its session writer)."""
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        out += [int(c) for c in (task / "children").read_text().split()]
+    return out
 
 
 def _wait_for(proc: subprocess.Popen[str], text: str, timeout: float) -> str:
@@ -121,9 +130,14 @@ def main() -> None:
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
     t0 = time.monotonic()
     samples: list[tuple[float, float]] = []
+    writer: list[tuple[float, float]] = []
     while guide.poll() is None:
         try:
-            samples.append((time.monotonic() - t0, _rss_mb(guide.pid)))
+            t = time.monotonic() - t0
+            samples.append((t, _rss_mb(guide.pid)))
+            kids = _children(guide.pid)
+            if kids:
+                writer.append((t, sum(_rss_mb(k) for k in kids)))
         except (FileNotFoundError, ProcessLookupError):
             break
         time.sleep(10.0)
@@ -140,6 +154,11 @@ def main() -> None:
           f"{max(after, default=float('nan')):.1f} MB, at the end "
           f"{after[-1] if after else float('nan'):.1f} MB: growth "
           f"{(after[-1] - first) if after else float('nan'):+.1f} MB (goal <= 50 MB)")
+    w_after = [m for s, m in writer if s >= 60.0]
+    if w_after:
+        print(f"session writer process: RSS after 1 min {w_after[0]:.1f} MB, at the end "
+              f"{w_after[-1]:.1f} MB: growth {w_after[-1] - w_after[0]:+.1f} MB (the chunks "
+              f"it shares with the guide count in both)")
     print(f"recording {session}: {session.stat().st_size / 1e6:.1f} MB" if session.exists()
           else "no recording")
     if "periods" in result:
@@ -155,7 +174,7 @@ def main() -> None:
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
     print("emulator: " + " ".join(report.split()))
-    (out / "rss.json").write_text(json.dumps(samples))
+    (out / "rss.json").write_text(json.dumps({"guide": samples, "writer": writer}))
 
 
 if __name__ == "__main__":

@@ -97,31 +97,33 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
     options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
                           reset_input=args.reset_input,
                           watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
-    for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
-                                               tuple(args.cpus) if args.cpus else None)):
-        print(f"leadthrough: {line}", file=sys.stderr, flush=True)
-    driver = connect(args.driver, robot, args.host, args.port)
-    sink = SessionFileSink(args.output, robot.n)
-    # everything built and compiled before the link opens: a controller streams from the
-    # open on, and cycles it is not answered in count against the session (RSI's late count)
-    parts = _loop_parts(robot, pf, guiding, driver.dt)
-    requests = LoopRequests()
-    settings: dict[str, object] = {"driver": args.driver, "host": args.host,
-                                   "port": args.port, "enable_input": args.enable_input,
-                                   "mark_input": args.mark_input,
-                                   "reset_input": args.reset_input}
-    dt = driver.dt
-    # Ctrl-C: a stop request while the loop runs, and nothing more once it has ended (the
-    # stream's own end and the file are written); a second one aborts
-    with requests.stop_on_interrupt(), _stop_on_term(requests), driver:
-        if driver.dt != dt:    # the cycle the controller reported at open (UR CB3: 8 ms)
-            parts = _loop_parts(robot, pf, guiding, driver.dt)
-        print(f"leadthrough: guiding {robot.name} on {args.driver} at {args.host} "
-              f"({1e3 * driver.dt:g} ms cycle, controller every "
-              f"{1e3 * parts.controller.config.dt:g} ms); press the enabling device to "
-              f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
-        result = run_session(driver, *parts, args.duration, options=options,
-                             requests=requests, settings=settings, sink=sink)
+    # the session writer's process first: started after the real-time set-up, it would
+    # inherit the loop's SCHED_FIFO and CPUs (it leaves them itself too); closed on every way out
+    with SessionFileSink(args.output, robot.n) as sink:
+        for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
+                                                   tuple(args.cpus) if args.cpus else None)):
+            print(f"leadthrough: {line}", file=sys.stderr, flush=True)
+        driver = connect(args.driver, robot, args.host, args.port)
+        # everything built and compiled before the link opens: a controller streams from the
+        # open on, and cycles it is not answered in count against the session (RSI's late count)
+        parts = _loop_parts(robot, pf, guiding, driver.dt)
+        requests = LoopRequests()
+        settings: dict[str, object] = {"driver": args.driver, "host": args.host,
+                                       "port": args.port, "enable_input": args.enable_input,
+                                       "mark_input": args.mark_input,
+                                       "reset_input": args.reset_input}
+        dt = driver.dt
+        # Ctrl-C: a stop request while the loop runs, and nothing more once it has ended (the
+        # stream's own end and the file are written); a second one aborts
+        with requests.stop_on_interrupt(), _stop_on_term(requests), driver:
+            if driver.dt != dt:    # the cycle the controller reported at open (UR CB3: 8 ms)
+                parts = _loop_parts(robot, pf, guiding, driver.dt)
+            print(f"leadthrough: guiding {robot.name} on {args.driver} at {args.host} "
+                  f"({1e3 * driver.dt:g} ms cycle, controller every "
+                  f"{1e3 * parts.controller.config.dt:g} ms); press the enabling device to "
+                  f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
+            result = run_session(driver, *parts, args.duration, options=options,
+                                 requests=requests, settings=settings, sink=sink)
     return _report(args, result, getattr(driver, "late_answers", 0))
 
 

@@ -61,15 +61,13 @@ cycles for it to find (its temporaries are freed by reference counting; a test c
 pausing it costs no memory.
 
 The interpreter's thread switch interval is shortened to :data:`GIL_SWITCH_S` while the loop
-runs (and restored after). Other threads of the process (the session file's writer, the
-watchdog) run Python code; when the loop's thread wakes with a sample, it waits for the
-interpreter lock until the running thread yields it: one switch interval while that thread
-runs Python code (Python's default 5 ms made the loop answer a 2 ms controller two cycles late
-every 10 s, when the writer converted a chunk, with no late period on the loop's own clock:
-measured with an emulated UR controller, ``benchmarks/long_session.py``), or the whole of a call
-into C that keeps the lock. The writer keeps its calls short
-(:data:`~leadthrough.session.recorder.QUATERNION_SLICE_ROWS`) and offers the lock between its
-steps; ``benchmarks/gil_hold.py`` measures the wait.
+runs (and restored after). Another thread of the process that runs Python code (the watchdog)
+makes the loop's thread, woken with a sample, wait for the interpreter lock until that thread
+yields it: one switch interval (Python's default 5 ms made the loop answer a 2 ms controller
+two cycles late every 10 s, when a writer thread converted a chunk: measured with an emulated
+UR controller, ``benchmarks/long_session.py``), or the whole of a call into C that keeps the
+lock. The session file is therefore written by a process of its own
+(:mod:`leadthrough.session.session_file`); ``benchmarks/gil_hold.py`` measures the wait.
 """
 
 from __future__ import annotations

@@ -9,7 +9,6 @@ memory grows by one chunk at a time, with the session's length.
 
 from __future__ import annotations
 
-import time
 from typing import Any, Protocol
 
 import numpy as np
@@ -18,64 +17,101 @@ from scipy.spatial.transform import Rotation
 
 from leadthrough.session.record import SessionEvent, SessionLog
 
-__all__ = ["DEFAULT_CHUNK_ROWS", "QUATERNION_SLICE_ROWS", "ChunkSink", "MemorySink", "RecordChunk",
+__all__ = ["DEFAULT_CHUNK_ROWS", "ChunkSink", "MemorySink", "RecordChunk",
            "SessionRecorder", "chunks_to_log"]
 
 Array = NDArray[np.float64]
 #: Rows per chunk: 10 s at 1 kHz (about 4.5 MB for six joints).
 DEFAULT_CHUNK_ROWS = 10_000
-#: Rows converted per call into SciPy when a chunk's orientations become quaternions. A call
-#: holds the interpreter lock throughout: 10 000 rows in one call held it 3-4 ms, and a
-#: streamed session's writer thread converts a chunk every 10 s while the loop runs (a thread
-#: waking from a 1 ms sleep waited up to 4 ms, ``benchmarks/gil_hold.py``). 500 rows hold it
-#: about 0.2 ms, and the lock is offered to a waiting thread between two calls.
-QUATERNION_SLICE_ROWS = 500
+
+
+def _layout(size: int, n: int, with_truth: bool) -> list[tuple[str, tuple[int, ...], type]]:
+    """A chunk's arrays in their order in its memory: name, shape, dtype (all 8-byte items, so
+    every array starts aligned)."""
+    fields: list[tuple[str, tuple[int, ...], type]] = [
+        ("time", (size,), np.float64), ("q", (size, n), np.float64),
+        ("current", (size, n), np.float64), ("tau_ext", (size, n), np.float64),
+        ("wrench", (size, 6), np.float64), ("q_cmd", (size, n), np.float64),
+        ("qd_cmd", (size, n), np.float64), ("tcp", (size, 3), np.float64),
+        ("rot", (size, 3, 3), np.float64), ("twist", (size, 6), np.float64),
+        ("state", (size,), np.int64), ("fault", (size,), np.int64)]
+    if with_truth:
+        fields.append(("applied", (size, 6), np.float64))
+    return fields
 
 
 class RecordChunk:
     """Preallocated rows of a session (row ``k`` of each array is servo period ``k`` of the
-    chunk; ``rows`` of them are filled).
+    chunk; ``rows`` of them are filled). The arrays are views into one block of memory: its
+    own, or ``buffer`` (memory shared with the session's writer process,
+    :mod:`leadthrough.session.writer_link`).
 
     Args:
         size: Rows it holds.
         n: Number of joints.
         with_truth: Keep the simulator's applied wrench.
+        buffer: Writable memory of at least :meth:`nbytes` bytes to hold the arrays (None: a
+            new zeroed block).
     """
 
-    def __init__(self, size: int, n: int, with_truth: bool) -> None:
+    def __init__(self, size: int, n: int, with_truth: bool, buffer: Any = None) -> None:
         self.rows = 0
-        self.time = np.zeros(size)
-        self.q = np.zeros((size, n))
-        self.current = np.zeros((size, n))
-        self.tau_ext = np.zeros((size, n))
-        self.wrench = np.zeros((size, 6))
-        self.q_cmd = np.zeros((size, n))
-        self.qd_cmd = np.zeros((size, n))
-        self.tcp = np.zeros((size, 3))
-        self.rot = np.zeros((size, 3, 3))
-        self.twist = np.zeros((size, 6))
-        self.state = np.zeros(size, dtype=np.int64)
-        self.fault = np.zeros(size, dtype=np.int64)
-        self.applied = np.zeros((size, 6)) if with_truth else None
+        memory = (np.zeros(self.nbytes(size, n, with_truth), dtype=np.uint8) if buffer is None
+                  else np.frombuffer(buffer, dtype=np.uint8))
+        offset = 0
+        views: dict[str, Any] = {}
+        for name, shape, dtype in _layout(size, n, with_truth):
+            count = int(np.prod(shape))
+            views[name] = memory[offset:offset + 8 * count].view(dtype).reshape(shape)
+            offset += 8 * count
+        self.time: Array = views["time"]
+        self.q: Array = views["q"]
+        self.current: Array = views["current"]
+        self.tau_ext: Array = views["tau_ext"]
+        self.wrench: Array = views["wrench"]
+        self.q_cmd: Array = views["q_cmd"]
+        self.qd_cmd: Array = views["qd_cmd"]
+        self.tcp: Array = views["tcp"]
+        self.rot: Array = views["rot"]
+        self.twist: Array = views["twist"]
+        self.state: NDArray[np.int64] = views["state"]
+        self.fault: NDArray[np.int64] = views["fault"]
+        self.applied: Array | None = views.get("applied")
+
+    @staticmethod
+    def nbytes(size: int, n: int, with_truth: bool) -> int:
+        """Bytes of memory a chunk of ``size`` rows needs."""
+        return sum(8 * int(np.prod(shape)) for _, shape, _ in _layout(size, n, with_truth))
+
+    @property
+    def size(self) -> int:
+        """Rows it holds."""
+        return int(self.time.size)
 
     @property
     def full(self) -> bool:
         """Every row is filled."""
         return self.rows == self.time.size
 
+    def copy_from(self, other: RecordChunk) -> None:
+        """The filled rows of ``other`` (a chunk of the same layout) into this one."""
+        self.rows = other.rows
+        for name, _, _ in _layout(0, 0, other.applied is not None):
+            getattr(self, name)[:other.rows] = getattr(other, name)[:other.rows]
+
     def quaternions(self) -> Array:
-        """The commanded TCP orientations of the filled rows, (x, y, z, w), shape (rows, 4),
-        converted :data:`QUATERNION_SLICE_ROWS` rows at a time."""
-        quat = np.zeros((self.rows, 4))
-        for start in range(0, self.rows, QUATERNION_SLICE_ROWS):
-            end = min(start + QUATERNION_SLICE_ROWS, self.rows)
-            quat[start:end] = Rotation.from_matrix(self.rot[start:end]).as_quat()
-            time.sleep(0)   # the lock to a waiting thread (the loop's), if there is one
-        return quat
+        """The commanded TCP orientations of the filled rows, (x, y, z, w), shape (rows, 4)."""
+        if self.rows == 0:
+            return np.zeros((0, 4))
+        return np.asarray(Rotation.from_matrix(self.rot[:self.rows]).as_quat())
 
 
 class ChunkSink(Protocol):
     """Where full chunks go."""
+
+    def empty(self) -> RecordChunk:
+        """A chunk to fill first."""
+        ...
 
     def take(self, chunk: RecordChunk) -> RecordChunk:
         """Accept a full (or, at the end, the last) chunk; return an empty chunk to fill next.
@@ -100,6 +136,10 @@ class MemorySink:
     def __init__(self, n: int, with_truth: bool, chunk_rows: int) -> None:
         self._n, self._truth, self._rows = n, with_truth, chunk_rows
         self._chunks: list[RecordChunk] = []
+
+    def empty(self) -> RecordChunk:
+        """A new chunk."""
+        return RecordChunk(self._rows, self._n, self._truth)
 
     def take(self, chunk: RecordChunk) -> RecordChunk:
         """Keep ``chunk``; a new one."""
@@ -136,14 +176,14 @@ class SessionRecorder:
         n: Number of joints.
         with_truth: Record the simulator's applied wrench.
         sink: Where full chunks go (default: memory).
-        chunk_rows: Rows per chunk.
+        chunk_rows: Rows per chunk of the default memory sink (a given sink sizes its own).
     """
 
     def __init__(self, n: int, with_truth: bool, sink: ChunkSink | None = None,
                  chunk_rows: int = DEFAULT_CHUNK_ROWS) -> None:
         self.sink: ChunkSink = sink if sink is not None else MemorySink(n, with_truth,
                                                                           chunk_rows)
-        self.chunk = RecordChunk(chunk_rows, n, with_truth)
+        self.chunk = self.sink.empty()
         self.rows = 0
 
     def store(self, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
