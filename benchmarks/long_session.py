@@ -17,6 +17,8 @@ its ``--duration``, then ``leadthrough teach`` loads the recording. It prints:
   answers in time, late (after send + one cycle) and never answered, and of those the ones
   that coincide with the emulator's own lag; the statuses the emulator sent late (more than
   1 ms behind its schedule) and the cycle slots its resynchronisations skipped;
+* the machine: the CPU time the hypervisor took from this virtual machine during the session
+  (steal, ``benchmarks/machine_jitter.py``: 0 on bare metal);
 * memory: RSS after the first minute (set-up done), at the end, the growth, of the guide and
   of its session writer process (the chunks they share count in both); the file's size;
   ``teach``'s answer; the emulator's report.
@@ -48,6 +50,7 @@ from leadthrough.sim.emulators.process import (
     stop_emulator,
     timing_summary,
 )
+from machine_jitter import steal_seconds
 
 
 def _lt(*args: str) -> list[str]:
@@ -128,7 +131,7 @@ def main() -> None:
     if emu is None:  # RSI: the PC listens (after compiling), then the robot sends
         early_stderr = _wait_for(guide, "compiling the loop done", timeout=300.0)
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
-    t0 = time.monotonic()
+    t0, steal0 = time.monotonic(), steal_seconds()
     samples: list[tuple[float, float]] = []
     writer: list[tuple[float, float]] = []
     while guide.poll() is None:
@@ -142,6 +145,7 @@ def main() -> None:
             break
         time.sleep(10.0)
     stdout, stderr = guide.communicate()
+    steal = steal_seconds() - steal0
     report = stop_emulator(emu, timeout=30.0)
     result = (json.loads(stdout) if stdout.strip().startswith("{")
               else {"stderr": early_stderr + stderr})
@@ -171,6 +175,9 @@ def main() -> None:
               f"{result['cycle_us_first'] / result['cycle_us_median']:.2f} (goal <= 2), "
               f"p99 {result['cycle_us_p99']:.0f} µs, max {result['cycle_us_max']:.0f} µs")
         print(timing_summary(emu_fields))
+        print(f"machine: steal {steal:.2f} s over the session (CPU time the hypervisor took "
+              f"from this virtual machine: a late answer may be the machine's; "
+              f"benchmarks/machine_jitter.py measures it alone)")
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
     print("emulator: " + " ".join(report.split()))
