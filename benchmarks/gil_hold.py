@@ -11,7 +11,8 @@ much later than asked it runs again, in one run, under:
 * ``idle``: no other thread (the machine's own wake-up jitter);
 * ``writer``: chunks of 10 000 rows (a 10 s chunk at 1 kHz) handed to the session file's
   writer process back to back, 10 ms apart (the hand-over runs in a thread of this process,
-  as the loop's ``take`` would);
+  as the loop's ``take`` would; the writer cannot keep up at that pace and the sink drops the
+  rows of the chunks it has no room for, with a warning: the hand-overs go on as in a loop);
 * ``in thread``: the same conversion and writing done by a thread of this process, as the
   session file did until 2026-11-28 (its share of the loop's timing was the reason for the
   process);

@@ -98,7 +98,8 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
                           reset_input=args.reset_input,
                           watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
     # the session writer's process first: started after the real-time set-up, it would
-    # inherit the loop's SCHED_FIFO and CPUs (it leaves them itself too); closed on every way out
+    # inherit the loop's CPUs and SCHED_FIFO (it leaves the policy itself, not the CPUs), and
+    # its shared chunks are mapped before mlockall; closed on every way out
     with SessionFileSink(args.output, robot.n) as sink:
         for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
                                                    tuple(args.cpus) if args.cpus else None)):

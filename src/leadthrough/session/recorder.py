@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from leadthrough.errors import DataError
 from leadthrough.session.record import SessionEvent, SessionLog
 
 __all__ = ["DEFAULT_CHUNK_ROWS", "ChunkSink", "MemorySink", "RecordChunk",
@@ -87,6 +88,11 @@ class RecordChunk:
     def size(self) -> int:
         """Rows it holds."""
         return int(self.time.size)
+
+    @property
+    def layout(self) -> tuple[int, int, bool]:
+        """Rows it holds, number of joints, whether it keeps the applied wrench."""
+        return int(self.time.size), int(self.q.shape[1]), self.applied is not None
 
     @property
     def full(self) -> bool:
@@ -184,6 +190,10 @@ class SessionRecorder:
         self.sink: ChunkSink = sink if sink is not None else MemorySink(n, with_truth,
                                                                           chunk_rows)
         self.chunk = self.sink.empty()
+        if self.chunk.layout[1:] != (n, with_truth):
+            raise DataError("the recording's sink holds another robot's rows", field="joints",
+                            value=self.chunk.layout[1], expected=f"{n} joints, applied wrench "
+                            f"{'kept' if with_truth else 'not kept'}")
         self.rows = 0
 
     def store(self, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,

@@ -19,6 +19,7 @@ from __future__ import annotations
 import mmap
 import os
 import pickle
+import selectors
 import socket
 import struct
 import tempfile
@@ -50,10 +51,13 @@ def open_chunk_memory(nbytes: int) -> tuple[int, mmap.mmap]:
 
 def send_message(sock: socket.socket, message: tuple[Any, ...], fds: tuple[int, ...] = ()
                  ) -> None:
-    """Send ``message`` (and pass ``fds`` with it) on a blocking ``sock``.
+    """Send ``message`` (and pass ``fds`` with it) on ``sock``. On a non-blocking socket a
+    message that does not fit in the send buffer raises ``BlockingIOError`` with part of it
+    sent: the link is then unusable (the loop's side sends only short messages there, and
+    the few it has in flight fit many times over).
 
     Raises:
-        OSError: The socket is closed or broken (the other process is gone).
+        OSError: The socket is closed or broken (the other process is gone), or full.
     """
     data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
     header = _HEADER.pack(len(data))
@@ -104,6 +108,13 @@ class MessageReader:
         self._buffer = bytearray()
         #: The other process closed its end.
         self.closed = False
+
+    def wait(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for something to read (off the loop only); whether there
+        is."""
+        with selectors.DefaultSelector() as selector:
+            selector.register(self._sock, selectors.EVENT_READ)
+            return bool(selector.select(timeout_s))
 
     def poll(self) -> list[tuple[Any, ...]]:
         """The complete messages received so far (none when nothing is waiting)."""

@@ -1,16 +1,19 @@
 """The session writer process's entry point (started by
 :class:`~leadthrough.session.session_file.SessionFileSink`, not by users).
 
-    python -m leadthrough.session.writer_process --fd FD --joints N --rows R [--truth] PARTIAL PATH
+    python -P -m leadthrough.session.writer_process --fd FD --joints N --rows R [--truth] \
+        -- PARTIAL PATH
 
 It first leaves any real-time scheduling it inherited (``sched_setscheduler(2)`` to
 ``SCHED_OTHER``) and lowers its priority (``nice`` 10): the loop's process runs at SCHED_FIFO
 where the user asked for it, and the writer must never take a CPU from it or from the
-controller's link. SIGINT is ignored: a Ctrl-C in the terminal reaches the whole process group,
-and it is the loop's stop request, after which the loop's process finishes the file through this
-process. Only then does it load NumPy and Arrow and serve the link
-(:func:`~leadthrough.session.session_file.serve_writer`). It exits when the file is finished or
-when the loop's process is gone (the rows then stay in the partial file).
+controller's link (its CPU affinity is left as inherited: the loop's process starts it before
+pinning itself). It runs in a session of its own and ignores SIGINT, SIGTERM and SIGHUP: a
+Ctrl-C, or a service manager's stop, is the loop's stop request, after which the loop's process
+finishes the file through this process; it ends with its link. Only then does it load NumPy
+and Arrow and serve the link (:func:`~leadthrough.session.session_file.serve_writer`). It
+exits when the file is finished or when the loop's process is gone (the rows written are then
+closed into the partial file).
 """
 
 from __future__ import annotations
@@ -42,7 +45,8 @@ def _background() -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the writer (see the module doc); the exit code."""
     _background()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for stop in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(stop, signal.SIG_IGN)
     parser = argparse.ArgumentParser(prog="leadthrough-session-writer")
     parser.add_argument("--fd", type=int, required=True)
     parser.add_argument("--joints", type=int, required=True)
