@@ -119,6 +119,7 @@ class SessionFileSink:
         self._index: dict[int, int] = {}     # id(chunk) -> its index
         self._free: deque[int] = deque()
         self._scratch = RecordChunk(chunk_rows, n, with_truth)   # rows to drop go here
+        self._filling = self._scratch      # the chunk last handed to the loop
         self._failure: str | None = None
         self._finished = False
         self._sock, self._process = _start_writer(self.partial, self.path, n, with_truth,
@@ -143,7 +144,8 @@ class SessionFileSink:
     def pending(self) -> int:
         """Chunks handed to the writer and not back yet (reads its answers; never waits)."""
         self._collect()
-        return len(self._chunks) - len(self._free) - 1
+        in_hand = 0 if self._filling is self._scratch else 1   # the chunk the loop fills
+        return len(self._chunks) - len(self._free) - in_hand
 
     def empty(self) -> RecordChunk:
         """The first chunk to fill."""
@@ -251,6 +253,7 @@ class SessionFileSink:
         else:
             chunk = self._scratch
         chunk.rows = 0
+        self._filling = chunk
         return chunk
 
     def _drop(self, rows: int) -> None:
