@@ -193,7 +193,12 @@ def test_a_client_stall_is_caught_up_at_the_limits_or_stops_past_max_stale(
         def stalling_write(cmd: JointCommand) -> None:
             count[0] += 1
             if count[0] == 500:  # 0.5 s into the trajectory, at 0.93 of the speed limit
-                time.sleep(stall)
+                # this side stalls while `stall` s of the controller's clock go by: its cycles,
+                # whatever a loaded machine does to the emulator's thread meanwhile (a stalled
+                # emulator's clock stops, and a wall-clock sleep then spans fewer cycles)
+                until = emu.emulator.t + stall
+                while emu.emulator.t < until:
+                    time.sleep(0.5e-3)
             write(cmd)
 
         driver.write = stalling_write  # type: ignore[method-assign]
