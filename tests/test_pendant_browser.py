@@ -19,6 +19,7 @@ import shutil
 import socket
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -26,10 +27,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.control.safety import State
 from leadthrough.pendant.app import Pendant, wait_for_clients
 from leadthrough.pendant.simulated import SimulatedPendantSession, simulated_session
 from leadthrough.robot import Robot
+from leadthrough.sim.session import light_guiding
 
 DOCS_SHOT = Path(__file__).resolve().parent.parent / "docs" / "pendant.png"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
@@ -96,7 +99,12 @@ def _screen(camera: Any, point: np.ndarray) -> tuple[float, float]:
 
 @pytest.fixture
 def pendant(er20: Robot, tmp_path: Path) -> Iterator[tuple[Pendant, SimulatedPendantSession]]:
-    sim = simulated_session(er20)
+    # the operator lets go and marks P2 at rest: with the paper's law alone the tool may move
+    # again at rest a second or two after the release (issue 24; on this session 1.3 mm at
+    # 13 mm/s 1.6 s after the release, which put P2 2.8 mm from where the page showed the
+    # robot), so the session runs with the stop after letting go (`pendant --hand-release`)
+    sim = simulated_session(er20, guiding=replace(
+        light_guiding(), hand_release=HandReleaseConfig(enabled=True)))
     sim.live.start()
     app = Pendant(sim.live, tmp_path / "out", hand=sim.hand, port=_free_port(),
                   params_note=sim.params_note)
@@ -119,8 +127,13 @@ def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSe
         browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
         try:
             page = browser.new_page(viewport={"width": 1280, "height": 800})
+            console: list[str] = []
+            page.on("console", lambda m: console.append(f"{m.type}: {m.text}"))
+            page.on("pageerror", lambda e: console.append(f"page error: {e}"))
             page.goto(app.url)
-            assert wait_for_clients(app), "the page did not connect"
+            if not wait_for_clients(app):
+                page.screenshot(path=str(tmp_path / "not-connected.png"))
+                pytest.fail(f"the page did not connect within 30 s; its console: {console}")
             state = page.locator("#lt-state")
             _until(lambda: state.get_attribute("data-state") == "IDLE", 30, "IDLE on the page")
             _until(lambda: live.snapshot().estimator.name == "OK", 10, "the estimator's tare")
@@ -173,7 +186,10 @@ def _drag_handle(page: Any, app: Pendant, tcp: np.ndarray, axis: np.ndarray,
     _until(lambda: app.live.snapshot().speed == 0.0, 15, "the robot to stop at the handle")
     page.mouse.up()
     _until(lambda: not app.scene.dragging, 5, "the end of the drag")
-    time.sleep(2.0 / 20)   # one page update: the hand lets go
+    # the page's next update lets go, the loop's next cycle applies it (a fixed 0.1 s was too
+    # short on a loaded CI runner: CI on 3494f0f still saw the hand's 20.6 N)
+    _until(lambda: app.hand is not None and not app.hand.force_base.any(), 5,
+           "the hand to let go")
 
 
 def _shot_path(app: Pendant) -> Path:

@@ -23,6 +23,7 @@ from leadthrough.pendant.robot_scene import RobotScene, link_meshes
 from leadthrough.pendant.status_view import StatusExtras, status_html
 from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.operator import HandPush
+from leadthrough.sim.session import light_guiding
 
 
 class _Node:
@@ -140,6 +141,33 @@ def test_pendant_command_refuses_a_driver_it_does_not_have(capsys: pytest.Captur
     err = capsys.readouterr().err
     assert "guides the simulator only" in err and "leadthrough guide --driver" in err
     assert "ur-rtde" in err and "kuka-rsi" in err and "fanuc-j519" in err
+    # the stop after letting go is the simulated session's setting here; guide has it for robots
+    assert main(["pendant", "--driver", "ur-rtde", "--host", "192.0.2.1",
+                 "--hand-release"]) == 2
+    err = capsys.readouterr().err
+    assert "--hand-release" in err and "guide --driver D --hand-release" in err
+
+
+def test_pendant_hand_release_reaches_the_simulated_session(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    import leadthrough.pendant.simulated as simulated
+
+    class Recorded(Exception):
+        pass
+
+    seen: list[object] = []
+
+    def record(*args: object, **kwargs: object) -> None:
+        seen.append(kwargs["guiding"])
+        raise Recorded  # nothing is started
+
+    monkeypatch.setattr(simulated, "simulated_session", record)
+    for flags in ([], ["--hand-release"]):
+        with pytest.raises(Recorded):
+            main(["pendant", *flags, "--duration", "0.1", "-o", str(tmp_path)])
+    assert seen[0] is None       # the default: light_guiding() with the paper's law alone
+    assert isinstance(seen[1], GuidingConfig) and seen[1].hand_release.enabled
+    assert seen[1].virtual_friction == light_guiding().virtual_friction
 
 
 def test_pendant_command_serves_the_simulator(tmp_path: Path,

@@ -7,9 +7,11 @@ import signal
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError, LeadthroughError
@@ -75,6 +77,12 @@ def register(sub: Any) -> None:
     p.add_argument("--rt-priority", type=int, default=None, metavar="P",
                    help="run the loop's process under SCHED_FIFO at priority P (1-99; Linux, "
                         "needs root or CAP_SYS_NICE); see the README on the loop's isolation")
+    p.add_argument("--hand-release", action="store_true",
+                   help="on the simulator: stop at the acceleration limit when the hand lets go "
+                        "of the tool, whatever the force estimate says, as `guide "
+                        "--hand-release` (off by default: it brakes a hand that eases off; "
+                        "without it the paper's law may move the tool again at rest after a "
+                        "release, issue 24)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)
@@ -114,14 +122,23 @@ def run(args: argparse.Namespace) -> int:
         raise LeadthroughError(f"the pendant's web stack is not installed ({e.name})",
                                field="extra", value="pendant",
                                expected="pip install 'leadthrough[pendant]'") from e
+    from leadthrough.sim.session import light_guiding
     robot = load_robot(args.robot)
     hand = None
     if args.driver is not None:
+        if args.hand_release:
+            raise ControlError("--hand-release is a setting of the simulated session here",
+                               field="--hand-release", value=True,
+                               expected="--sim; on a robot: leadthrough guide --driver D "
+                                        "--hand-release")
         live, note = _robot_session(args, robot)
     else:
         params = None if args.params is None else load_params(args.params, robot)
+        guiding = None
+        if args.hand_release:
+            guiding = replace(light_guiding(), hand_release=HandReleaseConfig(enabled=True))
         sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
-                                rt_priority=args.rt_priority)
+                                guiding=guiding, rt_priority=args.rt_priority)
         live, hand, note = sim.live, sim.hand, sim.params_note
     print("starting the loop in its own process ...", flush=True)
     live.start(progress=lambda step: print(f"  {step} ...", flush=True))
