@@ -130,6 +130,7 @@ def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSe
             console: list[str] = []
             page.on("console", lambda m: console.append(f"{m.type}: {m.text}"))
             page.on("pageerror", lambda e: console.append(f"page error: {e}"))
+            page.on("crash", lambda _: console.append("the page crashed"))
             page.goto(app.url)
             if not wait_for_clients(app):
                 page.screenshot(path=str(tmp_path / "not-connected.png"))

@@ -152,18 +152,18 @@ def test_pendant_hand_release_reaches_the_simulated_session(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     import leadthrough.pendant.simulated as simulated
 
-    class Recorded(Exception):
+    class RecordedError(Exception):
         pass
 
     seen: list[object] = []
 
     def record(*args: object, **kwargs: object) -> None:
         seen.append(kwargs["guiding"])
-        raise Recorded  # nothing is started
+        raise RecordedError  # nothing is started
 
     monkeypatch.setattr(simulated, "simulated_session", record)
     for flags in ([], ["--hand-release"]):
-        with pytest.raises(Recorded):
+        with pytest.raises(RecordedError):
             main(["pendant", *flags, "--duration", "0.1", "-o", str(tmp_path)])
     assert seen[0] is None       # the default: light_guiding() with the paper's law alone
     assert isinstance(seen[1], GuidingConfig) and seen[1].hand_release.enabled
