@@ -21,6 +21,7 @@ the simulator by tests/test_teach.py).
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import re
 import signal
@@ -83,20 +84,29 @@ PERIODS = {kind: 1e-3 * (RSI_CYCLE_MS if kind == "kuka-rsi" else EMULATORS[kind]
 
 
 def _emulator_stalled(log: SessionLog, report: str, period: float) -> bool:
-    """Whether the session's stale-feedback faults are the emulator's own stalls.
+    """Whether each of the session's stale-feedback faults is the emulator's own stall.
 
     The emulator is a Python process stepped at 1 ms; on a loaded machine it stalls now and
     then, and a stall longer than the loop's stale limit is a STALE_FEEDBACK fault, as on a
     real controller whose packets stop. Two of its statuses are its lag plus a period apart,
-    so the fault is the emulator's only if its report shows a lag of at least the limit the
-    loop logged ("stale feedback: no sample for … (limit L ms)") less one period.
+    so a fault is the emulator's only if its report lists a stall, at that time, of at least
+    the limit the loop logged ("stale feedback: no sample for … (limit L ms)") less one period.
+    The stall's time is the emulator's clock when it resumed (it stops during a stall), the
+    fault's the loop's on that clock: they are at most the stall's length plus the loop's
+    reaction (a cycle or two, 0.1 s allowed) apart.
     """
-    notes = [e.cause for e in log.events if e.kind == "loop" and e.label == "stale feedback"]
-    limits = [re.search(r"limit (\d+) ms", note) for note in notes]
-    if not limits or not all(limits):
+    events = [e for e in log.events if e.kind == "loop" and e.label == "stale feedback"]
+    limits = [re.search(r"limit (\d+) ms", e.cause) for e in events]
+    if not events or not all(limits):
         return False
-    limit = max(float(m[1]) for m in limits if m is not None) * 1e-3
-    return float(emulator_report(report)["max_lag"]) >= limit - period
+    stalls = ast.literal_eval(emulator_report(report)["stalls"])
+    for event, match in zip(events, limits, strict=True):
+        assert match is not None
+        limit = float(match[1]) * 1e-3
+        if not any(lag >= limit - period and abs(event.t - t) <= lag + 0.1
+                   for t, lag in stalls):
+            return False
+    return True
 
 
 def _guide_until_ctrl_c(kind: str, folder: Path) -> tuple[SessionLog, str, Path]:

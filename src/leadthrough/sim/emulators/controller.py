@@ -31,7 +31,13 @@ from leadthrough.sim.emulators.arm import ArmPhase, EmulatedArm, MotionLimits, S
 from leadthrough.sim.emulators.operator import EmulatedOperator
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
-__all__ = ["EmulatedController", "EmulatorReport", "UdpController"]
+__all__ = ["MAX_STALLS", "STALL_S", "EmulatedController", "EmulatorReport", "UdpController"]
+
+#: A lag of the emulator's loop that the report lists with its time [s] (a real controller's
+#: packets never stop for this long; the loop's stale limits are a few cycles, 24-48 ms).
+STALL_S = 0.02
+#: Stalls the report lists at most (a session on a loaded machine may stall every second).
+MAX_STALLS = 200
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,10 @@ class EmulatorReport:
         max_lag: Largest lag of the loop behind the wall clock [s].
         resyncs: Times the loop dropped a lag of more than one controller cycle instead of
             catching it up (a real controller never sends a burst of cycles).
+        stalls: The loop's lags of :data:`STALL_S` or more, as (simulated time [s], lag [s]),
+            the first :data:`MAX_STALLS` of them: when the emulator itself went silent (its
+            clock stops meanwhile), so that a client's stale-feedback fault can be told apart
+            from the emulator's own stall at that time.
         missed_cycles: Controller cycles, while the client streamed, that had no fresh command
             at the cycle's time (J519: no command answering the last status; RTDE: the
             program's counter unchanged; RSI: no answer with the IPOC, RSI's ``Delay``), without
@@ -75,6 +85,7 @@ class EmulatorReport:
     delayed: int
     max_lag: float
     resyncs: int
+    stalls: tuple[tuple[float, float], ...] = ()
     missed_cycles: int = 0
     operator_start: float | None = None
     operator_end: float | None = None
@@ -107,6 +118,7 @@ class EmulatedController(ABC):
                                  int | None]] = []
         self.sent = self.dropped = self.delayed = 0
         self.max_lag, self.resyncs = 0.0, 0
+        self.stalls: list[tuple[float, float]] = []
         self.missed_cycles = 0  # see EmulatorReport; counted by the protocol (cycle_answered)
         self._missed_run = 0     # missed cycles since the last fresh command
         self._sent_at = -math.inf  # wall-clock time of the last cycle's packet [s]
@@ -301,6 +313,8 @@ class EmulatedController(ABC):
                     time.sleep(-lag)
                     continue
                 self.max_lag = max(self.max_lag, lag)
+                if lag >= STALL_S and len(self.stalls) < MAX_STALLS:
+                    self.stalls.append((round(self.t, 4), round(lag, 4)))
                 self._note_lag(lag)
                 if lag > self.arm.cycle:  # late by a cycle: carry on from now, no burst
                     self.resyncs += 1
@@ -329,7 +343,8 @@ class EmulatedController(ABC):
             refused=arm.commands - arm.accepted, violations=tuple(arm.violations()),
             stop_kind=None if kind is None else kind.value, stop_reason=self.arm.stop_reason,
             sent=self.sent, dropped=self.dropped, delayed=self.delayed,
-            max_lag=self.max_lag, resyncs=self.resyncs, missed_cycles=self.missed_cycles,
+            max_lag=self.max_lag, resyncs=self.resyncs, stalls=tuple(self.stalls),
+            missed_cycles=self.missed_cycles,
             operator_start=None if self.operator is None else self.operator.t0,
             operator_end=None if self.operator is None else self.operator.finished_at,
             timing=self.timing.counts())
