@@ -1,11 +1,15 @@
 """The emulated controllers' answer timing (issue 25, must show 5): a late command is the
 client's when its answer reached the socket after the status's actual send + one cycle; the
 emulator's own late sends, skipped cycles and lag are counted apart. The counter is fed
-timestamps; the kernel's receive stamps are checked on real loopback sockets."""
+timestamps; the kernel's receive stamps are checked on real loopback sockets, and a stalled
+emulator's report on a real one."""
 
 from __future__ import annotations
 
+import ast
+import os
 import select
+import signal
 import socket
 import sys
 import time
@@ -26,6 +30,13 @@ from leadthrough.sim.emulators.answer_timing import (
     AnswerTiming,
     enable_rx_stamps,
     recv_stamped,
+)
+from leadthrough.sim.emulators.controller import STALL_S
+from leadthrough.sim.emulators.process import (
+    emulator_report,
+    free_loopback_address,
+    spawn_emulator,
+    stop_emulator,
 )
 from leadthrough.sim.emulators.rtde_session import RtdeSession
 
@@ -232,3 +243,28 @@ def test_rtde_frames_merged_in_one_tcp_read_are_stamped_as_bounds_but_the_last()
     assert [(c, exact) for c, _, exact in writes] == [(1, False), (2, True), (3, True)]
     assert before - 1e-4 <= writes[1][1] <= after + 1e-4         # the second's own arrival
     assert read - writes[2][1] >= 0.025                         # not when it was read
+
+
+def test_a_stalled_emulator_lists_the_stall_at_its_simulated_time() -> None:
+    """``leadthrough emulate`` stopped (SIGSTOP) for 0.15 s: its report lists that stall, at
+    least 0.14 s long, at a simulated time between its start and the stop; its clock stopped
+    meanwhile, so the session's simulated time falls short of the wall time (by 0.1 s at least:
+    the clock starts a moment before the ready line is read).
+    Only lags of ``STALL_S`` or more are listed (a loaded machine may add some of its own)."""
+    emu = spawn_emulator("fanuc-j519", "er20", free_loopback_address(60015), 0)
+    started = time.monotonic()
+    try:
+        time.sleep(0.5)
+        stopped_at = time.monotonic() - started
+        os.kill(emu.pid, signal.SIGSTOP)
+        time.sleep(0.15)
+        os.kill(emu.pid, signal.SIGCONT)
+        time.sleep(0.3)
+        wall = time.monotonic() - started
+    finally:
+        report = emulator_report(stop_emulator(emu))
+    stalls = ast.literal_eval(report["stalls"])
+    assert all(lag >= STALL_S for _, lag in stalls), stalls
+    ours = [(t, lag) for t, lag in stalls if lag >= 0.14]
+    assert ours and all(0.0 < t <= stopped_at + 0.05 for t, _ in ours), (stalls, stopped_at)
+    assert float(report["sim_time"]) <= wall - 0.1, (report["sim_time"], wall)
