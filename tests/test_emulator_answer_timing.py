@@ -245,11 +245,12 @@ def test_rtde_frames_merged_in_one_tcp_read_are_stamped_as_bounds_but_the_last()
     assert read - writes[2][1] >= 0.025                         # not when it was read
 
 
+@linux_only
 def test_a_stalled_emulator_lists_the_stall_at_its_simulated_time() -> None:
     """``leadthrough emulate`` stopped (SIGSTOP) for 0.15 s: its report lists that stall, at
     least 0.14 s long, at a simulated time between its start and the stop; its clock stopped
-    meanwhile, so the session's simulated time falls short of the wall time (by 0.1 s at least:
-    the clock starts a moment before the ready line is read).
+    meanwhile, so the session's simulated time falls short of the wall time until it stopped
+    (by 0.1 s at least: the clock starts a moment before the ready line is read).
     Only lags of ``STALL_S`` or more are listed (a loaded machine may add some of its own)."""
     emu = spawn_emulator("fanuc-j519", "er20", free_loopback_address(60015), 0)
     started = time.monotonic()
@@ -260,11 +261,11 @@ def test_a_stalled_emulator_lists_the_stall_at_its_simulated_time() -> None:
         time.sleep(0.15)
         os.kill(emu.pid, signal.SIGCONT)
         time.sleep(0.3)
-        wall = time.monotonic() - started
     finally:
         report = emulator_report(stop_emulator(emu))
+    wall = time.monotonic() - started
     stalls = ast.literal_eval(report["stalls"])
     assert all(lag >= STALL_S for _, lag in stalls), stalls
     ours = [(t, lag) for t, lag in stalls if lag >= 0.14]
-    assert ours and all(0.0 < t <= stopped_at + 0.05 for t, _ in ours), (stalls, stopped_at)
+    assert any(0.0 < t <= stopped_at + 0.05 for t, _ in ours), (stalls, stopped_at)
     assert float(report["sim_time"]) <= wall - 0.1, (report["sim_time"], wall)

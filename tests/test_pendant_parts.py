@@ -23,7 +23,6 @@ from leadthrough.pendant.robot_scene import RobotScene, link_meshes
 from leadthrough.pendant.status_view import StatusExtras, status_html
 from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.operator import HandPush
-from leadthrough.sim.session import light_guiding
 
 
 class _Node:
@@ -165,9 +164,9 @@ def test_pendant_hand_release_reaches_the_simulated_session(
     for flags in ([], ["--hand-release"]):
         with pytest.raises(RecordedError):
             main(["pendant", *flags, "--duration", "0.1", "-o", str(tmp_path)])
-    assert seen[0] is None       # the default: light_guiding() with the paper's law alone
+    assert seen[0] is None       # the default: Table IV's settings with the paper's law alone
     assert isinstance(seen[1], GuidingConfig) and seen[1].hand_release.enabled
-    assert seen[1].virtual_friction == light_guiding().virtual_friction
+    assert replace(seen[1], hand_release=GuidingConfig().hand_release) == GuidingConfig()
 
 
 def test_pendant_command_serves_the_simulator(tmp_path: Path,

@@ -196,8 +196,10 @@ def test_a_client_stall_is_caught_up_at_the_limits_or_stops_past_max_stale(
                 # this side stalls while `stall` s of the controller's clock go by: its cycles,
                 # whatever a loaded machine does to the emulator's thread meanwhile (a stalled
                 # emulator's clock stops, and a wall-clock sleep then spans fewer cycles)
-                until = emu.emulator.t + stall
+                until, deadline = emu.emulator.t + stall, time.monotonic() + 10.0
                 while emu.emulator.t < until:
+                    if time.monotonic() > deadline:
+                        pytest.fail(f"the emulator's clock stood still at {emu.emulator.t} s")
                     time.sleep(0.5e-3)
             write(cmd)
 

@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
@@ -122,7 +123,6 @@ def run(args: argparse.Namespace) -> int:
         raise LeadthroughError(f"the pendant's web stack is not installed ({e.name})",
                                field="extra", value="pendant",
                                expected="pip install 'leadthrough[pendant]'") from e
-    from leadthrough.sim.session import light_guiding
     robot = load_robot(args.robot)
     hand = None
     if args.driver is not None:
@@ -136,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
         params = None if args.params is None else load_params(args.params, robot)
         guiding = None
         if args.hand_release:
-            guiding = replace(light_guiding(), hand_release=HandReleaseConfig(enabled=True))
+            # (simulated_session sets the push demonstrations' translational mass on it)
+            guiding = replace(GuidingConfig(), hand_release=HandReleaseConfig(enabled=True))
         sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
                                 guiding=guiding, rt_priority=args.rt_priority)
         live, hand, note = sim.live, sim.hand, sim.params_note

@@ -14,6 +14,7 @@ import socket
 import threading
 import time
 from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -36,8 +37,9 @@ __all__ = ["MAX_STALLS", "STALL_S", "EmulatedController", "EmulatorReport", "Udp
 #: A lag of the emulator's loop that the report lists with its time [s] (a real controller's
 #: packets never stop for this long; the loop's stale limits are a few cycles, 24-48 ms).
 STALL_S = 0.02
-#: Stalls the report lists at most (a session on a loaded machine may stall every second).
-MAX_STALLS = 200
+#: Stalls the report lists at most, the latest (a loaded machine may stall the emulator every
+#: second, and most of all while the client starts: the stalls of a session's end are kept).
+MAX_STALLS = 1000
 
 
 @dataclass(frozen=True)
@@ -57,9 +59,10 @@ class EmulatorReport:
         resyncs: Times the loop dropped a lag of more than one controller cycle instead of
             catching it up (a real controller never sends a burst of cycles).
         stalls: The loop's lags of :data:`STALL_S` or more, as (simulated time [s], lag [s]),
-            the first :data:`MAX_STALLS` of them: when the emulator itself went silent (its
-            clock stops meanwhile), so that a client's stale-feedback fault can be told apart
-            from the emulator's own stall at that time.
+            the latest :data:`MAX_STALLS` of them: when the emulator itself went silent (its
+            clock stops meanwhile, so the time is when it stopped and resumed), so that a
+            client's stale-feedback fault can be told apart from the emulator's own stall at
+            that time.
         missed_cycles: Controller cycles, while the client streamed, that had no fresh command
             at the cycle's time (J519: no command answering the last status; RTDE: the
             program's counter unchanged; RSI: no answer with the IPOC, RSI's ``Delay``), without
@@ -118,7 +121,7 @@ class EmulatedController(ABC):
                                  int | None]] = []
         self.sent = self.dropped = self.delayed = 0
         self.max_lag, self.resyncs = 0.0, 0
-        self.stalls: list[tuple[float, float]] = []
+        self.stalls: deque[tuple[float, float]] = deque(maxlen=MAX_STALLS)
         self.missed_cycles = 0  # see EmulatorReport; counted by the protocol (cycle_answered)
         self._missed_run = 0     # missed cycles since the last fresh command
         self._sent_at = -math.inf  # wall-clock time of the last cycle's packet [s]
@@ -313,7 +316,7 @@ class EmulatedController(ABC):
                     time.sleep(-lag)
                     continue
                 self.max_lag = max(self.max_lag, lag)
-                if lag >= STALL_S and len(self.stalls) < MAX_STALLS:
+                if lag >= STALL_S:
                     self.stalls.append((round(self.t, 4), round(lag, 4)))
                 self._note_lag(lag)
                 if lag > self.arm.cycle:  # late by a cycle: carry on from now, no burst
