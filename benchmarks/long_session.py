@@ -18,7 +18,14 @@ its ``--duration``, then ``leadthrough teach`` loads the recording. It prints:
   that coincide with the emulator's own lag; the statuses the emulator sent late (more than
   1 ms behind its schedule) and the cycle slots its resynchronisations skipped;
 * the machine: the CPU time the hypervisor took from this virtual machine during the session
-  (steal, ``benchmarks/machine_jitter.py``: 0 on bare metal);
+  (steal, ``benchmarks/machine_jitter.py``: 0 on bare metal), and its stalls: a probe per CPU
+  (``machine_jitter.py --cpu C``, ``SCHED_FIFO`` ten above ``--rt-priority``, 60 without it)
+  sleeps 1 ms at a time beside the session and logs each wake-up more than 1 ms late, a
+  stretch in which nothing of ours could run on that CPU. Each late or missing answer that
+  is not the emulator's lag is then matched against them: one that overlaps a stall may be
+  the machine's; one that does not is the client's own (the loop, its process, the OS
+  scheduling them). The probes wake 1000 times a second each and preempt the session for a few
+  microseconds every time (``--no-probe``: without them);
 * memory: RSS after the first minute (set-up done), at the end, the growth, of the guide and
   of its session writer process (the chunks they share count in both); the file's size;
   ``teach``'s answer; the emulator's report.
@@ -28,12 +35,13 @@ option, the emulator set from here): the figures of a loaded machine. Default: o
 scheduling, the figures of an idle machine.
 
     python benchmarks/long_session.py [--minutes 60] [--kind kuka-rsi] [--rt-priority P]
-        [--out DIR]
+        [--out DIR] [--no-probe]
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import os
 import select
@@ -50,7 +58,10 @@ from leadthrough.sim.emulators.process import (
     stop_emulator,
     timing_summary,
 )
-from machine_jitter import steal_seconds
+from machine_jitter import load_stalls, steal_seconds
+
+#: A probe's wake-up later than this is a stall of the machine [ms].
+PROBE_THRESHOLD_MS = 1.0
 
 
 def _lt(*args: str) -> list[str]:
@@ -99,6 +110,69 @@ def _emulator(kind: str, port: int, minutes: float,
     return emu
 
 
+def _probes(out: Path, seconds: float, rt_priority: int | None
+            ) -> list[tuple[int, Path, subprocess.Popen[str]]]:
+    """One ``machine_jitter.py`` probe per CPU, above the session's priority."""
+    priority = min(99, (rt_priority or 50) + 10)
+    script = Path(__file__).with_name("machine_jitter.py")
+    probes = []
+    for cpu in sorted(os.sched_getaffinity(0)):
+        path = out / f"probe_cpu{cpu}.json"
+        cmd = [sys.executable, str(script), "--seconds", f"{seconds:g}", "--cpu", str(cpu),
+               "--rt-priority", str(priority), "--events", str(path), "--threshold-ms",
+               f"{PROBE_THRESHOLD_MS:g}"]
+        probes.append((cpu, path, subprocess.Popen(cmd, stdout=subprocess.PIPE,
+                                                   stderr=subprocess.STDOUT, text=True)))
+    return probes
+
+
+def _stop_probes(probes: list[tuple[int, Path, subprocess.Popen[str]]]
+                 ) -> dict[int, list[tuple[float, float]]]:
+    """End the probes; print what each measured; their stalls per CPU (wall clock)."""
+    stalls: dict[int, list[tuple[float, float]]] = {}
+    for cpu, path, proc in probes:
+        proc.terminate()
+        text, _ = proc.communicate(timeout=30.0)
+        print(f"probe, CPU {cpu}: {text.strip()}")
+        if path.exists():
+            stalls[cpu] = load_stalls(path)
+    return stalls
+
+
+def match_stalls(windows: list[tuple[float, float]],
+                 stalls: dict[int, list[tuple[float, float]]]
+                 ) -> tuple[list[tuple[float, float]], dict[int, int]]:
+    """The client's late or missing answers (their wall-clock windows) against the machine's
+    stalls per CPU (wall-clock stretches): the windows that overlap no stall, and per CPU how
+    many windows overlap one of its stalls."""
+    per_cpu = {cpu: 0 for cpu in stalls}
+    own: list[tuple[float, float]] = []
+    for start, end in windows:
+        hit = [cpu for cpu, st in stalls.items() if any(a < end and b > start for a, b in st)]
+        for cpu in hit:
+            per_cpu[cpu] += 1
+        if not hit:
+            own.append((start, end))
+    return own, per_cpu
+
+
+def _stall_line(windows: list[tuple[float, float]],
+                stalls: dict[int, list[tuple[float, float]]], wall0: float) -> str:
+    """:func:`match_stalls` in a line (times from ``wall0``, the session's start)."""
+    if not stalls:
+        return "machine stalls: not measured (no probe)"
+    own, per_cpu = match_stalls(windows, stalls)
+    counts = ", ".join(f"CPU {cpu}: {len(st)} (longest "
+                       f"{max((b - a for a, b in st), default=0.0) * 1e3:.1f} ms)"
+                       for cpu, st in stalls.items())
+    first = ", ".join(f"{(s - wall0):.3f} s +{(e - s) * 1e3:.1f} ms" for s, e in own[:20])
+    return (f"machine stalls (a probe woke > {PROBE_THRESHOLD_MS:g} ms late): {counts}; the "
+            f"client's late or missing answers (not the emulator's lag): {len(windows)}, "
+            f"overlapping a stall {len(windows) - len(own)} (per CPU "
+            f"{', '.join(f'{c}: {n}' for c, n in per_cpu.items())}), **not overlapping any: "
+            f"{len(own)}**" + (f" (the first, from the session's start: {first})" if own else ""))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=60.0)
@@ -108,6 +182,8 @@ def main() -> None:
     ap.add_argument("--rt-priority", type=int, default=None, metavar="P",
                     help="SCHED_FIFO priority of the guide and the emulator")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--no-probe", action="store_true",
+                    help="no machine probes beside the session")
     args = ap.parse_args()
     from leadthrough.sim.guiding_params import shipped_params_path
 
@@ -131,7 +207,9 @@ def main() -> None:
     if emu is None:  # RSI: the PC listens (after compiling), then the robot sends
         early_stderr = _wait_for(guide, "compiling the loop done", timeout=300.0)
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
-    t0, steal0 = time.monotonic(), steal_seconds()
+    probes = [] if args.no_probe else _probes(out, 60.0 * args.minutes + 600.0,
+                                              args.rt_priority)
+    t0, steal0, wall0 = time.monotonic(), steal_seconds(), time.time()
     samples: list[tuple[float, float]] = []
     writer: list[tuple[float, float]] = []
     while guide.poll() is None:
@@ -147,6 +225,7 @@ def main() -> None:
     stdout, stderr = guide.communicate()
     steal = steal_seconds() - steal0
     report = stop_emulator(emu, timeout=30.0)
+    stalls = _stop_probes(probes)
     result = (json.loads(stdout) if stdout.strip().startswith("{")
               else {"stderr": early_stderr + stderr})
     after = [m for s, m in samples if s >= 60.0]
@@ -178,9 +257,12 @@ def main() -> None:
         print(f"machine: steal {steal:.2f} s over the session (CPU time the hypervisor took "
               f"from this virtual machine: a late answer may be the machine's; "
               f"benchmarks/machine_jitter.py measures it alone)")
+        windows = ast.literal_eval(emu_fields.get("timing.client_windows", "()"))
+        print(_stall_line([(float(a), float(b)) for a, b in windows], stalls, wall0))
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
-    print("emulator: " + " ".join(report.split()))
+    print("emulator: " + " ".join(" ".join(line.split()) for line in report.splitlines()
+                                  if not line.startswith("timing.client_windows")))
     (out / "rss.json").write_text(json.dumps({"guide": samples, "writer": writer}))
 
 

@@ -47,6 +47,10 @@ linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                 reason="SO_TIMESTAMPNS is Linux's")
 
 
+def _flat(windows: tuple[tuple[float, float], ...]) -> list[float]:
+    return [x for window in windows for x in window]
+
+
 def _timing() -> AnswerTiming:
     return AnswerTiming(CYCLE, tolerance=1e-3)
 
@@ -65,6 +69,7 @@ def test_an_answer_is_late_only_after_the_actual_send_plus_one_cycle() -> None:
     assert (c.sends_late, c.cycles_skipped) == (0, 0)
     assert c.worst_answer_ms == pytest.approx(4.1)
     assert c.events == ("t=1.004 #2 +4.1 ms",)
+    assert _flat(c.client_windows) == pytest.approx([T0 + CYCLE, T0 + CYCLE + 4.1e-3], abs=1e-6)
 
 
 def test_late_answers_that_coincide_with_the_emulators_lag_are_told_apart() -> None:
@@ -82,6 +87,8 @@ def test_late_answers_that_coincide_with_the_emulators_lag_are_told_apart() -> N
     c = t.counts()
     assert (c.late, c.late_with_lag, c.sends_late) == (3, 2, 1)
     assert [e.endswith(" lag") for e in c.events] == [True, True, False]
+    # only the client's own keeps its window (send to arrival), for a machine's stalls
+    assert _flat(c.client_windows) == pytest.approx([T0 + 0.020, T0 + 0.026], abs=1e-6)
 
 
 def test_a_send_call_that_held_the_emulator_up_is_the_emulators() -> None:
@@ -113,6 +120,8 @@ def test_never_answered_statuses_expire_and_a_resync_skips_cycles() -> None:
     t.answer(T0 + 0.040 + HORIZON_S, key=2)                   # too late: stale
     c = t.counts()
     assert (c.in_time, c.never, c.never_with_lag, c.cycles_skipped, c.stale) == (1, 2, 1, 2, 1)
+    # status 1, never answered and not in the resync: its window ends at its deadline
+    assert _flat(c.client_windows) == pytest.approx([T0, T0 + CYCLE], abs=1e-6)
 
 
 def test_the_run_that_ends_the_stream_is_the_stops_not_missing_answers() -> None:

@@ -6,7 +6,9 @@ re-arms without restarting."""
 from __future__ import annotations
 
 import dataclasses
+import gc
 import math
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -21,7 +23,7 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session import loop_start
-from leadthrough.session.loop import EndCause, LoopResult, run_session
+from leadthrough.session.loop import GIL_SWITCH_S, EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
 from leadthrough.session.record import SessionLog, load_session
 from leadthrough.session.requests import LoopRequests
@@ -282,6 +284,7 @@ class Closable(WrappedDriver):
                  ) -> None:
         super().__init__(driver)
         self.fail, self.interrupt_at, self.closed, self.t = fail, interrupt_at, 0, 0.0
+        self.closed_with: list[tuple[float, bool]] = []  # switch interval, collector on
 
     def read(self, fb):  # type: ignore[no-untyped-def]
         fresh = self._driver.read(fb)
@@ -292,6 +295,7 @@ class Closable(WrappedDriver):
 
     def close(self) -> None:
         self.closed += 1
+        self.closed_with.append((sys.getswitchinterval(), gc.isenabled()))
         if self.fail:
             raise OSError("the controller went away")
 
@@ -328,9 +332,13 @@ def test_every_way_out_stops_the_driver_before_the_file_is_finished(
     Ctrl-C): each closes the driver (its stream's own stop) once, before the recording is
     finished, and the file logs it with how the session ended."""
     driver = Closable(_sim(er20))
+    gc_on, interval = gc.isenabled(), sys.getswitchinterval()
     log, at_finish = _closing_session(er20, nominal_params, tmp_path / "a.parquet", driver)
     assert at_finish == [1] and driver.closed == 1
     assert _notes(log)[-1] == ("driver stopped", "after duration; the test's stop")
+    # the stop answers the controller's waiting packet before the loop's settings are undone
+    assert driver.closed_with == [(pytest.approx(GIL_SWITCH_S), False)]
+    assert (gc.isenabled(), sys.getswitchinterval()) == (gc_on, interval)
 
     req = LoopRequests()
     driver = Closable(Scripted(_sim(er20), [(0.5, req.stop)]))

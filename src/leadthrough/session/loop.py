@@ -198,15 +198,19 @@ def run_session(
         escaped = e
         raise
     finally:
-        sys.setswitchinterval(switch_interval)
-        if gc_was_enabled:
-            gc.enable()
-        loop.close()
         try:
+            # first: the controller's document of the last period still waits for its answer
+            # (the driver's stop answers it), with the loop's real-time settings still on
             stop_driver(loop, escaped)
         finally:    # the recording complete whatever the driver's stop did
-            events = loop.session_events()
-            session_log = rec.finish(controller.robot.name, events, settings or {})
+            sys.setswitchinterval(switch_interval)
+            if gc_was_enabled:
+                gc.enable()
+            try:
+                loop.close()
+            finally:
+                events = loop.session_events()
+                session_log = rec.finish(controller.robot.name, events, settings or {})
     assert loop.end is not None
     if clock.late:
         log.warning("%d servo periods late (%d slots skipped, none caught up)", clock.late,
@@ -222,7 +226,13 @@ def stop_driver(loop: ServoLoop, escaped: BaseException | None = None) -> None:
     the loop): a real controller's stream ends its own way (``driver.close()``: the protocol's
     clean stop, then the disconnect) before the recording is finished, logged as a ``loop``
     event with how the session ended; a failure of it is logged, never raised (the recording
-    is still finished). A simulated driver has nothing to stop."""
+    is still finished). A simulated driver has nothing to stop.
+
+    Called right after the last period, before the loop's own teardown (its watchdog, its
+    events, the pendant's board) and with its real-time settings (the collector paused, the
+    short switch interval) still on: the exchange of the last period read the controller's
+    next packet, which waits for its answer, and the driver's stop is that answer (an RSI
+    robot counts it late after one cycle, 4 ms)."""
     driver = loop.driver
     if driver.simulated:
         return

@@ -22,7 +22,11 @@ read late. :class:`AnswerTiming` does, from timestamps alone:
   call's return: the emulator was held up inside it), or the answer's time is only an upper
   bound (``exact=False``: see below). Those are not shown to be the client's;
 * the emulator's own misses are counted apart: statuses sent more than ``tolerance`` late and
-  cycle slots skipped by its resynchronisations.
+  cycle slots skipped by its resynchronisations;
+* the late or missing answers that do not coincide with the emulator's lag keep their
+  wall-clock windows (``client_windows``: from the send to the answer, or to the deadline of a
+  missing one), so that a machine's own stalls measured beside the session
+  (``benchmarks/machine_jitter.py``) can be matched against them.
 
 Pairing an answer with its status: J519 and RSI answers carry the status's sequence number /
 IPOC (``key``). RTDE answers carry nothing of the status (the program sees a watchdog counter
@@ -46,8 +50,8 @@ import time
 from collections import OrderedDict, deque
 from dataclasses import dataclass
 
-__all__ = ["HORIZON_S", "SO_TIMESTAMPNS", "AnswerTiming", "TimingCounts", "enable_rx_stamps",
-           "recv_stamped"]
+__all__ = ["HORIZON_S", "SO_TIMESTAMPNS", "WINDOWS_KEPT", "AnswerTiming", "TimingCounts",
+           "enable_rx_stamps", "recv_stamped"]
 
 #: Linux's ``SO_TIMESTAMPNS`` (= ``SCM_TIMESTAMPNS``; asm-generic value, x86 and ARM), which
 #: Python's ``socket`` module does not export.
@@ -56,6 +60,8 @@ _TIMESPEC = struct.Struct("@qq")
 #: A status not answered within this long [s] is never answered (a later answer is stale).
 HORIZON_S = 0.5
 _EVENTS_KEPT = 20
+#: How many of the client's late or missing answers keep their windows (the first ones).
+WINDOWS_KEPT = 5000
 
 
 def enable_rx_stamps(sock: socket.socket) -> bool:
@@ -107,6 +113,10 @@ class TimingCounts:
         worst_answer_ms: Longest time from a send to its answer [ms].
         events: The first late or missing answers: ``t=<sim s> <status> +<ms>`` (answer time
             after the send; ``never``) and ``lag`` when they coincide with the emulator's lag.
+        client_windows: The first :data:`WINDOWS_KEPT` late or missing answers that do not
+            coincide with the emulator's lag, as (send, end) [s, ``CLOCK_REALTIME``], end the
+            answer's arrival (late) or the send + one cycle (never): where the client, or the
+            machine that runs it, was held up.
     """
 
     statuses: int = 0
@@ -120,6 +130,7 @@ class TimingCounts:
     stale: int = 0
     worst_answer_ms: float = 0.0
     events: tuple[str, ...] = ()
+    client_windows: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass
@@ -149,6 +160,7 @@ class AnswerTiming:
         self.sends_late = self.cycles_skipped = self.stale = 0
         self.worst = 0.0
         self.events: list[str] = []
+        self.client_windows: list[tuple[float, float]] = []
 
     # ------------------------------------------------------------------------ the emulator
     def sent(self, key: int, at: float, lag: float, label: float = 0.0,
@@ -210,6 +222,8 @@ class AnswerTiming:
         lag = not exact or rx - status.done <= self.cycle or self._coincides(status, rx)
         self.late_with_lag += lag
         self._event(status, key, f"+{response * 1e3:.1f} ms", lag)
+        if not lag:
+            self._client_window(status.sent, rx)
 
     def expire(self, now: float) -> None:
         """Statuses not answered within :data:`HORIZON_S` of ``now`` are never answered."""
@@ -234,7 +248,8 @@ class AnswerTiming:
             statuses=self.statuses, in_time=self.in_time, late=self.late, never=self.never,
             late_with_lag=self.late_with_lag, never_with_lag=self.never_with_lag,
             sends_late=self.sends_late, cycles_skipped=self.cycles_skipped, stale=self.stale,
-            worst_answer_ms=round(self.worst * 1e3, 3), events=tuple(self.events))
+            worst_answer_ms=round(self.worst * 1e3, 3), events=tuple(self.events),
+            client_windows=tuple(self.client_windows))
 
     # ---------------------------------------------------------------------------- helpers
     def _never(self, key: int, status: _Status) -> None:
@@ -242,6 +257,12 @@ class AnswerTiming:
         lag = self._coincides(status, status.sent + self.cycle)
         self.never_with_lag += lag
         self._event(status, key, "never", lag)
+        if not lag:
+            self._client_window(status.sent, status.sent + self.cycle)
+
+    def _client_window(self, start: float, end: float) -> None:
+        if len(self.client_windows) < WINDOWS_KEPT:
+            self.client_windows.append((round(start, 6), round(end, 6)))
 
     def _coincides(self, status: _Status, until: float) -> bool:
         """The status went out late, or the loop lagged between its send and ``until``."""
