@@ -165,12 +165,14 @@ def _stall_line(windows: list[tuple[float, float]],
     counts = ", ".join(f"CPU {cpu}: {len(st)} (longest "
                        f"{max((b - a for a, b in st), default=0.0) * 1e3:.1f} ms)"
                        for cpu, st in stalls.items())
-    first = ", ".join(f"{(s - wall0):.3f} s +{(e - s) * 1e3:.1f} ms" for s, e in own[:20])
+    shown = own if len(own) <= 20 else own[:15] + own[-5:]
+    which = "" if len(own) <= 20 else ", the first 15 and the last 5"
+    first = ", ".join(f"{(s - wall0):.3f} s +{(e - s) * 1e3:.1f} ms" for s, e in shown)
     return (f"machine stalls (a probe woke > {PROBE_THRESHOLD_MS:g} ms late): {counts}; the "
             f"client's late or missing answers (not the emulator's lag): {len(windows)}, "
             f"overlapping a stall {len(windows) - len(own)} (per CPU "
             f"{', '.join(f'{c}: {n}' for c, n in per_cpu.items())}), **not overlapping any: "
-            f"{len(own)}**" + (f" (the first, from the session's start: {first})" if own else ""))
+            f"{len(own)}**" + (f" (from the session's start{which}: {first})" if own else ""))
 
 
 def main() -> None:
