@@ -32,10 +32,13 @@ its ``--duration``, then ``leadthrough teach`` loads the recording. It prints:
 
 ``--rt-priority P`` runs both processes with ``SCHED_FIFO`` priority P (the guide by its own
 option, the emulator set from here): the figures of a loaded machine. Default: ordinary
-scheduling, the figures of an idle machine.
+scheduling, the figures of an idle machine. ``--pin`` runs the guide on the last CPU (its own
+``--cpus``; its session writer, started before the real-time set-up, is not pinned) and the
+emulator on the first, so that the two never share a CPU (a real controller is another
+computer).
 
     python benchmarks/long_session.py [--minutes 60] [--kind kuka-rsi] [--rt-priority P]
-        [--out DIR] [--no-probe]
+        [--out DIR] [--no-probe] [--pin]
 """
 
 from __future__ import annotations
@@ -97,8 +100,8 @@ def _wait_for(proc: subprocess.Popen[str], text: str, timeout: float) -> str:
     return read
 
 
-def _emulator(kind: str, port: int, minutes: float,
-              rt_priority: int | None) -> subprocess.Popen[str]:
+def _emulator(kind: str, port: int, minutes: float, rt_priority: int | None,
+              cpu: int | None) -> subprocess.Popen[str]:
     presses: list[str] = []
     for k in range(int(minutes * 2) + 2):
         a = 5.0 + 30.0 * k
@@ -107,6 +110,8 @@ def _emulator(kind: str, port: int, minutes: float,
                          timeout=120.0)
     if rt_priority is not None:
         os.sched_setscheduler(emu.pid, os.SCHED_FIFO, os.sched_param(rt_priority))
+    if cpu is not None:
+        os.sched_setaffinity(emu.pid, {cpu})
     return emu
 
 
@@ -186,7 +191,13 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--no-probe", action="store_true",
                     help="no machine probes beside the session")
+    ap.add_argument("--pin", action="store_true",
+                    help="the guide on the last CPU, the emulator on the first")
     args = ap.parse_args()
+    cpus = sorted(os.sched_getaffinity(0))
+    if args.pin and len(cpus) < 2:
+        ap.error(f"--pin needs two CPUs, this process may use {cpus}")
+    guide_cpu, emu_cpu = (cpus[-1], cpus[0]) if args.pin else (None, None)
     from leadthrough.sim.guiding_params import shipped_params_path
 
     params = args.params or shipped_params_path("er20")
@@ -200,15 +211,17 @@ def main() -> None:
                     str(60.0 * args.minutes), "-o", str(session), "--json")
     if args.rt_priority is not None:
         guide_cmd += ["--rt-priority", str(args.rt_priority)]
+    if guide_cpu is not None:
+        guide_cmd += ["--cpus", str(guide_cpu)]
     emu = None
     if args.kind != "kuka-rsi":
-        emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
+        emu = _emulator(args.kind, port, args.minutes, args.rt_priority, emu_cpu)
     guide = subprocess.Popen(guide_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True)
     early_stderr = ""
     if emu is None:  # RSI: the PC listens (after compiling), then the robot sends
         early_stderr = _wait_for(guide, "compiling the loop done", timeout=300.0)
-        emu = _emulator(args.kind, port, args.minutes, args.rt_priority)
+        emu = _emulator(args.kind, port, args.minutes, args.rt_priority, emu_cpu)
     probes = [] if args.no_probe else _probes(out, 60.0 * args.minutes + 600.0,
                                               args.rt_priority)
     t0, steal0, wall0 = time.monotonic(), steal_seconds(), time.time()
