@@ -28,7 +28,8 @@ its ``--duration``, then ``leadthrough teach`` loads the recording. It prints:
   microseconds every time (``--no-probe``: without them);
 * memory: RSS after the first minute (set-up done), at the end, the growth, of the guide and
   of its session writer process (the chunks they share count in both); the file's size;
-  ``teach``'s answer; the emulator's report.
+  ``teach``'s answer; the emulator's report (all of it, with the client's windows, in
+  ``emulator_report.txt`` under ``--out``).
 
 ``--rt-priority P`` runs both processes with ``SCHED_FIFO`` priority P (the guide by its own
 option, the emulator set from here): the figures of a loaded machine. Default: ordinary
@@ -52,6 +53,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from leadthrough.drivers.controllers import DEFAULT_PORTS
@@ -132,16 +134,26 @@ def _probes(out: Path, seconds: float, rt_priority: int | None
 
 
 def _stop_probes(probes: list[tuple[int, Path, subprocess.Popen[str]]]
-                 ) -> dict[int, list[tuple[float, float]]]:
-    """End the probes; print what each measured; their stalls per CPU (wall clock)."""
+                 ) -> tuple[dict[int, list[tuple[float, float]]], list[int]]:
+    """End the probes (all signalled first); print what each measured. Returns their stalls per
+    CPU (wall clock) and the CPUs whose probe failed (no file: its stalls are unknown)."""
+    for _, _, proc in probes:
+        if proc.poll() is None:
+            proc.terminate()
     stalls: dict[int, list[tuple[float, float]]] = {}
+    failed: list[int] = []
     for cpu, path, proc in probes:
-        proc.terminate()
-        text, _ = proc.communicate(timeout=30.0)
-        print(f"probe, CPU {cpu}: {text.strip()}")
-        if path.exists():
+        try:
+            text, _ = proc.communicate(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            text, _ = proc.communicate()
+        print(f"probe, CPU {cpu}: {' '.join(text.split())}")
+        if proc.returncode == 0 and path.exists():
             stalls[cpu] = load_stalls(path)
-    return stalls
+        else:
+            failed.append(cpu)
+    return stalls, failed
 
 
 def match_stalls(windows: list[tuple[float, float]],
@@ -161,20 +173,29 @@ def match_stalls(windows: list[tuple[float, float]],
     return own, per_cpu
 
 
-def _stall_line(windows: list[tuple[float, float]],
-                stalls: dict[int, list[tuple[float, float]]], wall0: float) -> str:
-    """:func:`match_stalls` in a line (times from ``wall0``, the session's start)."""
+def _stall_line(windows: list[tuple[float, float]], total: int,
+                stalls: dict[int, list[tuple[float, float]]], failed: list[int],
+                wall0: float) -> str:
+    """:func:`match_stalls` in a line (``total``: the client's late or missing answers, of
+    which ``windows`` are the first; times from ``wall0``, the session's start)."""
     if not stalls:
         return "machine stalls: not measured (no probe)"
     own, per_cpu = match_stalls(windows, stalls)
+    caveats = ""
+    if failed:
+        caveats += (f" INCOMPLETE: no probe on CPU {failed}, so some answers counted as the "
+                    f"client's own may be the machine's;")
+    if len(windows) < total:
+        caveats += f" only the first {len(windows)} of {total} windows were kept;"
     counts = ", ".join(f"CPU {cpu}: {len(st)} (longest "
                        f"{max((b - a for a, b in st), default=0.0) * 1e3:.1f} ms)"
                        for cpu, st in stalls.items())
     shown = own if len(own) <= 20 else own[:15] + own[-5:]
     which = "" if len(own) <= 20 else ", the first 15 and the last 5"
     first = ", ".join(f"{(s - wall0):.3f} s +{(e - s) * 1e3:.1f} ms" for s, e in shown)
-    return (f"machine stalls (a probe woke > {PROBE_THRESHOLD_MS:g} ms late): {counts}; the "
-            f"client's late or missing answers (not the emulator's lag): {len(windows)}, "
+    return (f"machine stalls (a probe woke > {PROBE_THRESHOLD_MS:g} ms late): {counts};"
+            f"{caveats} the client's late or missing answers (not the emulator's lag): {total}, "
+            f"of the {len(windows)} matched "
             f"overlapping a stall {len(windows) - len(own)} (per CPU "
             f"{', '.join(f'{c}: {n}' for c, n in per_cpu.items())}), **not overlapping any: "
             f"{len(own)}**" + (f" (from the session's start{which}: {first})" if own else ""))
@@ -213,6 +234,33 @@ def main() -> None:
         guide_cmd += ["--rt-priority", str(args.rt_priority)]
     if guide_cpu is not None:
         guide_cmd += ["--cpus", str(guide_cpu)]
+    probes = [] if args.no_probe else _probes(out, 60.0 * args.minutes + 900.0,
+                                              args.rt_priority)
+    try:
+        run = _session(args, guide_cmd, port, emu_cpu)
+    finally:
+        stalls, failed = _stop_probes(probes)
+    _report(args, out, session, run, stalls, failed)
+
+
+@dataclass
+class _Run:
+    """What a session left: the emulator's report, the guide's output (its stderr with what it
+    printed before the emulator started), memory samples (s, MB) of the guide and its writer,
+    the machine's steal [s] and the session's start on the wall clock [s]."""
+
+    report: str
+    stdout: str
+    stderr: str
+    samples: list[tuple[float, float]]
+    writer: list[tuple[float, float]]
+    steal: float
+    wall0: float
+
+
+def _session(args: argparse.Namespace, guide_cmd: list[str], port: int,
+             emu_cpu: int | None) -> _Run:
+    """Run the emulator and the guide until the guide ends; sample their memory."""
     emu = None
     if args.kind != "kuka-rsi":
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority, emu_cpu)
@@ -222,8 +270,6 @@ def main() -> None:
     if emu is None:  # RSI: the PC listens (after compiling), then the robot sends
         early_stderr = _wait_for(guide, "compiling the loop done", timeout=300.0)
         emu = _emulator(args.kind, port, args.minutes, args.rt_priority, emu_cpu)
-    probes = [] if args.no_probe else _probes(out, 60.0 * args.minutes + 600.0,
-                                              args.rt_priority)
     t0, steal0, wall0 = time.monotonic(), steal_seconds(), time.time()
     samples: list[tuple[float, float]] = []
     writer: list[tuple[float, float]] = []
@@ -240,9 +286,15 @@ def main() -> None:
     stdout, stderr = guide.communicate()
     steal = steal_seconds() - steal0
     report = stop_emulator(emu, timeout=30.0)
-    stalls = _stop_probes(probes)
+    return _Run(report, stdout, early_stderr + stderr, samples, writer, steal, wall0)
+
+
+def _report(args: argparse.Namespace, out: Path, session: Path, run: _Run,
+            stalls: dict[int, list[tuple[float, float]]], failed: list[int]) -> None:
+    """Print the figures; write the memory samples and the emulator's report under ``out``."""
+    report, stdout, samples, writer = run.report, run.stdout, run.samples, run.writer
     result = (json.loads(stdout) if stdout.strip().startswith("{")
-              else {"stderr": early_stderr + stderr})
+              else {"stderr": run.stderr})
     after = [m for s, m in samples if s >= 60.0]
     first = after[0] if after else float("nan")
     teach = subprocess.run(_lt("teach", str(session), "--robot", "er20", "--no-line", "-o",
@@ -269,16 +321,20 @@ def main() -> None:
               f"{result['cycle_us_first'] / result['cycle_us_median']:.2f} (goal <= 2), "
               f"p99 {result['cycle_us_p99']:.0f} µs, max {result['cycle_us_max']:.0f} µs")
         print(timing_summary(emu_fields))
-        print(f"machine: steal {steal:.2f} s over the session (CPU time the hypervisor took "
+        print(f"machine: steal {run.steal:.2f} s over the session (CPU time the hypervisor took "
               f"from this virtual machine: a late answer may be the machine's; "
               f"benchmarks/machine_jitter.py measures it alone)")
         windows = ast.literal_eval(emu_fields.get("timing.client_windows", "()"))
-        print(_stall_line([(float(a), float(b)) for a, b in windows], stalls, wall0))
+        total = sum(int(emu_fields.get(f"timing.{k}", "0")) * sign for k, sign in (
+            ("late", 1), ("late_with_lag", -1), ("never", 1), ("never_with_lag", -1)))
+        print(_stall_line([(float(a), float(b)) for a, b in windows], total, stalls, failed,
+                          run.wall0))
     print(f"guide: {json.dumps(result)}")
     print(f"teach: exit {teach.returncode}: {(teach.stdout + teach.stderr).strip()[:400]}")
     print("emulator: " + " ".join(" ".join(line.split()) for line in report.splitlines()
                                   if not line.startswith("timing.client_windows")))
     (out / "rss.json").write_text(json.dumps({"guide": samples, "writer": writer}))
+    (out / "emulator_report.txt").write_text(report)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,9 @@ Beside a session (``benchmarks/long_session.py``) it runs as a probe: pinned to 
 (``--cpu``), at a priority above the loop's, it writes each wake-up later than
 ``--threshold-ms`` as [asked wake-up, actual wake-up] in wall-clock time (``CLOCK_REALTIME``,
 the emulators' answer timing's clock) to ``--events``: stretches in which nothing of ours could
-run on that CPU. SIGTERM ends it early (the figures and the file are written).
+run on that CPU (a stretch starts at the asked wake-up: a stall that began during the sleep
+counts from there). It says ``machine_jitter: probing`` on stderr once SIGTERM ends it
+early, with the figures and the file written.
 
     python benchmarks/machine_jitter.py [--seconds 120] [--rt-priority 50] [--cpu C]
         [--events FILE] [--threshold-ms 1]
@@ -88,6 +90,7 @@ def main() -> None:
         stop = True
 
     signal.signal(signal.SIGTERM, _stop)
+    print("machine_jitter: probing", file=sys.stderr, flush=True)  # SIGTERM ends it from here
     steal0 = steal_seconds()
     delays = array("d")
     stalls: list[tuple[float, float]] = []
@@ -104,6 +107,8 @@ def main() -> None:
     seconds = time.perf_counter() - start
     steal = steal_seconds() - steal0
     d = np.frombuffer(delays, dtype=np.float64)
+    if d.size == 0:
+        d = np.zeros(1)   # stopped before the first sleep: nothing measured
     policy = f"SCHED_FIFO {args.rt_priority}" if args.rt_priority else "ordinary scheduling"
     where = f" on CPU {args.cpu}" if args.cpu is not None else ""
     print(f"{d.size} sleeps of 1 ms over {seconds:.0f} s ({policy}{where}), delay behind the "

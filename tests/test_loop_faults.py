@@ -281,9 +281,10 @@ class Closable(WrappedDriver):
     stop_method = "the test's stop"
 
     def __init__(self, driver: Driver, fail: bool = False, interrupt_at: float = math.inf,
-                 ) -> None:
+                 close_s: float = 0.0) -> None:
         super().__init__(driver)
         self.fail, self.interrupt_at, self.closed, self.t = fail, interrupt_at, 0, 0.0
+        self.close_s, self.aborted = close_s, 0
         self.closed_with: list[tuple[float, bool]] = []  # switch interval, collector on
 
     def read(self, fb):  # type: ignore[no-untyped-def]
@@ -296,12 +297,17 @@ class Closable(WrappedDriver):
     def close(self) -> None:
         self.closed += 1
         self.closed_with.append((sys.getswitchinterval(), gc.isenabled()))
+        time.sleep(self.close_s)   # the stream's stop takes a while (RSI: the next document)
         if self.fail:
             raise OSError("the controller went away")
 
+    def abort(self) -> None:
+        self.aborted += 1
+
 
 def _closing_session(robot: Robot, params: ParamsFile, path: Path, driver: Closable,
-                     requests: LoopRequests | None = None) -> tuple[SessionLog, list[int]]:
+                     requests: LoopRequests | None = None, watchdog_s: float = 0.5,
+                     ) -> tuple[SessionLog, list[int]]:
     """A 1 s session on ``driver`` recorded to ``path``; the file, and ``driver.closed`` when
     the sink was finished."""
     sink = SessionFileSink(path, robot.n)
@@ -315,7 +321,8 @@ def _closing_session(robot: Robot, params: ParamsFile, path: Path, driver: Closa
     sink.finish = finish_after_close  # type: ignore[method-assign]
     parts = build_loop(robot, params, LoopConfig(), driver.dt)
     try:
-        run_session(driver, *parts, 1.0, options=LoopOptions(enable_input=0, watchdog_s=0.5),
+        run_session(driver, *parts, 1.0,
+                    options=LoopOptions(enable_input=0, watchdog_s=watchdog_s),
                     requests=requests, sink=sink)
     finally:
         out = load_session(path)
@@ -352,15 +359,32 @@ def test_every_way_out_stops_the_driver_before_the_file_is_finished(
     log = load_session(tmp_path / "c.parquet")
     assert driver.closed == 1 and log.time[-1] < 0.51
     assert _notes(log)[-1] == ("driver stopped", "after KeyboardInterrupt; the test's stop")
+    assert driver.closed_with == [(pytest.approx(GIL_SWITCH_S), False)]
+    assert (gc.isenabled(), sys.getswitchinterval()) == (gc_on, interval)
+
+
+def test_the_driver_stop_after_a_second_ctrl_c_is_no_blocked_exchange(
+        er20: Robot, nominal_params: ParamsFile, tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A second Ctrl-C escaping from the driver's ``read`` leaves no exchange open: the
+    driver's stop that follows (1.2 s here, the watchdog at 50 ms, its abort after 1 s) is not
+    taken for a blocked call, logged or aborted, while the watchdog still runs."""
+    driver = Closable(_sim(er20), interrupt_at=0.5, close_s=1.2)
+    with pytest.raises(KeyboardInterrupt):
+        _closing_session(er20, nominal_params, tmp_path / "c.parquet", driver, watchdog_s=0.05)
+    assert driver.closed == 1 and driver.aborted == 0
+    assert "blocked" not in caplog.text
 
 
 def test_a_failing_driver_stop_is_logged_and_the_file_is_complete(
         er20: Robot, nominal_params: ParamsFile, tmp_path: Path) -> None:
     driver = Closable(_sim(er20), fail=True)
+    gc_on, interval = gc.isenabled(), sys.getswitchinterval()
     log, at_finish = _closing_session(er20, nominal_params, tmp_path / "s.parquet", driver)
     assert at_finish == [1] and log.time.size == 1000          # every period, then the events
     assert _notes(log)[-1] == ("driver stop failed",
                                "after duration; OSError: the controller went away")
+    assert (gc.isenabled(), sys.getswitchinterval()) == (gc_on, interval)
 
 
 class Stalling(WrappedDriver):

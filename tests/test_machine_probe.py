@@ -5,6 +5,7 @@ late answers that overlap one of them from those that overlap none."""
 from __future__ import annotations
 
 import itertools
+import os
 import signal
 import subprocess
 import sys
@@ -24,9 +25,18 @@ linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"),
 
 
 def _probe(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, str(BENCHMARKS / "machine_jitter.py"),
+    """A probe at ordinary scheduling, once it says it is probing (its first line)."""
+    proc = subprocess.Popen([sys.executable, str(BENCHMARKS / "machine_jitter.py"),
                              "--rt-priority", "0", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    assert first.strip() == "machine_jitter: probing", first
+    return proc
+
+
+def _a_cpu() -> int:
+    return min(os.sched_getaffinity(0))
 
 
 @linux_only
@@ -34,28 +44,28 @@ def test_the_probe_writes_its_late_wake_ups_on_the_wall_clock(tmp_path: Path) ->
     """With a threshold of 0 every wake-up of a 1 ms sleep is late (a sleep never returns
     early): the file lists one stretch per sleep, each starting 1 ms after the one before
     began at the earliest, of positive length, in order, within the run's wall-clock time."""
-    events = tmp_path / "cpu0.json"
+    events, cpu = tmp_path / "cpu.json", _a_cpu()
     before = time.time()
-    proc = _probe("--seconds", "0.5", "--cpu", "0", "--events", str(events),
+    proc = _probe("--seconds", "0.5", "--cpu", str(cpu), "--events", str(events),
                   "--threshold-ms", "0")
     out, _ = proc.communicate(timeout=60)
     after = time.time()
     assert proc.returncode == 0, out
     stalls = load_stalls(events)
     sleeps = int(out.split(" sleeps of 1 ms")[0])
-    assert len(stalls) == sleeps and 100 <= sleeps <= 500
+    assert len(stalls) == sleeps and 10 <= sleeps <= 500
     assert all(before < a < b < after for a, b in stalls)
     assert all(b0 <= a1 - 1e-3 + 1e-5 for (_, b0), (a1, _) in itertools.pairwise(stalls))
-    assert "on CPU 0" in out
+    assert f"on CPU {cpu}" in out
 
 
 @linux_only
 def test_sigterm_ends_the_probe_with_its_figures_and_file(tmp_path: Path) -> None:
     """The session ends its probes with SIGTERM: the probe stops within a second, prints its
     figures and writes its file (here with no stretch: a threshold of 1 s)."""
-    events = tmp_path / "cpu0.json"
+    events = tmp_path / "cpu.json"
     proc = _probe("--seconds", "120", "--events", str(events), "--threshold-ms", "1000")
-    time.sleep(1.0)
+    time.sleep(0.2)
     sent = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=30)

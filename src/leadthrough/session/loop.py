@@ -187,10 +187,7 @@ def run_session(
     clock = PeriodClock(dt, options.paced, real_time=not driver.simulated)
     times = ComputeTimes()
     t_start = loop.start()
-    gc_was_enabled = gc.isenabled()
-    gc.disable()
-    switch_interval = sys.getswitchinterval()
-    sys.setswitchinterval(GIL_SWITCH_S)
+    interpreter = _InterpreterSettings()
     escaped: BaseException | None = None
     try:
         _run(loop, rec, t_start, steps, clock, applied_wrench, times)
@@ -198,19 +195,8 @@ def run_session(
         escaped = e
         raise
     finally:
-        try:
-            # first: the controller's document of the last period still waits for its answer
-            # (the driver's stop answers it), with the loop's real-time settings still on
-            stop_driver(loop, escaped)
-        finally:    # the recording complete whatever the driver's stop did
-            sys.setswitchinterval(switch_interval)
-            if gc_was_enabled:
-                gc.enable()
-            try:
-                loop.close()
-            finally:
-                events = loop.session_events()
-                session_log = rec.finish(controller.robot.name, events, settings or {})
+        session_log = _end(loop, rec, escaped, interpreter, controller.robot.name,
+                           settings or {})
     assert loop.end is not None
     if clock.late:
         log.warning("%d servo periods late (%d slots skipped, none caught up)", clock.late,
@@ -219,6 +205,44 @@ def run_session(
     return LoopResult(log=session_log, end=loop.end, cycle_us=cycle_us, servo_us=servo_us,
                       late_periods=clock.late, skipped_periods=clock.skipped,
                       periods=times.count, cycles=-(-times.count // every))
+
+
+class _InterpreterSettings:
+    """The interpreter while the loop runs (module doc): the cyclic collector paused, the
+    thread switch interval at :data:`GIL_SWITCH_S`; :meth:`restore` puts both back."""
+
+    def __init__(self) -> None:
+        self.gc_was_enabled = gc.isenabled()
+        gc.disable()
+        self.switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(GIL_SWITCH_S)
+
+    def restore(self) -> None:
+        sys.setswitchinterval(self.switch_interval)
+        if self.gc_was_enabled:
+            gc.enable()
+
+
+def _end(loop: ServoLoop, rec: SessionRecorder, escaped: BaseException | None,
+         interpreter: _InterpreterSettings, robot_name: str,
+         settings: dict[str, object]) -> SessionLog | None:
+    """After the last period, however the loop left: first the driver's stop, which answers the
+    controller's packet the last period read (:func:`stop_driver`), with the interpreter still
+    set for the loop (the requests left unmade are noted just before, so that the stop's note
+    is the last); then the interpreter restored, the loop closed, and the recording finished
+    whatever the steps before did. Returns the recording (None where it went to a sink)."""
+    try:
+        try:
+            loop.note_unmade()
+        finally:
+            stop_driver(loop, escaped)
+    finally:
+        interpreter.restore()
+        try:
+            loop.close()
+        finally:
+            session_log = rec.finish(robot_name, loop.session_events(), settings)
+    return session_log
 
 
 def stop_driver(loop: ServoLoop, escaped: BaseException | None = None) -> None:

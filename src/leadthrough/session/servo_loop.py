@@ -156,10 +156,7 @@ class ServoLoop:
         """After the last period: the watchdog stops, the last snapshot says why it ended."""
         if self.watch is not None:
             self.watch.stop()
-        t = self.end.t if self.end is not None else math.nan
-        for request in self.deferred:
-            self.note(t, f"{request.kind} not made", "the session ended before rest")
-        self.deferred.clear()
+        self.note_unmade()
         self.drain()
         if self.board is not None and self.board.fields is not None:
             end = self.end
@@ -168,6 +165,14 @@ class ServoLoop:
             self.board.begin()
             self.board.fields.running = False
             self.board.end()
+
+    def note_unmade(self) -> None:
+        """The requests deferred until rest that the session's end left unmade, noted (at the
+        end's time) and dropped."""
+        t = self.end.t if self.end is not None else math.nan
+        for request in self.deferred:
+            self.note(t, f"{request.kind} not made", "the session ended before rest")
+        self.deferred.clear()
 
     def session_events(self) -> list[SessionEvent]:
         """Transitions, marks and the loop's notes, in time order."""
@@ -267,8 +272,9 @@ class ServoLoop:
             aborted = watch is not None and watch.fired
             self._link_failed(t_loop, Fault.DRIVER_TIMEOUT if aborted else Fault.DRIVER_ERROR,
                               math.nan, f"{type(e).__name__}: {e}", lost=aborted)
-        if watch is not None:
-            watch.leave()
+        finally:    # also when a second Ctrl-C escapes: the driver's stop is no exchange
+            if watch is not None:
+                watch.leave()
         elapsed = time.perf_counter() - start
         if elapsed > self.timeout_s and self.link is not Link.LOST:
             self._link_failed(t_loop, Fault.DRIVER_TIMEOUT, elapsed,
