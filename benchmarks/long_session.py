@@ -39,7 +39,7 @@ emulator on the first, so that the two never share a CPU (a real controller is a
 computer).
 
     python benchmarks/long_session.py [--minutes 60] [--kind kuka-rsi] [--rt-priority P]
-        [--out DIR] [--no-probe] [--pin]
+        [--out DIR] [--no-probe] [--pin] [--lock-memory]
 """
 
 from __future__ import annotations
@@ -214,6 +214,8 @@ def main() -> None:
                     help="no machine probes beside the session")
     ap.add_argument("--pin", action="store_true",
                     help="the guide on the last CPU, the emulator on the first")
+    ap.add_argument("--lock-memory", action="store_true",
+                    help="the guide with --lock-memory (mlockall: no page faults in the loop)")
     args = ap.parse_args()
     cpus = sorted(os.sched_getaffinity(0))
     if args.pin and len(cpus) < 2:
@@ -234,6 +236,8 @@ def main() -> None:
         guide_cmd += ["--rt-priority", str(args.rt_priority)]
     if guide_cpu is not None:
         guide_cmd += ["--cpus", str(guide_cpu)]
+    if args.lock_memory:
+        guide_cmd += ["--lock-memory"]
     probes = [] if args.no_probe else _probes(out, 60.0 * args.minutes + 900.0,
                                               args.rt_priority)
     try:
