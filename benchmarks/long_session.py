@@ -329,8 +329,11 @@ def _report(args: argparse.Namespace, out: Path, session: Path, run: _Run,
               f"from this virtual machine: a late answer may be the machine's; "
               f"benchmarks/machine_jitter.py measures it alone)")
         windows = ast.literal_eval(emu_fields.get("timing.client_windows", "()"))
-        total = sum(int(emu_fields.get(f"timing.{k}", "0")) * sign for k, sign in (
-            ("late", 1), ("late_with_lag", -1), ("never", 1), ("never_with_lag", -1)))
+        def count(name: str) -> int:
+            return int(emu_fields.get(f"timing.{name}", "0"))
+
+        total = (count("late") - count("late_with_lag")) + (count("never")
+                                                             - count("never_with_lag"))
         print(_stall_line([(float(a), float(b)) for a, b in windows], total, stalls, failed,
                           run.wall0))
     print(f"guide: {json.dumps(result)}")

@@ -107,14 +107,14 @@ def main() -> None:
     seconds = time.perf_counter() - start
     steal = steal_seconds() - steal0
     d = np.frombuffer(delays, dtype=np.float64)
-    if d.size == 0:
-        d = np.zeros(1)   # stopped before the first sleep: nothing measured
     policy = f"SCHED_FIFO {args.rt_priority}" if args.rt_priority else "ordinary scheduling"
     where = f" on CPU {args.cpu}" if args.cpu is not None else ""
-    print(f"{d.size} sleeps of 1 ms over {seconds:.0f} s ({policy}{where}), delay behind the "
-          f"asked wake-up [ms]: median {np.median(d):.3f}, p99 {np.percentile(d, 99):.3f}, "
-          f"p99.99 {np.percentile(d, 99.99):.3f}, max {d.max():.3f}; later than 1 ms: "
-          f"{int(np.sum(d > 1))}, 2 ms: {int(np.sum(d > 2))}, 4 ms: {int(np.sum(d > 4))}; "
+    figures = ("nothing measured (stopped before the first)" if d.size == 0 else
+               f"delay behind the asked wake-up [ms]: median {np.median(d):.3f}, p99 "
+               f"{np.percentile(d, 99):.3f}, p99.99 {np.percentile(d, 99.99):.3f}, max "
+               f"{d.max():.3f}; later than 1 ms: {int(np.sum(d > 1))}, 2 ms: "
+               f"{int(np.sum(d > 2))}, 4 ms: {int(np.sum(d > 4))}")
+    print(f"{d.size} sleeps of 1 ms over {seconds:.0f} s ({policy}{where}), {figures}; "
           f"steal {steal:.2f} s", flush=True)
     if args.events is not None:
         args.events.write_text(json.dumps({"cpu": args.cpu, "threshold_ms": args.threshold_ms,
