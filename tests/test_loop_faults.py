@@ -29,6 +29,7 @@ from leadthrough.session.record import SessionLog, load_session
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.servo_loop import ServoLoop
 from leadthrough.session.session_file import SessionFileSink
+from leadthrough.session.watchdog import STACK_BYTES, DriverWatchdog
 from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
@@ -548,3 +549,86 @@ def test_the_start_answers_the_packets_that_waited_only_where_the_controller_wan
     unanswered = [s for s in first if s not in driver.answered]
     assert unanswered == ([] if answer_late else [first[0], first[2]]), (first, unanswered)
     assert all(s in driver.answered for s in driver.taken[4:-1])   # the periods answer each
+
+
+class PacedDelays(Paced):
+    """:class:`Paced`, keeping for each answer how long after its packet was read it went
+    out [s]."""
+
+    def __init__(self, driver: Driver) -> None:
+        super().__init__(driver)
+        self.read_at = math.nan
+        self.delays: list[float] = []
+
+    def read(self, fb):  # type: ignore[no-untyped-def]
+        fresh = super().read(fb)
+        if fresh:
+            self.read_at = time.perf_counter()
+        return fresh
+
+    def write(self, cmd: JointCommand) -> None:
+        if self.answered != self.k:
+            self.delays.append(time.perf_counter() - self.read_at)
+        super().write(cmd)
+
+
+def test_a_slow_watchdog_start_is_in_the_set_up_not_before_an_answer(
+        er20: Robot, nominal_params: ParamsFile, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The watchdog's thread taking 1.9 cycles to start (its stack faulted in where the memory
+    is locked: 3.4-5 ms measured for the default 8 MiB stack) delays no answer: it starts in
+    the set-up's compute, before the start reads the packet the first period answers. (Before,
+    it started after that read: the first period's answer went out 15 ms after its packet.)"""
+    start = DriverWatchdog.start
+
+    def slow_start(self: DriverWatchdog) -> None:
+        start(self)
+        time.sleep(1.9 * 0.008)
+
+    monkeypatch.setattr(DriverWatchdog, "start", slow_start)
+    driver = PacedDelays(_sim(er20))
+    config = LoopConfig(guiding=dataclasses.replace(LoopConfig().guiding, dt=0.008))
+    parts = build_loop(er20, nominal_params, config, driver.dt)
+    r = run_session(driver, *parts, 0.1, options=LoopOptions(enable_input=0, watchdog_s=0.5))
+    assert r.end.cause is EndCause.DURATION
+    first = driver.delays[:5]     # the start's holds and the first periods' answers
+    assert len(first) == 5 and max(first) < 0.008, first
+
+
+def test_the_watchdog_thread_starts_on_its_small_stack(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The thread is created with a stack of STACK_BYTES, and the interpreter's setting for
+    new threads is put back at once."""
+    sizes: list[int] = []
+    create = threading._start_new_thread    # type: ignore[attr-defined]
+
+    def spy(*args: object) -> int:
+        sizes.append(threading.stack_size())
+        return int(create(*args))
+
+    monkeypatch.setattr(threading, "_start_new_thread", spy)
+    before = threading.stack_size()
+    watch = DriverWatchdog(0.05, 1.0, None)
+    watch.start()
+    try:
+        assert sizes == [STACK_BYTES]
+        assert threading.stack_size() == before
+    finally:
+        watch.stop()
+    assert not watch._thread.is_alive()
+
+
+def test_a_failed_set_up_stops_the_watchdog(er20: Robot, nominal_params: ParamsFile,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """An exception in the start's compute (after the watchdog's thread started) leaves no
+    thread behind."""
+    def broken(loop: ServoLoop, q0: np.ndarray, t: float) -> None:
+        raise RuntimeError("set-up failed")
+
+    monkeypatch.setattr(loop_start, "dry_periods", broken)
+    before = {t for t in threading.enumerate() if t.name == "leadthrough-watchdog"}
+    sim = _sim(er20)
+    parts = build_loop(er20, nominal_params, LIGHT, sim.dt)
+    with pytest.raises(RuntimeError, match="set-up failed"):
+        run_session(Real(sim), *parts, 0.05,
+                    options=LoopOptions(enable_input=0, watchdog_s=0.05))
+    after = {t for t in threading.enumerate() if t.name == "leadthrough-watchdog"}
+    assert after == before

@@ -3,12 +3,14 @@
 reset on it, and a packet just come for the first period to answer.
 
 On a real controller the start is where packets are most easily answered late: the first one
-may have waited since the driver opened, and the set-up's compute (each part's ``warm_up``,
-:data:`DRY_PERIODS` periods' compute, the resets) may outlast a cycle. So the start answers
-at once a packet it waited for (a hold where the robot stands), and one that may have waited
-is answered only where the controller counts an unanswered packet late anyway (a driver's
-``answer_late_packets``, RSI); J519 refuses a late answer, the UR program holds a cycle
-(:func:`fresh_packet`).
+may have waited since the driver opened, and the set-up's compute (the watchdog's thread
+started, each part's ``warm_up``, :data:`DRY_PERIODS` periods' compute, the resets) may outlast
+a cycle. So the start answers at once a packet it waited for (a hold where the robot stands),
+and one that may have waited is answered only where the controller counts an unanswered packet
+late anyway (a driver's ``answer_late_packets``, RSI); J519 refuses a late answer, the UR
+program holds a cycle (:func:`fresh_packet`). Nothing that takes time is left between the last
+packet read and the first period: the watchdog's thread, whose start faults in its whole stack
+where the memory is locked, starts with the compute.
 """
 
 from __future__ import annotations
@@ -70,6 +72,24 @@ def start_loop(loop: ServoLoop) -> float:
         cmd.q[:] = q0
         cmd.qd[:] = 0.0
         driver.write(cmd)
+    watch = loop.watch
+    if watch is not None:   # its thread started in the set-up's compute (it watches from
+        watch.start()       # the first period's exchange on), not in a period
+    try:
+        _set_up(loop, q0, answer_all)
+    except BaseException:
+        if watch is not None:
+            watch.stop()
+        raise
+    loop.t = fb.t
+    loop.fresh_at, loop.fresh_sequence = time.perf_counter(), fb.sequence
+    return fb.t
+
+
+def _set_up(loop: ServoLoop, q0: Array, answer_all: bool) -> None:
+    """The start's compute on the first sample ``q0``, then (a real controller) a packet just
+    come for the first period to answer."""
+    driver, fb, cmd = loop.driver, loop.fb, loop.cmd
     dry_periods(loop, q0, fb.t)
     loop.estimator.reset(q0)
     loop.controller.reset(q0, fb.t)
@@ -82,11 +102,6 @@ def start_loop(loop: ServoLoop) -> float:
     if not driver.simulated:  # a packet that has just come, for the first period to
         # answer (one that came during the compute: a hold, or unanswered as a lost one)
         fresh_packet(driver, fb, cmd if answer_all else None)
-    if loop.watch is not None:
-        loop.watch.start()
-    loop.t = fb.t
-    loop.fresh_at, loop.fresh_sequence = time.perf_counter(), fb.sequence
-    return fb.t
 
 
 def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:

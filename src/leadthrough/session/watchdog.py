@@ -13,6 +13,13 @@ its stop.
 
 The loop's side is two attribute writes per period (:meth:`enter`, :meth:`leave`): no lock, no
 allocation.
+
+The thread runs on a stack of :data:`STACK_BYTES` instead of the C library's default (8 MiB on
+glibc): with the memory locked (``guide --lock-memory``: ``mlockall(MCL_FUTURE)``) a new
+thread's whole stack is faulted in when it starts, which took 3.4-5.0 ms for the default and
+0.3 ms for 256 KiB on the CI machine's kind (two cores): a late RSI answer at the session's
+start. The PREEMPT_RT project's "HOWTO build a simple RT application" (application_base) asks
+for the same: threads created, with their stacks, before the real-time work.
 """
 
 from __future__ import annotations
@@ -23,9 +30,12 @@ import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["DriverWatchdog"]
+__all__ = ["STACK_BYTES", "DriverWatchdog"]
 
 log = logging.getLogger("leadthrough.session")
+
+#: The watchdog thread's stack [bytes] (module doc): it logs and calls the driver's ``abort``.
+STACK_BYTES = 256 * 1024
 
 
 class DriverWatchdog:
@@ -54,8 +64,13 @@ class DriverWatchdog:
                                         daemon=True)
 
     def start(self) -> None:
-        """Start watching."""
-        self._thread.start()
+        """Start the thread, on a stack of :data:`STACK_BYTES` (the interpreter's setting for
+        new threads is put back at once). It watches from the first :meth:`enter` on."""
+        default = threading.stack_size(STACK_BYTES)
+        try:
+            self._thread.start()
+        finally:
+            threading.stack_size(default)
 
     def stop(self) -> None:
         """Stop watching (joins the thread)."""
