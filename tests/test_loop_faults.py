@@ -632,3 +632,24 @@ def test_a_failed_set_up_stops_the_watchdog(er20: Robot, nominal_params: ParamsF
                     options=LoopOptions(enable_input=0, watchdog_s=0.05))
     after = {t for t in threading.enumerate() if t.name == "leadthrough-watchdog"}
     assert after == before
+
+
+def test_a_refused_stack_size_starts_the_watchdog_on_the_default_stack(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """A platform whose threads cannot take STACK_BYTES (``threading.stack_size`` raises)
+    still gets its watchdog, on the default stack, with a warning."""
+    def refused(size: int = 0) -> int:
+        raise ValueError("size not valid")
+
+    monkeypatch.setattr(threading, "stack_size", refused)
+    fired = threading.Event()
+    watch = DriverWatchdog(0.02, 0.05, fired.set)
+    with caplog.at_level("WARNING", logger="leadthrough.session"):
+        watch.start()
+    try:
+        watch.enter(time.perf_counter())
+        assert fired.wait(2.0)          # it watches: a blocked exchange is aborted
+    finally:
+        watch.leave()
+        watch.stop()
+    assert "default stack (size not valid)" in caplog.text

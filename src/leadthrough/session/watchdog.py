@@ -65,8 +65,14 @@ class DriverWatchdog:
 
     def start(self) -> None:
         """Start the thread, on a stack of :data:`STACK_BYTES` (the interpreter's setting for
-        new threads is put back at once). It watches from the first :meth:`enter` on."""
-        default = threading.stack_size(STACK_BYTES)
+        new threads is put back at once; a platform that refuses that size gives the thread
+        its default stack, logged). It watches from the first :meth:`enter` on."""
+        try:
+            default = threading.stack_size(STACK_BYTES)
+        except (ValueError, RuntimeError) as e:
+            log.warning("the watchdog's thread starts on the default stack (%s)", e)
+            self._thread.start()
+            return
         try:
             self._thread.start()
         finally:
