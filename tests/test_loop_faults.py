@@ -489,19 +489,26 @@ def test_the_first_answers_go_out_a_whole_cycle_ahead(
     period's answer each answer a packet waited for, not one that was waiting (come up to a
     cycle before, its answer may reach the controller late: J519 refuses it and reports it,
     a CONTROLLER_STATE fault at the stream's start)."""
-    dry = loop_start.dry_periods
-
-    def slow_dry(loop: ServoLoop, q0: np.ndarray, t: float) -> None:
-        dry(loop, q0, t)
-        time.sleep(1.9 * 0.008)
-
-    monkeypatch.setattr(loop_start, "dry_periods", slow_dry)
+    monkeypatch.setattr(loop_start, "dry_periods", _then_sleep(loop_start.dry_periods))
     driver = Paced(_sim(er20))
+    _paced_session(er20, nominal_params, driver)
+    assert [waiting for _, waiting in driver.answers[:2]] == [False, False], driver.answers
+
+
+def _then_sleep(function: Callable[..., None]) -> Callable[..., None]:
+    """``function``, then 1.9 cycles of 8 ms more."""
+    def slow(*args: object) -> None:
+        function(*args)
+        time.sleep(1.9 * 0.008)
+    return slow
+
+
+def _paced_session(robot: Robot, params: ParamsFile, driver: Paced) -> None:
+    """0.1 s of the loop at the paced driver's 8 ms, to its end."""
     config = LoopConfig(guiding=dataclasses.replace(LoopConfig().guiding, dt=0.008))
-    parts = build_loop(er20, nominal_params, config, driver.dt)
+    parts = build_loop(robot, params, config, driver.dt)
     r = run_session(driver, *parts, 0.1, options=LoopOptions(enable_input=0, watchdog_s=0.5))
     assert r.end.cause is EndCause.DURATION
-    assert [waiting for _, waiting in driver.answers[:2]] == [False, False], driver.answers
 
 
 class AnswerLog(WrappedDriver):
@@ -578,18 +585,9 @@ def test_a_slow_watchdog_start_is_in_the_set_up_not_before_an_answer(
     is locked: 3.4-5 ms measured for the default 8 MiB stack) delays no answer: it starts in
     the set-up's compute, before the start reads the packet the first period answers. (Before,
     it started after that read: the first period's answer went out 15 ms after its packet.)"""
-    start = DriverWatchdog.start
-
-    def slow_start(self: DriverWatchdog) -> None:
-        start(self)
-        time.sleep(1.9 * 0.008)
-
-    monkeypatch.setattr(DriverWatchdog, "start", slow_start)
+    monkeypatch.setattr(DriverWatchdog, "start", _then_sleep(DriverWatchdog.start))
     driver = PacedDelays(_sim(er20))
-    config = LoopConfig(guiding=dataclasses.replace(LoopConfig().guiding, dt=0.008))
-    parts = build_loop(er20, nominal_params, config, driver.dt)
-    r = run_session(driver, *parts, 0.1, options=LoopOptions(enable_input=0, watchdog_s=0.5))
-    assert r.end.cause is EndCause.DURATION
+    _paced_session(er20, nominal_params, driver)
     first = driver.delays[:5]     # the start's holds and the first periods' answers
     assert len(first) == 5 and max(first) < 0.008, first
 
