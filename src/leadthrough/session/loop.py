@@ -186,8 +186,12 @@ def run_session(
     rec = SessionRecorder(driver.n, applied_wrench is not None, sink)
     clock = PeriodClock(dt, options.paced, real_time=not driver.simulated)
     times = ComputeTimes()
-    t_start = loop.start()
-    interpreter = _InterpreterSettings()
+    interpreter = _InterpreterSettings()   # from the start on: no collection between the
+    try:                                   # start's last packet and the first answer
+        t_start = loop.start()
+    except BaseException:
+        interpreter.restore()
+        raise
     escaped: BaseException | None = None
     try:
         _run(loop, rec, t_start, steps, clock, applied_wrench, times)
@@ -208,8 +212,9 @@ def run_session(
 
 
 class _InterpreterSettings:
-    """The interpreter while the loop runs (module doc): the cyclic collector paused, the
-    thread switch interval at :data:`GIL_SWITCH_S`; :meth:`restore` puts both back."""
+    """The interpreter while the loop runs, its start included (module doc): the cyclic
+    collector paused, the thread switch interval at :data:`GIL_SWITCH_S`; :meth:`restore` puts
+    both back."""
 
     def __init__(self) -> None:
         self.gc_was_enabled = gc.isenabled()

@@ -73,9 +73,9 @@ def start_loop(loop: ServoLoop) -> float:
         cmd.qd[:] = 0.0
         driver.write(cmd)
     watch = loop.watch
-    if watch is not None:   # its thread started in the set-up's compute (it watches from
-        watch.start()       # the first period's exchange on), not in a period
     try:
+        if watch is not None:   # its thread started in the set-up's compute (it watches
+            watch.start()       # from the first period's exchange on), not in a period
         _set_up(loop, q0, answer_all)
     except BaseException:
         if watch is not None:

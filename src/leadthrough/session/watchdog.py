@@ -64,9 +64,15 @@ class DriverWatchdog:
                                         daemon=True)
 
     def start(self) -> None:
-        """Start the thread, on a stack of :data:`STACK_BYTES` (the interpreter's setting for
-        new threads is put back at once; a platform that refuses that size gives the thread
-        its default stack, logged). It watches from the first :meth:`enter` on."""
+        """Start the thread, on a stack of :data:`STACK_BYTES`. The interpreter's setting for
+        new threads is process-wide: it is put back as soon as the thread has started (a
+        thread that another thread starts meanwhile gets the small stack too); a platform
+        that refuses the size gives the thread its default stack, logged. It watches from the
+        first :meth:`enter` on.
+
+        Raises:
+            RuntimeError: The thread could not be started.
+        """
         try:
             default = threading.stack_size(STACK_BYTES)
         except (ValueError, RuntimeError) as e:
