@@ -153,10 +153,10 @@ class ServoLoop:
         return self.end is not None
 
     def close(self) -> None:
-        """After the last period: the watchdog stops, the last snapshot says why it ended."""
+        """After the last period and the driver's stop (the requests left unmade already
+        noted: :meth:`note_unmade`): the watchdog stops, the last snapshot says why it ended."""
         if self.watch is not None:
             self.watch.stop()
-        self.note_unmade()
         self.drain()
         if self.board is not None and self.board.fields is not None:
             end = self.end
