@@ -73,16 +73,16 @@ class DriverWatchdog:
         Raises:
             RuntimeError: The thread could not be started.
         """
+        default: int | None = None
         try:
             default = threading.stack_size(STACK_BYTES)
         except (ValueError, RuntimeError) as e:
             log.warning("the watchdog's thread starts on the default stack (%s)", e)
-            self._thread.start()
-            return
         try:
             self._thread.start()
         finally:
-            threading.stack_size(default)
+            if default is not None:
+                threading.stack_size(default)
 
     def stop(self) -> None:
         """Stop watching (joins the thread)."""
