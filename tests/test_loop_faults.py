@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 import gc
+import json
 import math
+import subprocess
 import sys
 import threading
 import time
@@ -659,3 +661,82 @@ def test_a_refused_stack_size_starts_the_watchdog_on_the_default_stack(
         watch.leave()
         watch.stop()
     assert "default stack (size not valid)" in caplog.text
+
+
+#: Run in a fresh interpreter: the adaptive bytecode of the loop's period code when the first
+#: period begins (in the test process, earlier sessions may have specialised it already).
+_SPECIALISED_AT_FIRST_PERIOD = """
+import dis, json
+from leadthrough.robot import load_robot
+from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session import operator_inputs, servo_loop
+from leadthrough.session.loop import run_session
+from leadthrough.session.loop_config import LoopConfig, build_loop
+from leadthrough.sim.driver import SimDriver
+from leadthrough.sim.robot import SimConfig, SimRobot
+from leadthrough.sim.guiding_params import shipped_guiding_params
+
+robot = load_robot("er20")
+driver = SimDriver(SimRobot(robot, SimConfig(seed=1), q0=guide_start_pose(robot)))
+parts = build_loop(robot, shipped_guiding_params(robot), LoopConfig(), driver.dt)
+code = {"compute": servo_loop.ServoLoop.compute, "_cycle": servo_loop.ServoLoop._cycle,
+        "EnablingDevice.update": operator_inputs.EnablingDevice.update}
+seen = {}
+period = servo_loop.ServoLoop.period
+
+def first_period(self, i, t, clock):
+    if not seen:
+        seen.update({name: sum(ins.opname not in dis.opmap
+                               for ins in dis.get_instructions(f, adaptive=True))
+                     for name, f in code.items()})
+    return period(self, i, t, clock)
+
+servo_loop.ServoLoop.period = first_period
+run_session(driver, *parts, 0.02)
+print(json.dumps(seen))
+"""
+
+
+def test_the_first_period_runs_code_the_interpreter_has_specialised() -> None:
+    """The start's dry periods run the loop's own period code (the controller cycle, the
+    enabling device) often enough that the interpreter has specialised its bytecode before the
+    first period: CPython 3.11 quickens a function on its 8th call, and the first periods of
+    a session ran slower before. (Before, only the parts' updates ran at the start: no
+    specialised instruction in these.)"""
+    out = subprocess.run([sys.executable, "-c", _SPECIALISED_AT_FIRST_PERIOD],
+                         capture_output=True, text=True, timeout=300, check=True)
+    specialised = json.loads(out.stdout.strip().splitlines()[-1])
+    assert all(count > 0 for count in specialised.values()), specialised
+
+
+def test_the_dry_periods_leave_nothing_of_the_session(
+        er20: Robot, nominal_params: ParamsFile, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the start's dry cycles and with them, the same session: a protective stop
+    reported from the first sample is the first period's fault, noted once (the dry cycles
+    read no controller state); the enabling device held from the start never guides; a stop
+    requested before the start ends the session at its first period (the dry cycles serve no
+    request); and the logs are equal bit for bit."""
+    cfg = SimSessionConfig(operator="push-x", duration_s=1.5, loop=LIGHT,
+                           enable_held_s=((0.0, math.inf),),
+                           faults=(InjectedFault(InjectedFaultKind.PROTECTIVE_STOP, 0.0, 0.5),))
+    logs = []
+    for dry_cycles in (0, loop_start.DRY_CYCLES):
+        monkeypatch.setattr(loop_start, "DRY_CYCLES", dry_cycles)
+        log = run_sim_session(er20, nominal_params, cfg).log
+        t_fault, fault = _fault_at(log)
+        assert fault is Fault.CONTROLLER_STATE and t_fault == log.time[0]
+        assert [n for n in _notes(log) if n[0] != "stop"] == [("controller state",
+                                                               "PROTECTIVE_STOP")]
+        assert not np.any(log.state == int(State.GUIDING))
+        req = LoopRequests()
+        req.stop()
+        stopped = run_sim_session(er20, nominal_params,
+                                  dataclasses.replace(cfg, duration_s=0.5), requests=req)
+        assert stopped.result.end.cause is EndCause.STOP_REQUESTED
+        assert stopped.result.end.t == stopped.log.time[0]
+        logs.append(log)
+    a, b = logs
+    for name in ("time", "q", "current", "wrench_base", "q_cmd", "twist_cmd_base", "state",
+                 "fault"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.events == b.events

@@ -4,19 +4,21 @@ reset on it, and a packet just come for the first period to answer.
 
 On a real controller the start is where packets are most easily answered late: the first one
 may have waited since the driver opened, and the set-up's compute (the watchdog's thread
-started, each part's ``warm_up``, :data:`DRY_PERIODS` periods' compute, the resets) may outlast
-a cycle. So the start answers at once a packet it waited for (a hold where the robot stands),
-and one that may have waited is answered only where the controller counts an unanswered packet
-late anyway (a driver's ``answer_late_packets``, RSI); J519 refuses a late answer, the UR
-program holds a cycle (:func:`fresh_packet`). Nothing that takes time is left between the last
-packet read and the first period: the watchdog's thread, whose start faults in its whole stack
-where the memory is locked, starts with the compute.
+started, each part's ``warm_up``, :data:`DRY_CYCLES` controller cycles of the loop's periods,
+the resets) may outlast a cycle. So the start answers at once a packet it waited for (a hold
+where the robot stands), and one that may have waited is answered only where the controller
+counts an unanswered packet late anyway (a driver's ``answer_late_packets``, RSI); J519 refuses
+a late answer, the UR program holds a cycle (:func:`fresh_packet`). Nothing that takes time is
+left between the last packet read and the first period: the watchdog's thread, whose start
+faults in its whole stack where the memory is locked, starts with the compute.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,13 +31,15 @@ from leadthrough.session import operator_link
 if TYPE_CHECKING:
     from leadthrough.session.servo_loop import ServoLoop
 
-__all__ = ["DRY_PERIODS", "dry_periods", "fresh_packet", "start_loop"]
+__all__ = ["DRY_CYCLES", "dry_periods", "fresh_packet", "start_loop"]
 
 Array = NDArray[np.float64]
-#: Periods computed on the first sample at the start, before every part is reset
-#: (:func:`dry_periods`); a real controller's packets that come meanwhile are answered by
-#: :func:`fresh_packet`.
-DRY_PERIODS = 3
+#: Controller cycles of the loop's own periods computed on the first sample at the start,
+#: before every part is reset (:func:`dry_periods`): more than the calls after which the
+#: interpreter specialises a function's bytecode (CPython 3.11 quickens a code object on its
+#: 8th call; 3.12 and later sooner). A real controller's packets that come meanwhile are
+#: answered by :func:`fresh_packet`.
+DRY_CYCLES = 10
 
 
 def start_loop(loop: ServoLoop) -> float:
@@ -90,49 +94,69 @@ def _set_up(loop: ServoLoop, q0: Array, answer_all: bool) -> None:
     """The start's compute on the first sample ``q0``, then (a real controller) a packet just
     come for the first period to answer."""
     driver, fb, cmd = loop.driver, loop.fb, loop.cmd
+    if loop.board is not None:   # before the dry periods: they write it too
+        loop.board.attach(driver.n)
+        operator_link.publish_settings(loop)
     dry_periods(loop, q0, fb.t)
     loop.estimator.reset(q0)
     loop.controller.reset(q0, fb.t)
     loop.interpolator.reset(q0)
     loop.interp_status = loop.interpolator.update(cmd)
     loop.drain()  # the reset's transition: the session's, taken now, not in a period
-    if loop.board is not None:
-        loop.board.attach(driver.n)
-        operator_link.publish_settings(loop)
     if not driver.simulated:  # a packet that has just come, for the first period to
         # answer (one that came during the compute: a hold, or unanswered as a lost one)
         fresh_packet(driver, fb, cmd if answer_all else None)
 
 
 def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
-    """:data:`DRY_PERIODS` periods' compute on the first sample with the enabling device
-    released, then every part reset by the caller: the session's first period then runs on
-    code and state already touched. (Each part's ``warm_up`` loads its compiled code on
-    copies of its state; the first update of the state itself still took 2-3 times the
-    steady-state median, on every driver; the interpreter specialises a function's code
-    only after it has run a few times.) Its transitions are not the session's."""
+    """:data:`DRY_CYCLES` controller cycles of the loop's own periods
+    (:meth:`ServoLoop.compute <leadthrough.session.servo_loop.ServoLoop.compute>`) on the first
+    sample, as if the robot stood there (one sample per period, its time and sequence number
+    counted on), with the operator's side held still (:func:`_operator_held`); then every part
+    is reset by the caller. The session's first period then runs code and state already touched,
+    and code the interpreter has already specialised: each part's ``warm_up`` loads its
+    compiled code on copies of its state, but the first update of the state itself took 2-3
+    times the steady-state median, and the period's own code (the controller cycle, the
+    enabling device, the snapshot) ran unspecialised in the first cycles. Nothing of them is
+    the session's: their transitions and notes are dropped."""
     estimator, controller, interpolator = loop.estimator, loop.controller, loop.interpolator
-    cmd = loop.cmd
     estimator.reset(q0)
     controller.reset(q0, t)
     interpolator.reset(q0)
     for part in (estimator, controller, interpolator):
         part.warm_up()
-    c_in = loop.c_in
-    for _ in range(DRY_PERIODS):
-        loop.e_in.t = t
-        estimator.update(loop.e_in, loop.e_out)
-        c_in.t, c_in.sequence, c_in.deadman = t, loop.fb.sequence, False
-        c_in.q[:] = loop.fb.q
-        c_in.current[:] = loop.fb.current
-        c_in.wrench_base[:] = loop.e_out.wrench
-        c_in.estimator_status = int(loop.e_out.status)
-        controller.update(c_in, loop.c_out)
-        interpolator.set_target(loop.c_out.q, loop.c_out.qd)
-        interpolator.update(cmd)
-    cmd.q[:] = q0
-    cmd.qd[:] = 0.0
+    fb, dt = loop.fb, loop.driver.dt
+    sequence = fb.sequence
+    with _operator_held(loop):
+        for i in range(DRY_CYCLES * loop.every):   # the robot standing: a sample per period
+            fb.t, fb.sequence = t + i * dt, sequence + i
+            loop.compute(i, fb.t, True)
+    fb.t, fb.sequence = t, sequence
+    loop.cmd.q[:] = q0
+    loop.cmd.qd[:] = 0.0
     loop.seen = controller.event_count
+
+
+@contextmanager
+def _operator_held(loop: ServoLoop) -> Iterator[None]:
+    """While the start's dry periods run: no enabling device, mark or reset button, requests
+    or controller-state fault is read, and what they may write (the session's events, the
+    snapshot's notices, the enabling device's history, the loop's flags) is put back after."""
+    saved = (loop.requests, loop.enable_level, loop.mark_bit, loop.reset_bit, loop.inputs,
+             loop.controller_ready, loop.controller_tripped, loop.held, loop.ready)
+    events, board = len(loop.events), loop.board
+    notices = (board.notice, board.fault_cause) if board is not None else None
+    loop.requests, loop.enable_level, loop.mark_bit, loop.reset_bit = None, None, -1, -1
+    loop.controller_tripped = True   # the controller's state is the first period's to read
+    try:
+        yield
+    finally:
+        (loop.requests, loop.enable_level, loop.mark_bit, loop.reset_bit, loop.inputs,
+         loop.controller_ready, loop.controller_tripped, loop.held, loop.ready) = saved
+        del loop.events[events:]
+        loop.enabling.reset()
+        if board is not None and notices is not None:
+            board.notice, board.fault_cause = notices
 
 
 def fresh_packet(driver: Driver, fb: DriverFeedback, hold: JointCommand | None = None,

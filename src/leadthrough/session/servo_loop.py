@@ -213,12 +213,17 @@ class ServoLoop:
 
     # ------------------------------------------------------------------ one period
     def period(self, i: int, t_loop: float, clock: PeriodClock) -> float:
-        """Servo period ``i``: exchange with the driver, estimate, the operator's inputs and
-        requests, every ``every`` periods the controller cycle, interpolate. Returns the
+        """Servo period ``i``: exchange with the driver, then :meth:`compute`. Returns the
         compute time [µs]."""
         clock.wait()
         fresh = self._exchange(t_loop)
         clock.exchanged()
+        return self.compute(i, t_loop, fresh)
+
+    def compute(self, i: int, t_loop: float, fresh: bool) -> float:
+        """Period ``i``'s work after its exchange (``fresh``: a new sample came): estimate, the
+        operator's inputs and requests, every ``every`` periods the controller cycle,
+        interpolate. Returns its time [µs]."""
         t0 = time.perf_counter()
         fb = self.fb
         if fresh and self.follow_clock and fb.t > t_loop:
