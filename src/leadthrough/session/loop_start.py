@@ -34,12 +34,13 @@ if TYPE_CHECKING:
 __all__ = ["DRY_CYCLES", "dry_periods", "fresh_packet", "start_loop"]
 
 Array = NDArray[np.float64]
-#: Controller cycles of the loop's own periods computed on the first sample at the start,
-#: before every part is reset (:func:`dry_periods`): more than the calls after which the
-#: interpreter specialises a function's bytecode (CPython 3.11 quickens a code object on its
-#: 8th call; 3.12 and later sooner). A real controller's packets that come meanwhile are
-#: answered by :func:`fresh_packet`.
-DRY_CYCLES = 10
+#: Controller cycles' periods of the loop computed on the first sample at the start, before
+#: every part is reset (:func:`dry_periods`): as many as the calls after which the interpreter
+#: has specialised a function's bytecode (CPython 3.11 quickens a code object on its 8th call
+#: and specialises its instructions as that call runs them; 3.12 and later sooner). Kept to
+#: that so that the start's compute stays within a cycle; a real controller's packets that
+#: come meanwhile are answered by :func:`fresh_packet`.
+DRY_CYCLES = 8
 
 
 def start_loop(loop: ServoLoop) -> float:
@@ -109,26 +110,27 @@ def _set_up(loop: ServoLoop, q0: Array, answer_all: bool) -> None:
 
 
 def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
-    """:data:`DRY_CYCLES` controller cycles of the loop's own periods
+    """:data:`DRY_CYCLES` of the loop's own periods that run a controller cycle
     (:meth:`ServoLoop.compute <leadthrough.session.servo_loop.ServoLoop.compute>`) on the first
-    sample, as if the robot stood there (one sample per period, its time and sequence number
-    counted on), with the operator's side held still (:func:`_operator_held`); then every part
-    is reset by the caller. The session's first period then runs code and state already touched,
-    and code the interpreter has already specialised: each part's ``warm_up`` loads its
-    compiled code on copies of its state, but the first update of the state itself took 2-3
-    times the steady-state median, and the period's own code (the controller cycle, the
-    enabling device, the snapshot) ran unspecialised in the first cycles. Nothing of them is
-    the session's: their transitions and notes are dropped."""
+    sample, as if the robot stood there (the sample's time and sequence number counted on to
+    each of those periods), with the operator's side held still (:func:`_operator_held`); then
+    every part is reset by the caller. The session's first period then runs code and state
+    already touched, and code the interpreter has already specialised: each part's ``warm_up``
+    loads its compiled code on copies of its state, but the first update of the state itself
+    took 2-3 times the steady-state median, and the period's own code (the controller cycle, the
+    enabling device, the snapshot) ran unspecialised in the first cycles. Nothing of them is the
+    session's: their transitions and notes are dropped."""
     estimator, controller, interpolator = loop.estimator, loop.controller, loop.interpolator
     estimator.reset(q0)
     controller.reset(q0, t)
     interpolator.reset(q0)
     for part in (estimator, controller, interpolator):
         part.warm_up()
-    fb, dt = loop.fb, loop.driver.dt
+    fb, every, dt = loop.fb, loop.every, loop.driver.dt
     sequence = fb.sequence
     with _operator_held(loop):
-        for i in range(DRY_CYCLES * loop.every):   # the robot standing: a sample per period
+        for k in range(DRY_CYCLES):   # the controller cycles' periods, the robot standing
+            i = k * every
             fb.t, fb.sequence = t + i * dt, sequence + i
             loop.compute(i, fb.t, True)
     fb.t, fb.sequence = t, sequence
