@@ -369,9 +369,10 @@ class ServoLoop:
         """The controller's new transitions into the session's events."""
         count = self.controller.event_count
         for e in self.controller.events_since(self.seen):
-            self.events.append(transition_event(e))
+            event = transition_event(e)
+            self.events.append(event)
             if self.board is not None and e.to_state == State.FAULT:
-                self.board.fault_cause = transition_event(e).cause
+                self.board.fault_cause = event.cause
         self.seen = count
 
 
