@@ -87,13 +87,14 @@ from leadthrough.control.interpolation import JointInterpolator
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import ExternalForceEstimator
+from leadthrough.session.controller_events import transition_event
 from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, LoopEnd
 from leadthrough.session.pacing import ComputeTimes, PeriodClock
 from leadthrough.session.record import SessionLog
 from leadthrough.session.recorder import ChunkSink, SessionRecorder
 from leadthrough.session.requests import LoopRequests
-from leadthrough.session.servo_loop import ServoLoop, transition_event
+from leadthrough.session.servo_loop import ServoLoop
 from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
 
 __all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers",

@@ -19,11 +19,11 @@ from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingController
 from leadthrough.control.interpolation import InterpolatorStatus, JointInterpolator
-from leadthrough.control.safety import Event
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.drivers.protocol import ControllerState, Driver, DriverFeedback, JointCommand
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
 from leadthrough.session import operator_link
+from leadthrough.session.controller_events import transition_event
 from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, Link, LoopEnd
 from leadthrough.session.loop_start import start_loop
@@ -31,9 +31,10 @@ from leadthrough.session.operator_inputs import EnablingDevice, MarkButton, inpu
 from leadthrough.session.pacing import PeriodClock
 from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request
+from leadthrough.session.rest_rezero import zero_velocity_update
 from leadthrough.session.watchdog import DriverWatchdog
 
-__all__ = ["ServoLoop", "transition_event", "zero_velocity_update"]
+__all__ = ["ServoLoop"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
@@ -387,21 +388,3 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
     if options.software_enable and requests is not None:
         return lambda t: requests.enable_held
     return None
-
-
-def zero_velocity_update(estimator: ExternalForceEstimator, rest_s: float, settle_s: float,
-                          cycle_s: float, samples: int) -> None:
-    """Re-zero the estimator once the commanded motion has been at rest for ``settle_s``
-    (in the first controller cycle past it); abandon the re-zero if the motion restarts."""
-    if rest_s == 0.0:
-        if estimator.rezeroing:
-            estimator.cancel_rezero()
-    elif settle_s <= rest_s < settle_s + cycle_s:
-        estimator.rezero(samples)
-
-
-def transition_event(e: Event) -> SessionEvent:
-    """A controller's state transition as a session event (``cause`` or ``cause:fault``)."""
-    cause = e.cause.name if e.fault.name == "NONE" else f"{e.cause.name}:{e.fault.name}"
-    return SessionEvent(t=e.t, kind="transition",
-                        label=f"{e.from_state.name}->{e.to_state.name}", cause=cause)

@@ -21,7 +21,7 @@ from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
 from leadthrough.session.pacing import sleep_until
 from leadthrough.session.record import SessionEvent, SessionLog
-from leadthrough.session.servo_loop import zero_velocity_update
+from leadthrough.session.rest_rezero import zero_velocity_update
 
 __all__ = ["ServoPeriods", "SessionBuffers"]
 

@@ -5,8 +5,8 @@ stays bounded for hours, and the loop's process does nothing but copy rows.
 (:mod:`leadthrough.session.recorder`, 10 s at 1 kHz) live in memory shared with a writer
 process (:mod:`leadthrough.session.writer_link`, started with
 :mod:`leadthrough.session.writer_process`). A full chunk is handed over by its index in one
-short message; the writer turns it into one Parquet row group (``pyarrow.parquet.ParquetWriter``,
-https://arrow.apache.org/docs/python/parquet.html) and hands the chunk back. A few chunks
+short message; the writer (:mod:`leadthrough.session.session_writer`) turns it into one
+Parquet row group and hands the chunk back. A few chunks
 circulate, so memory is a handful of chunks whatever the session's length. At the end the
 events (marks, transitions, the loop's notes) and settings go into the file's key-value metadata
 and the file is moved into place: the result reads with
@@ -32,7 +32,6 @@ on, and :meth:`SessionFileSink.finish` raises.
 from __future__ import annotations
 
 import logging
-import mmap
 import os
 import socket
 import subprocess
@@ -43,13 +42,10 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import pyarrow as pa
-import pyarrow.parquet as pq
-
 import leadthrough
 from leadthrough.errors import DataError
-from leadthrough.session.record import SessionEvent, session_columns, session_metadata
-from leadthrough.session.recorder import DEFAULT_CHUNK_ROWS, RecordChunk, chunks_to_log
+from leadthrough.session.record import SessionEvent, session_metadata
+from leadthrough.session.recorder import DEFAULT_CHUNK_ROWS, RecordChunk
 from leadthrough.session.writer_link import (
     MessageReader,
     open_chunk_memory,
@@ -57,7 +53,7 @@ from leadthrough.session.writer_link import (
     send_message,
 )
 
-__all__ = ["POOL_CHUNKS", "SessionFileSink", "serve_writer"]
+__all__ = ["POOL_CHUNKS", "SessionFileSink"]
 
 log = logging.getLogger("leadthrough.session")
 #: Chunks mapped at the start (the writer may fall this many chunks behind: a minute at 1 kHz
@@ -345,88 +341,3 @@ def _start_writer(partial: Path, path: Path, n: int, with_truth: bool, chunk_row
                         expected=f"a ready writer within {_START_TIMEOUT_S:g} s")
     ours.settimeout(None)
     return ours, process
-
-
-def serve_writer(sock: socket.socket, partial: Path, path: Path, n: int, with_truth: bool,
-                 chunk_rows: int) -> int:
-    """The writer process's work (see the module doc): write each chunk it is handed, return
-    it, and finish the file when asked. Its exit code: 0 once the file is finished (or its
-    failure reported), 1 when the loop's process went away first (the rows written are then
-    closed into the partial file, without the session's events)."""
-    chunks: dict[int, RecordChunk] = {}
-    keep: list[mmap.mmap] = []
-    nbytes = RecordChunk.nbytes(chunk_rows, n, with_truth)
-    file = _ChunkFile(partial, n, with_truth)
-    try:
-        send_message(sock, ("ready",))
-        while True:
-            got = recv_message(sock)
-            if got is None:
-                break
-            message, fds = got
-            if message[0] == "chunk":
-                memory = mmap.mmap(fds[0], nbytes)
-                os.close(fds[0])
-                keep.append(memory)
-                chunks[int(message[1])] = RecordChunk(chunk_rows, n, with_truth, memory)
-            elif message[0] == "write":
-                chunk = chunks[int(message[1])]
-                chunk.rows = int(message[2])
-                file.write(chunk)
-                chunk.rows = 0
-                send_message(sock, ("free", message[1], file.rows_written))
-            elif message[0] == "finish":
-                error = file.finish(path, message[1])
-                send_message(sock, ("done", file.rows_written, error))
-                return 0
-    except OSError:
-        pass        # the loop's process is gone (a reset or broken link)
-    file.abandon()
-    return 1
-
-
-class _ChunkFile:
-    """The partial file, written chunk by chunk (the writer process's side)."""
-
-    def __init__(self, partial: Path, n: int, with_truth: bool) -> None:
-        self.partial, self._n, self._truth = partial, n, with_truth
-        self._writer: pq.ParquetWriter | None = None
-        self.error: str | None = None
-        self.rows_written = 0
-
-    def write(self, chunk: RecordChunk) -> None:
-        """One chunk as one row group (nothing after a failure)."""
-        if self.error is not None:
-            return
-        try:
-            table = pa.table(session_columns(chunks_to_log([chunk], self._truth, "", [], {})))
-            if self._writer is None:
-                self._writer = pq.ParquetWriter(self.partial, table.schema)
-            self._writer.write_table(table)
-            self.rows_written += chunk.rows
-        except (OSError, ValueError, pa.ArrowException) as e:   # ValueError: bad rows
-            log.error("session file %s: %s: %s (the recording stops here)", self.partial,
-                      type(e).__name__, e)
-            self.error = f"{type(e).__name__}: {e}"
-
-    def finish(self, path: Path, metadata: dict[bytes, bytes]) -> str | None:
-        """The metadata written, the file closed and moved to ``path``; the failure, if any."""
-        if self.error is None and self._writer is None:   # no rows: an empty session
-            self.write(RecordChunk(0, self._n, self._truth))
-        if self.error is not None or self._writer is None:
-            return self.error
-        try:
-            self._writer.add_key_value_metadata(metadata)
-            self._writer.close()
-            self.partial.replace(path)
-        except (OSError, pa.ArrowException) as e:
-            self.error = f"{type(e).__name__}: {e}"
-        return self.error
-
-    def abandon(self) -> None:
-        """Close the rows written so far (the partial file stays, readable as Parquet)."""
-        if self._writer is not None:
-            try:
-                self._writer.close()
-            except (OSError, pa.ArrowException) as e:
-                log.error("session file %s: %s", self.partial, e)

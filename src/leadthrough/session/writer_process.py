@@ -11,7 +11,7 @@ controller's link (its CPU affinity is left as inherited: the loop's process sta
 pinning itself). It runs in a session of its own and ignores SIGINT, SIGTERM and SIGHUP: a
 Ctrl-C, or a service manager's stop, is the loop's stop request, after which the loop's process
 finishes the file through this process; it ends with its link. Only then does it load NumPy
-and Arrow and serve the link (:func:`~leadthrough.session.session_file.serve_writer`). It
+and Arrow and serve the link (:func:`~leadthrough.session.session_writer.serve_writer`). It
 exits when the file is finished or when the loop's process is gone (the rows written are then
 closed into the partial file).
 """
@@ -57,7 +57,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="leadthrough (session writer): %(message)s")
     # NumPy, Arrow and the session's columns only now, at the lowered priority
-    from leadthrough.session.session_file import serve_writer
+    from leadthrough.session.session_writer import serve_writer
     sock = socket.socket(fileno=args.fd)
     with sock:
         return serve_writer(sock, args.partial, args.path, args.joints, args.truth, args.rows)
