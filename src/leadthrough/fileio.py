@@ -1,10 +1,12 @@
-"""Atomic file output: write to a temporary file beside the target, then rename.
+"""Atomic file output: write to a temporary file beside the target, then rename. And the checks
+of an input file before it is parsed.
 
 A crash or a bad input never leaves a half-written file behind.
 """
 
 from __future__ import annotations
 
+import codecs
 import os
 import tempfile
 from collections.abc import Callable
@@ -13,7 +15,10 @@ from pathlib import Path
 from leadthrough.errors import DataError, LeadthroughError
 
 __all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "require_file",
-           "require_folder"]
+           "require_folder", "require_text"]
+
+#: The first bytes of a Parquet file (its magic number).
+PARQUET_MAGIC = b"PAR1"
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
@@ -98,6 +103,43 @@ def require_file(path: str | Path, what: str, expected: str,
         raise error(f"{what} {problem}", source=source if source is not None else path,
                     field=field, value=value, expected=expected)
     return path
+
+
+def require_text(path: Path, what: str) -> None:
+    """A delimited text file: UTF-8 throughout, checked before it is parsed (a parser meeting
+    a binary file, or one bad byte in a log, fails with an unreadable message).
+
+    Args:
+        path: The file (it exists).
+        what: What it is, for the message (``"log"``).
+
+    Raises:
+        DataError: A Parquet file, or the first bytes that are not UTF-8, with their line.
+    """
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    line = 1
+    try:
+        with Path(path).open("rb") as f:
+            chunk = f.read(1 << 20)
+            if chunk.startswith(PARQUET_MAGIC):
+                raise DataError(f"a Parquet file given as a delimited {what}", source=path,
+                                field="format", value="Parquet",
+                                expected="delimited text (a Parquet recording loads without a "
+                                         "column map)")
+            while chunk:
+                try:
+                    decoder.decode(chunk)
+                except UnicodeDecodeError as e:
+                    line += chunk.count(b"\n", 0, e.start)
+                    raise DataError(f"not text: the {what} has bytes that are not UTF-8",
+                                    source=path, field=f"line {line}",
+                                    value=chunk[e.start:e.start + 8].split(b"\n")[0].hex(" "),
+                                    expected="UTF-8 text (a binary file given as a delimited "
+                                             f"{what}?)") from e
+                line += chunk.count(b"\n")
+                chunk = f.read(1 << 20)
+    except OSError as e:
+        raise DataError(f"cannot read: {e}", source=path) from e
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

@@ -15,8 +15,8 @@ from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_PAYLOAD_COM_M", "check_output", "check_trajectory_limits", "warm_up_seconds",
-           "with_command_lag"]
+__all__ = ["MAX_PAYLOAD_COM_M", "check_not_input", "check_output", "check_trajectory_limits",
+           "warm_up_seconds", "with_command_lag"]
 
 #: Farthest payload CoM from the TCP ``record`` simulates [m].
 MAX_PAYLOAD_COM_M = 1.0
@@ -49,13 +49,32 @@ def with_command_lag(pf: ParamsFile, lag: float | None) -> ParamsFile:
     return replace(pf, params=replace(pf.params, command_lag=float(lag)))
 
 
-def check_output(path: Path, suffixes: tuple[str, ...]) -> None:
-    """An output file, checked before any work: its type (the writer would not convert) and
-    its folder (:func:`leadthrough.fileio.require_folder`)."""
+def check_output(path: Path, suffixes: tuple[str, ...],
+                 inputs: tuple[tuple[str, Path | None], ...] = ()) -> None:
+    """An output file, checked before any work: its type (the writer would not convert), its
+    folder (:func:`leadthrough.fileio.require_folder`), and that it is none of the command's
+    ``inputs`` (option name, path or None), which writing it would replace."""
     if Path(path).suffix.lower() not in suffixes:
         raise DataError("unsupported output file type", source=path, field="-o",
                         value=Path(path).suffix or "(none)", expected=" or ".join(suffixes))
     require_folder(path)
+    check_not_input(path, "-o", inputs)
+
+
+def check_not_input(path: Path, option: str, inputs: tuple[tuple[str, Path | None], ...]
+                    ) -> None:
+    """Refuse an output ``path`` (given as ``option``) that is one of the command's inputs
+    (option name, path or None; the same file by any path, a link included).
+
+    Raises:
+        DataError: Naming the output option, the path and the input it would overwrite.
+    """
+    out = Path(path).resolve()
+    for name, given in inputs:
+        if given is not None and Path(given).resolve() == out:
+            raise DataError(f"the output would overwrite the input {name}", source=path,
+                            field=option, value=str(path),
+                            expected=f"a path other than {name}'s")
 
 
 def check_trajectory_limits(path: Path, traj: TrajectorySamples, robot: Robot) -> None:

@@ -19,7 +19,7 @@ from leadthrough.cli.arg_checks import (
     warm_up_seconds,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
-from leadthrough.cli.record_robot import add_driver_arguments, record_on_robot
+from leadthrough.cli.record_robot import add_driver_arguments, record_on_robot, refuse_settings
 from leadthrough.data.io import save_recording
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
@@ -162,7 +162,11 @@ def run_excite(args: argparse.Namespace) -> int:
 
 def run_record(args: argparse.Namespace) -> int:
     """Execute ``leadthrough record``."""
-    check_output(args.output, (".csv", ".parquet", ".pq"))
+    check_output(args.output, (".csv", ".parquet", ".pq"), (("--trajectory", args.trajectory),))
+    if args.driver is None:
+        refuse_settings(args, ("host", "port", "approach"), "a robot setting given without a "
+                        "driver (the recording would come from the simulator)",
+                        "--driver D with it, or none of --host, --port, --approach")
     robot = load_robot(args.robot)
     traj, traj_robot = load_trajectory(args.trajectory)
     if traj_robot is not None and traj_robot != robot.name:

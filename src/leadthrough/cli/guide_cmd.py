@@ -10,7 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from leadthrough.cli.arg_checks import warm_up_seconds, with_command_lag
+from leadthrough.cli.arg_checks import check_not_input, warm_up_seconds, with_command_lag
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
 from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
@@ -132,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
     if args.hand_release:
         guiding = replace(guiding, hand_release=HandReleaseConfig(enabled=True))
     require_folder(args.output)
+    check_not_input(args.output, "-o", (("--params", args.params),))
     if args.driver is not None:
         _note_missing_presliding(pf)
         return guide_on_robot(args, robot, pf, guiding)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import sys
 from collections.abc import Iterator
@@ -54,6 +55,11 @@ __all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot"]
 #: The guiding controller's cycle the paper uses [s].
 PAPER_CYCLE_S = 0.01
 _SIM_ONLY = ("operator", "seed", "operator_seed", "run")
+#: SCHED_FIFO's highest priority (``sched_get_priority_max(2)`` on Linux).
+MAX_RT_PRIORITY = 99
+#: CPU numbers ``--cpus`` takes: Linux's default CPU mask size (``sched_setaffinity(2)``); a
+#: CPU in range that this machine lacks is the OS's refusal, reported as the loop starts.
+MAX_CPUS = 1024
 
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:
@@ -139,6 +145,14 @@ def _check_args(args: argparse.Namespace) -> None:
                            "device is pressed", field="--enable-input", value=None,
                            expected="the controller's digital input wired to the enabling "
                                     "device")
+    if args.rt_priority is not None and not 1 <= args.rt_priority <= MAX_RT_PRIORITY:
+        raise ControlError("out of range", field="--rt-priority", value=args.rt_priority,
+                           expected=f"a SCHED_FIFO priority 1..{MAX_RT_PRIORITY}")
+    bad_cpus = [c for c in args.cpus or () if not 0 <= c < MAX_CPUS]
+    if bad_cpus:
+        raise ControlError("out of range", field="--cpus", value=bad_cpus[0],
+                           expected=f"CPU numbers 0..{MAX_CPUS - 1} (this machine has "
+                                    f"{os.cpu_count()})")
 
 
 def _loop_parts(robot: Robot, pf: ParamsFile, guiding: GuidingConfig, dt: float) -> LoopParts:

@@ -10,9 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from leadthrough.cli.arg_checks import (
-    check_output,
-)
+from leadthrough.cli.arg_checks import check_not_input, check_output
 from leadthrough.data.io import load_recording
 from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
@@ -169,10 +167,14 @@ def run_identify(args: argparse.Namespace) -> int:
         raise DataError("a friction sweep is used by the consistent method only",
                         field="--method", value=args.method,
                         expected="'consistent' with --friction-sweep")
-    check_output(args.output, (".toml",))
+    inputs = (("the recording", args.recording), ("--columns", args.columns),
+              ("--friction-sweep", args.friction_sweep),
+              ("--presliding-test", args.presliding_test))
+    check_output(args.output, (".toml",), inputs)
     if args.urdf_out is not None:
         # checked before the identification, so that nothing is written if it cannot be
         require_folder(args.urdf_out)
+        check_not_input(args.urdf_out, "--urdf-out", inputs)
         if Path(args.urdf_out).resolve() == Path(args.output).resolve():
             raise DataError("the URDF would overwrite the params file", field="--urdf-out",
                             value=str(args.urdf_out), expected="a path other than -o")

@@ -27,11 +27,15 @@ __all__ = ["add_connection_arguments", "add_driver_arguments", "check_rsi_reach"
 _SIM_ONLY = ("seed", "run", "plant", "warm_up", "payload_mass", "payload_com")
 
 
+#: ``--approach``'s default: share of the joint limits for the move to the start.
+DEFAULT_APPROACH = 0.1
+
+
 def add_driver_arguments(p: argparse.ArgumentParser) -> None:
     """``--driver``, ``--host``, ``--port`` and ``--approach``."""
     g = p.add_argument_group("on a robot controller")
     add_connection_arguments(g)
-    g.add_argument("--approach", type=float, default=0.1, metavar="F",
+    g.add_argument("--approach", type=float, default=None, metavar="F",
                    help="share of the joint speed and acceleration limits for the move to the "
                         "trajectory's start (0: the robot must already be there; default 0.1)")
 
@@ -89,7 +93,8 @@ def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamp
     """Run ``traj`` on the controller of ``args.driver`` and write the recording."""
     refuse_settings(args, _SIM_ONLY, "a simulator setting given for a robot",
                     "no simulator settings with --driver")
-    config = TrajectoryRunConfig(approach_fraction=args.approach)
+    config = TrajectoryRunConfig(approach_fraction=DEFAULT_APPROACH if args.approach is None
+                                 else args.approach)
     driver = connect(args.driver, robot, args.host, args.port)
     bar = Progress(f"recording on {args.driver} at {args.host}", 1, lines=True)
     with driver:

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from leadthrough.data.column_map import ColumnMap, parse_column_map
 from leadthrough.data.recording import Recording, is_sim_seed
 from leadthrough.errors import DataError, DataWarning
-from leadthrough.fileio import atomic_write, read_comment_header, require_file
+from leadthrough.fileio import atomic_write, read_comment_header, require_file, require_text
 
 __all__ = ["load_recording", "save_recording"]
 
@@ -163,6 +163,7 @@ def _read_csv_table(path: Path, delimiter: str, skip_rows: int, header: bool,
         invalid[0] += 1
         return "skip"
 
+    require_text(path, "log")
     source: Path | pa.BufferReader = path
     if drop_unterminated:
         try:

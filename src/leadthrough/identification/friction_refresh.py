@@ -134,8 +134,9 @@ def refresh_friction(params: DriveModelParameters, check: Recording,
     """
     check.check_robot(robot)
     if params.friction_model is not FrictionModel.STRIBECK or params.stribeck is None:
-        raise DataError("a friction check rescales eq. 15 friction", source=check.source,
-                        field="friction_model", value=params.friction_model.value,
+        raise DataError("a friction check rescales eq. 15 friction (these parameters have "
+                        "another friction model)", field="friction_model",
+                        value=params.friction_model.value,
                         expected="stribeck (identify with --friction-sweep)")
     points = sweep_points(check, robot)
     q_mean = np.mean(check.q, axis=0)[None, :]

@@ -83,7 +83,7 @@ def _affinity(cpus: tuple[int, ...]) -> str:
         return "CPU affinity not set: this OS has no sched_setaffinity (Linux only)"
     try:
         os.sched_setaffinity(0, set(cpus))
-    except OSError as e:
+    except (OSError, ValueError) as e:     # ValueError: a negative CPU number
         return (f"CPU affinity not set: {e} (CPUs {list(cpus)}; this machine has "
                 f"{os.cpu_count()})")
     return f"CPU affinity {sorted(cpus)}"

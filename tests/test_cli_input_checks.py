@@ -1,0 +1,170 @@
+"""CLI: bad input found by a new user's audit (2026-11-29), each refused with exit code 2, a
+message naming the option or field and the value, and nothing written or overwritten."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from leadthrough.cli import main
+from leadthrough.dynamics.model import FrictionModel, nominal_drive_parameters
+from leadthrough.errors import DataError
+from leadthrough.fileio import require_text
+from leadthrough.identification.metrics import ResidualStats
+from leadthrough.identification.params_file import save_params
+from leadthrough.robot import load_robot
+from leadthrough.session.realtime import RealtimeRequest, setup_realtime
+from leadthrough.sim.guiding_params import shipped_params_path
+
+COLUMN_MAP = """delimiter = ","
+skip_rows = 0
+[time]
+column = 0
+unit = "s"
+[q]
+columns = [1, 2, 3, 4, 5, 6]
+unit = "rad"
+[current]
+columns = [7, 8, 9, 10, 11, 12]
+unit = "A"
+"""
+
+
+def _error(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err
+
+
+def _closed_port() -> int:
+    """A loopback port nobody listens on (bound, then released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize("option, value", [("--host", "127.0.0.1"), ("--port", "30004"),
+                                           ("--approach", "0.2")])
+def test_record_refuses_a_robot_setting_without_a_driver(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str) -> None:
+    """``record --host H`` without ``--driver`` used to record on the simulator, exit 0: the
+    user believed they had recorded their robot."""
+    traj, out = tmp_path / "traj.csv", tmp_path / "rec.parquet"
+    traj.write_text("not read: refused before\n")
+    assert main(["record", "--robot", "er20", "--trajectory", str(traj), option, value,
+                 "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert f"'{option}'" in err and "without a driver" in err
+    assert not out.exists()
+
+
+def test_outputs_never_overwrite_the_commands_inputs(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]
+                                                     ) -> None:
+    """Each output option that names one of the command's inputs (by another spelling of the
+    same path too) is refused before anything is read, and the input is left as it was."""
+    traj, cmap, rec = tmp_path / "traj.csv", tmp_path / "map.toml", tmp_path / "log.csv"
+    for f in (traj, cmap, rec):
+        f.write_text("original\n")
+    params = tmp_path / "params.toml"
+    params.write_bytes(shipped_params_path("er20").read_bytes())
+    other = tmp_path / "sub" / ".." / "traj.csv"
+    (tmp_path / "sub").mkdir()
+    cases = [
+        (["record", "--robot", "er20", "--trajectory", str(traj), "-o", str(other)],
+         "'-o'", "--trajectory", traj),
+        (["identify", str(rec), "--columns", str(cmap), "--robot", "er20", "-o", str(cmap)],
+         "'-o'", "--columns", cmap),
+        (["identify", str(rec), "--robot", "er20", "--columns", str(cmap), "-o",
+          str(tmp_path / "p.toml"), "--urdf-out", str(rec)], "'--urdf-out'", "the recording",
+         rec),
+        (["refresh-friction", str(params), str(rec), "--robot", "er20", "-o", str(params)],
+         "'-o'", "the params", params),
+        (["guide", "--robot", "er20", "--params", str(params), "--operator", "rest", "-o",
+          str(params)], "'-o'", "--params", params),
+    ]
+    for argv, option, name, victim in cases:
+        before = victim.read_bytes()
+        assert main(argv) == 2, argv
+        err = _error(capsys)
+        assert option in err and f"overwrite the input {name}" in err, (argv, err)
+        assert victim.read_bytes() == before
+
+
+def test_refresh_friction_names_the_params_file_for_its_friction_model(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Parameters without eq. 15 friction: the error names the params file and its field (it
+    named the check recording, which has no such field)."""
+    robot = load_robot("er20")
+    params = tmp_path / "cv.toml"
+    n = robot.n
+    stats = ResidualStats(mean=np.zeros(n), std=np.ones(n), std_pct_max=np.ones(n),
+                          rms=np.ones(n), rel_error_pct=1.0, J=1.0, k_omega=1.0,
+                          samples=np.ones(n, dtype=np.int64))
+    save_params(params, robot, "ols-cv", nominal_drive_parameters(robot), stats)
+    assert nominal_drive_parameters(robot).friction_model is not FrictionModel.STRIBECK
+    check = tmp_path / "check.parquet"
+    assert main(["refresh-friction", str(params), str(check), "--robot", "er20", "-o",
+                 str(tmp_path / "new.toml")]) == 2
+    err = _error(capsys)
+    assert f"{params}: field 'meta.friction_model'" in err and "check.parquet" not in err
+    assert not (tmp_path / "new.toml").exists()
+
+
+@pytest.mark.parametrize("option, value", [("--rt-priority", "200"), ("--rt-priority", "0"),
+                                           ("--cpus", "-1")])
+def test_guide_on_a_robot_refuses_real_time_settings_out_of_range(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str) -> None:
+    """Before connecting or starting anything: ``--rt-priority 200`` only warned and ran at
+    normal priority, ``--cpus -1`` ended in a ValueError traceback."""
+    out = tmp_path / "s.parquet"
+    assert main(["guide", "--driver", "ur-rtde", "--host", "127.0.0.1", "--port",
+                 str(_closed_port()), "--robot", "er20", "--params",
+                 str(shipped_params_path("er20")), "--enable-input", "0", option, value,
+                 "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert f"field '{option}' = {value}" in err
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_an_affinity_the_os_refuses_is_reported_not_raised() -> None:
+    """The library's real-time set-up reports a CPU number the OS rejects (a negative one
+    raised ValueError from ``os.sched_setaffinity``)."""
+    lines = setup_realtime(RealtimeRequest(cpus=(-1,)))
+    assert len(lines) == 1 and lines[0].startswith("CPU affinity not set")
+
+
+def test_a_binary_or_non_utf8_log_is_refused_with_its_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A Parquet file given with a column map, and a log with one row of bytes that are not
+    UTF-8: Arrow's CSV reader printed an ignored exception's traceback and a message full of
+    raw bytes. Now the file is checked first: Parquet is named as such, and the first bad
+    bytes are given with their line."""
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(COLUMN_MAP)
+    parquet = tmp_path / "rec.parquet"
+    pq.write_table(pa.table({"t": [0.0, 1.0]}), parquet)
+    assert main(["identify", str(parquet), "--columns", str(cmap), "--robot", "er20", "-o",
+                 str(tmp_path / "p.toml")]) == 2
+    err = _error(capsys)
+    assert "field 'format' = 'Parquet'" in err and "without a column map" in err
+    log = tmp_path / "log.csv"
+    good = ",".join(["0.0"] * 13) + "\n"
+    log.write_bytes(good.encode() * 2 + b"0.5,\xe9\xff,1\n" + good.encode())
+    for command in ("identify", "payload"):
+        extra = ["--params", str(shipped_params_path("er20"))] if command == "payload" else \
+            ["-o", str(tmp_path / "p.toml")]
+        assert main([command, str(log), "--columns", str(cmap), "--robot", "er20",
+                     *extra]) == 2
+        err = _error(capsys)
+        assert "field 'line 3' = 'e9 ff 2c 31'" in err and "not UTF-8" in err
+    assert not (tmp_path / "p.toml").exists()
+    with pytest.raises(DataError) as e:
+        require_text(log, "log")
+    assert e.value.field == "line 3"
+    require_text(cmap, "column map")     # text passes
