@@ -168,3 +168,60 @@ def test_a_binary_or_non_utf8_log_is_refused_with_its_line(
         require_text(log, "log")
     assert e.value.field == "line 3"
     require_text(cmap, "column map")     # text passes
+
+
+def _trajectory_csv(path: Path, rows: list[list[float]]) -> None:
+    header = "time," + ",".join(f"{k}{j}" for k in ("q", "qd", "qdd") for j in range(1, 7))
+    path.write_text("# leadthrough trajectory\n# robot: er20\n" + header + "\n"
+                    + "".join(",".join(repr(v) for v in r) + "\n" for r in rows))
+
+
+def test_a_bad_trajectory_row_is_named_with_its_column(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """A NaN, a time that goes back, no rows: the message named only 'time' (a NaN in q3
+    included), with no row; an empty file also printed two numpy warnings."""
+    rows = [[0.01 * i] + [0.0] * 18 for i in range(6)]
+    out = tmp_path / "rec.parquet"
+    cases = []
+    nan = [r.copy() for r in rows]
+    nan[4][3] = float("nan")
+    cases.append((nan, "not finite in row 5", "field 'q3' = nan"))
+    back = [r.copy() for r in rows]
+    back[3][0] = 0.0
+    cases.append((back, "time does not increase in row 4", "field 'time' = 0.0"))
+    cases.append(([], "too few samples", "field 'rows' = 0"))
+    for data, what, field in cases:
+        traj = tmp_path / "t.csv"
+        _trajectory_csv(traj, data)
+        assert main(["record", "--robot", "er20", "--trajectory", str(traj), "-o",
+                     str(out)]) == 2
+        err = _error(capsys)
+        assert what in err and field in err and "Warning" not in err, err
+        assert not out.exists()
+
+
+def test_a_column_map_scale_of_zero_is_refused(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """``scale = 0`` made every current zero, and identify wrote parameters fitted to them."""
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(COLUMN_MAP.replace('unit = "A"', 'unit = "A"\nscale = 0'))
+    log = tmp_path / "log.csv"
+    log.write_text("".join(f"{0.001 * i}" + ",0.0" * 12 + "\n" for i in range(10)))
+    assert main(["identify", str(log), "--columns", str(cmap), "--robot", "er20", "-o",
+                 str(tmp_path / "p.toml")]) == 2
+    err = _error(capsys)
+    assert "field 'current.scale' = 0" in err and "non-zero" in err
+    assert not (tmp_path / "p.toml").exists()
+
+
+@pytest.mark.parametrize("option, value", [("--harmonics", "100000"),
+                                           ("--starts", "1000000000")])
+def test_excite_bounds_the_search(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                  option: str, value: str) -> None:
+    """Both had no upper bound: the search just ran (killed after 40 s in the audit)."""
+    out = tmp_path / "t.csv"
+    assert main(["excite", "--robot", "er20", option, value, "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert option.lstrip("-") in err and value in err
+    assert not out.exists()

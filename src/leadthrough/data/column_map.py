@@ -154,14 +154,19 @@ class ColumnMap:
         return max([*cols, max(self.signals["time"].columns)])
 
 
-def _vector(path: Path, field: str, value: Any, size: int, default: float) -> NDArray[np.float64]:
+def _vector(path: Path, field: str, value: Any, size: int, default: float,
+            nonzero: bool = False) -> NDArray[np.float64]:
+    """A per-joint number (one for all, or a list of ``size``); ``nonzero``: a scale (0
+    would turn the signal into zeros)."""
     if value is None:
         return np.full(size, default)
     vals = value if isinstance(value, list) else [value] * size
     if len(vals) != size or not all(isinstance(v, int | float) and not isinstance(v, bool)
-                                    and math.isfinite(v) for v in vals):
+                                    and math.isfinite(v) and (v != 0 or not nonzero)
+                                    for v in vals):
         raise DataError("malformed", source=path, field=field, value=value,
-                        expected=f"a finite number or a list of {size}")
+                        expected=f"a finite{' non-zero' if nonzero else ''} number or a list "
+                                 f"of {size}")
     return np.asarray(vals, dtype=float)
 
 
@@ -179,7 +184,7 @@ def _signal(path: Path, name: str, table: Any, mat: bool = False, joints: int = 
             raise DataError("missing", source=path, field=f"{name}.field",
                             expected="the name of the struct field")
         size = 1 if name == "time" else joints
-        scale = _vector(path, f"{name}.scale", table.get("scale"), size, 1.0)
+        scale = _vector(path, f"{name}.scale", table.get("scale"), size, 1.0, nonzero=True)
         offset = _vector(path, f"{name}.offset", table.get("offset"), size, 0.0)
         return Signal(columns=(), factor=scale * _UNITS[name][unit], offset=offset, field=fld)
     key = "column" if name == "time" else "columns"
@@ -191,7 +196,7 @@ def _signal(path: Path, name: str, table: Any, mat: bool = False, joints: int = 
         raise DataError("malformed", source=path, field=f"{name}.{key}", value=cols,
                         expected="a 0-based column index" if name == "time"
                         else "a list of 0-based column indices, one per joint")
-    scale = _vector(path, f"{name}.scale", table.get("scale"), len(cols), 1.0)
+    scale = _vector(path, f"{name}.scale", table.get("scale"), len(cols), 1.0, nonzero=True)
     offset = _vector(path, f"{name}.offset", table.get("offset"), len(cols), 0.0)
     file = table.get("file")
     if file is not None and (name == "time" or not isinstance(file, str) or not file

@@ -40,6 +40,12 @@ __all__ = ["ExcitationConfig", "ExcitationResult", "design_excitation", "observa
 
 Array = NDArray[np.float64]
 
+#: Most harmonics per joint: at the largest base frequency (2 Hz) the top one is then 50 Hz,
+#: past every servo's tracking, and the search has 2·H coefficients per joint.
+MAX_HARMONICS = 25
+#: Most random starts of the search (each is a whole SLSQP run).
+MAX_STARTS = 64
+
 
 @dataclass(frozen=True)
 class ExcitationConfig:
@@ -75,14 +81,14 @@ class ExcitationConfig:
 
     def __post_init__(self) -> None:
         checks = [
-            ("harmonics", self.harmonics >= 2, ">= 2"),
+            ("harmonics", 2 <= self.harmonics <= MAX_HARMONICS, f"2 .. {MAX_HARMONICS}"),
             ("base_frequency", 0 < self.base_frequency <= 2.0, "0 < f0 <= 2 Hz"),
             ("objective_samples", self.objective_samples >= 10, ">= 10"),
             ("check_samples", self.check_samples >= 20, ">= 20"),
             ("velocity_fraction", 0 < self.velocity_fraction <= 1, "in (0, 1]"),
             ("acceleration_fraction", 0 < self.acceleration_fraction <= 1, "in (0, 1]"),
             ("torque_fraction", 0 < self.torque_fraction <= 1, "in (0, 1]"),
-            ("starts", self.starts >= 1, ">= 1"),
+            ("starts", 1 <= self.starts <= MAX_STARTS, f"1 .. {MAX_STARTS}"),
             ("max_iterations", self.max_iterations >= 1, ">= 1"),
             # below the base, or above any industrial arm's reach: no trajectory to search for
             ("floor_height", -5.0 <= self.floor_height <= 5.0, "-5 <= floor <= 5 m"),

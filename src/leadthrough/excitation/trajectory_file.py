@@ -10,9 +10,11 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
 from leadthrough.excitation.fourier import TrajectorySamples
@@ -48,6 +50,32 @@ def save_trajectory(path: str | Path, traj: TrajectorySamples, robot: str,
     return atomic_write(path, write)
 
 
+def _check_samples(path: Path, data: NDArray[np.float64]) -> None:
+    """At least two rows of time + 3·n finite columns, time strictly increasing; the first
+    bad value named by its row (1-based, after the header) and column."""
+    if data.shape[0] < 2:
+        raise DataError("too few samples", source=path, field="rows", value=data.shape[0],
+                        expected="at least 2 rows after the header")
+    if data.shape[1] < 4 or (data.shape[1] - 1) % 3:
+        raise DataError("wrong number of columns", source=path, field="columns",
+                        value=data.shape[1], expected="time + 3·n columns (q, qd, qdd)")
+    n = (data.shape[1] - 1) // 3
+    names = ["time"] + [f"{kind}{j + 1}" for kind in ("q", "qd", "qdd") for j in range(n)]
+    bad = ~np.isfinite(data)
+    if bad.any():
+        row, col = (int(x) for x in np.argwhere(bad)[0])
+        raise DataError(f"a value that is not finite in row {row + 1}", source=path,
+                        field=names[col], value=float(data[row, col]),
+                        expected="finite numbers")
+    back = np.flatnonzero(np.diff(data[:, 0]) <= 0)
+    if back.size:
+        row = int(back[0]) + 1
+        raise DataError(f"time does not increase in row {row + 1}", source=path, field="time",
+                        value=float(data[row, 0]),
+                        expected=f"> {data[row - 1, 0]:g} (the row before): strictly "
+                                 "increasing time")
+
+
 def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
     """Read a trajectory CSV.
 
@@ -62,15 +90,14 @@ def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
     skip, meta = read_comment_header(path)
     robot = meta.get("robot") or None
     try:
-        data = np.loadtxt(path, delimiter=",", skiprows=skip + 1, ndmin=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)    # numpy's "empty input file"
+            data = np.loadtxt(path, delimiter=",", skiprows=skip + 1, ndmin=2)
     except ValueError as e:
-        raise DataError(f"malformed trajectory: {e}", source=path) from e
-    if data.shape[1] < 4 or (data.shape[1] - 1) % 3:
-        raise DataError("wrong number of columns", source=path, field="columns",
-                        value=data.shape[1], expected="time + 3·n columns (q, qd, qdd)")
-    if not np.all(np.isfinite(data)) or data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
-        raise DataError("trajectory must be finite with increasing time", source=path,
-                        field="time", expected="finite values, strictly increasing time")
+        raise DataError(f"malformed trajectory: {str(e).split('; use `usecols`')[0]}",
+                        source=path, expected="rows of numbers, each time + 3·n columns"
+                        ) from e
+    _check_samples(path, data)
     n = (data.shape[1] - 1) // 3
     return TrajectorySamples(time=data[:, 0], q=data[:, 1:1 + n], qd=data[:, 1 + n:1 + 2 * n],
                              qdd=data[:, 1 + 2 * n:]), robot
