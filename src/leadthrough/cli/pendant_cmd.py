@@ -3,25 +3,30 @@
 from __future__ import annotations
 
 import argparse
+import errno
+import math
+import os
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
-from leadthrough.errors import ControlError, LeadthroughError
-from leadthrough.identification.params_file import load_params
+from leadthrough.errors import ControlError, DataError, LeadthroughError
+from leadthrough.identification.params_file import ParamsFile, load_params
 from leadthrough.pendant.backend import LiveSession
 from leadthrough.pendant.loop_process import DriverRecipe
 from leadthrough.robot.description import Robot, load_robot
 
-__all__ = ["DRIVERS", "register"]
+__all__ = ["DRIVERS", "check_address", "check_arguments", "check_export_folder", "register",
+           "require_sweep"]
 
 #: Drivers of real controllers the pendant's live loop may run, by name: ``(robot, host) ->
 #: Driver``. None yet: the pendant's loop (:class:`~leadthrough.session.loop.ServoPeriods`)
@@ -29,6 +34,19 @@ __all__ = ["DRIVERS", "register"]
 #: link faults and the watchdog, the controller's state, the enabling input's fresh press), so
 #: a robot is guided with ``leadthrough guide --driver`` until the two loops are one.
 DRIVERS: dict[str, Callable[[Robot, str], Driver]] = {}
+
+#: The page's port without ``--port`` (the next free one if taken; with ``--port``: that one).
+DEFAULT_PORT = 8080
+#: Longest ``--record-s`` [s]: the recording is kept in shared memory, about 50 MB per 100 s.
+MAX_RECORD_S = 3600.0
+#: Longest ``--duration`` [s] (about 115 days).
+MAX_DURATION_S = 1e7
+#: SCHED_FIFO's highest priority (``sched_get_priority_max(2)`` on Linux).
+MAX_RT_PRIORITY = 99
+#: Suffixes of files, not folders: an ``-o`` with one is a file name given for the folder.
+_FILE_SUFFIXES = (".parquet", ".pq", ".csv", ".json", ".toml", ".txt", ".urdf", ".yaml",
+                  ".yml", ".npz", ".html", ".md", ".png", ".script", ".src", ".dat", ".ls",
+                  ".mod")
 
 _DESCRIPTION = """\
 Serve the live pendant: a web page for the person at the robot (a tablet's browser) with the
@@ -68,13 +86,23 @@ def register(sub: Any) -> None:
                    help="identified parameters (default on the simulator: the shipped "
                         "identification of the simulated er20)")
     p.add_argument("--seed", type=int, default=None,
-                   help="simulated robot instance (default: the parameters' own)")
-    p.add_argument("--bind", default="127.0.0.1", help="address to serve the page on")
-    p.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+                   help="simulated robot instance, >= 0 (default: the parameters' own)")
+    p.add_argument("--allow-no-sweep", action="store_true",
+                   help="guide with --params identified without a friction sweep (refused "
+                        "otherwise, as by `guide`: their friction is 15-24 %% low at guiding "
+                        "speeds, which reads as a 20-50 N force against the motion)")
+    p.add_argument("--bind", default="127.0.0.1",
+                   help="address of this machine to serve the page on (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=None,
+                   help=f"port, 1-65535, refused if in use; 0: any free port (default: "
+                        f"{DEFAULT_PORT}, or the next free one if taken)")
     p.add_argument("-o", "--output", type=Path, default=Path("leadthrough-pendant"),
-                   help="folder of the exports (default: leadthrough-pendant)")
+                   help="folder of the exports, made on the first export if missing (its "
+                        "parent must exist); each export goes into a new OUT/export-NNN "
+                        "(default: leadthrough-pendant)")
     p.add_argument("--record-s", type=float, default=600.0, metavar="S",
-                   help="seconds of the session kept for the export (default 600)")
+                   help=f"seconds of the session kept for the export, 0 < S <= "
+                        f"{MAX_RECORD_S:g} (default 600)")
     p.add_argument("--rt-priority", type=int, default=None, metavar="P",
                    help="run the loop's process under SCHED_FIFO at priority P (1-99; Linux, "
                         "needs root or CAP_SYS_NICE); see the README on the loop's isolation")
@@ -85,8 +113,112 @@ def register(sub: Any) -> None:
                         "without it the paper's law may move the tool again at rest after a "
                         "release, issue 24)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="stop after S seconds (default: run until Ctrl-C)")
+                   help="stop after S seconds, finite and > 0 (default: run until Ctrl-C)")
     p.set_defaults(func=run)
+
+
+def _refuse(option: str, value: object, message: str, expected: str) -> NoReturn:
+    raise DataError(message, field=option, value=value, expected=expected)
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Every argument of ``pendant`` that needs no robot and no network, before any work.
+
+    Raises:
+        DataError, ControlError: Naming the option, the value and the expected range (exit
+            code 2).
+    """
+    if args.port is not None and not 0 <= args.port <= 65535:
+        _refuse("--port", args.port, "out of range",
+                f"1-65535, or 0 for any free port; omit it for {DEFAULT_PORT} or the next free one")
+    d = args.duration
+    if d is not None and not (math.isfinite(d) and 0.0 < d <= MAX_DURATION_S):
+        _refuse("--duration", d, "out of range",
+                f"finite, > 0 and <= {MAX_DURATION_S:g} s; omit it to run until Ctrl-C")
+    r = args.record_s
+    if not (math.isfinite(r) and 0.0 < r <= MAX_RECORD_S):
+        _refuse("--record-s", r, "out of range", f"0 < seconds <= {MAX_RECORD_S:g}")
+    if args.seed is not None and args.seed < 0:
+        _refuse("--seed", args.seed, "out of range", "an integer >= 0")
+    if args.rt_priority is not None and not 1 <= args.rt_priority <= MAX_RT_PRIORITY:
+        raise ControlError("out of range", field="--rt-priority", value=args.rt_priority,
+                           expected=f"a SCHED_FIFO priority 1..{MAX_RT_PRIORITY}")
+    check_export_folder(args.output)
+
+
+def check_export_folder(out: Path) -> None:
+    """``-o``: the exports' folder (made on the first export): an existing, writable folder,
+    or a new one (not a file's name) in an existing, writable folder.
+
+    Raises:
+        DataError: Naming ``-o``, the path and what is expected.
+    """
+    given = str(out)
+    if out.exists() and not out.is_dir():
+        _refuse("-o", given, "not a folder (an existing file)",
+                "a folder for the exports (each goes into OUT/export-NNN), e.g. -o taught")
+    if not out.exists() and out.suffix.lower() in _FILE_SUFFIXES:
+        _refuse("-o", given, f"a file name ({out.suffix}) given for the exports' folder",
+                "a folder for the exports (each goes into OUT/export-NNN), e.g. -o taught")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not out.exists() and not parent.is_dir():
+        _refuse("-o", given, "its parent folder does not exist",
+                f"a folder whose parent exists ({parent} does not)")
+    where = out if out.exists() else parent
+    if not os.access(where, os.W_OK | os.X_OK):
+        _refuse("-o", given, f"{where} is not writable", "a writable folder")
+
+
+def require_sweep(pf: ParamsFile, allow_no_sweep: bool) -> ParamsFile:
+    """``pf`` if it can guide: identified with a friction sweep, or ``--allow-no-sweep``
+    (the rule of ``leadthrough guide``).
+
+    Raises:
+        DataError: Naming the file, ``meta.friction_sweep`` and the ways out.
+    """
+    if not (pf.friction_sweep or allow_no_sweep):
+        raise DataError(
+            "these parameters cannot guide: their friction was not measured at guiding speeds",
+            source=pf.path, field="meta.friction_sweep", value=False,
+            expected="true: record a friction sweep (leadthrough excite --sweep, then record) "
+                     "and identify with --method consistent --friction-sweep; or pass "
+                     "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
+                     " low at guiding speeds: a 40 N push barely moves the robot)")
+    return pf
+
+
+def check_address(bind: str, port: int | None) -> None:
+    """``--bind`` (and an explicit ``--port``): the address resolves and the page's server
+    can listen on it, the port free, checked by binding it as the server does (viser would
+    hang on an address it cannot bind, and move on to the next port when one is taken).
+
+    Raises:
+        LeadthroughError: Naming ``--bind`` or ``--port``, the value and why (exit code 2).
+    """
+    expected = "an address of this machine, e.g. 127.0.0.1, or 0.0.0.0 for the network"
+    if not bind.strip():
+        raise LeadthroughError("empty address", field="--bind", value=bind, expected=expected)
+    try:
+        infos = socket.getaddrinfo(bind, port or 0, socket.AF_UNSPEC, socket.SOCK_STREAM, 0,
+                                   socket.AI_PASSIVE)
+    except (OSError, UnicodeError) as e:
+        raise LeadthroughError(f"cannot resolve it: {getattr(e, 'strerror', None) or e}",
+                               field="--bind", value=bind, expected=expected) from e
+    for family, kind, proto, _, address in infos:
+        with socket.socket(family, kind, proto) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as asyncio's server
+            if family == socket.AF_INET6:
+                s.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+            try:
+                s.bind(address)
+            except OSError as e:
+                if port and e.errno == errno.EADDRINUSE:
+                    raise LeadthroughError(
+                        f"port in use on {bind}", field="--port", value=port,
+                        expected="a free port; or --port 0 for any free one, or no --port for "
+                                 f"{DEFAULT_PORT} or the next free one") from e
+                raise LeadthroughError(f"cannot listen on it: {e.strerror or e}",
+                                       field="--bind", value=bind, expected=expected) from e
 
 
 def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession, str]:
@@ -108,14 +240,53 @@ def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession,
         raise ControlError("a robot needs its address and its identified parameters",
                            field="--host/--params", value=(args.host, args.params),
                            expected="--host H --params params.toml")
-    params = load_params(args.params, robot)
+    params = require_sweep(load_params(args.params, robot), args.allow_no_sweep)
     recipe = DriverRecipe(robot, params, factory, args.host)
     return (LiveSession(recipe, robot, rt_priority=args.rt_priority),
             f"{args.params} ({params.method})")
 
 
+def _sessions(args: argparse.Namespace, robot: Robot, simulated_session: Any
+              ) -> tuple[LiveSession, Any, str]:
+    """The live session (not started), the simulated hand (None on a robot) and the
+    parameters' note."""
+    if args.driver is not None:
+        if args.hand_release:
+            raise ControlError("--hand-release is a setting of the simulated session here",
+                               field="--hand-release", value=True,
+                               expected="--sim; on a robot: leadthrough guide --driver D "
+                                        "--hand-release")
+        live, note = _robot_session(args, robot)
+        return live, None, note
+    params = None if args.params is None else require_sweep(load_params(args.params, robot),
+                                                            args.allow_no_sweep)
+    guiding = None
+    if args.hand_release:
+        # (simulated_session sets the push demonstrations' translational mass on it)
+        guiding = replace(GuidingConfig(), hand_release=HandReleaseConfig(enabled=True))
+    sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
+                            guiding=guiding, rt_priority=args.rt_priority)
+    return sim.live, sim.hand, sim.params_note
+
+
+def _serve(pendant_class: Any, live: LiveSession, hand: Any, note: str,
+           args: argparse.Namespace) -> Any:
+    """The pendant's page (a ``pendant_class``), served on ``--bind``: on ``--port`` exactly
+    if given."""
+    port = DEFAULT_PORT if args.port is None else args.port
+    pendant = pendant_class(live, args.output, hand=hand, bind=args.bind, port=port,
+                            params_note=note)
+    if args.port not in (None, 0) and pendant.server.get_port() != args.port:
+        pendant.stop()    # taken between the check and the start: viser moved on
+        raise LeadthroughError(f"port in use on {args.bind}", field="--port", value=args.port,
+                               expected="a free port; or --port 0 for any free one, or no "
+                                        f"--port for {DEFAULT_PORT} or the next free one")
+    return pendant
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough pendant``."""
+    check_arguments(args)
     try:  # the web stack is an extra: the rest of the CLI works without it
         from leadthrough.pendant.app import Pendant
         from leadthrough.pendant.simulated import simulated_session
@@ -124,42 +295,28 @@ def run(args: argparse.Namespace) -> int:
                                field="extra", value="pendant",
                                expected="pip install 'leadthrough[pendant]'") from e
     robot = load_robot(args.robot)
-    hand = None
-    if args.driver is not None:
-        if args.hand_release:
-            raise ControlError("--hand-release is a setting of the simulated session here",
-                               field="--hand-release", value=True,
-                               expected="--sim; on a robot: leadthrough guide --driver D "
-                                        "--hand-release")
-        live, note = _robot_session(args, robot)
-    else:
-        params = None if args.params is None else load_params(args.params, robot)
-        guiding = None
-        if args.hand_release:
-            # (simulated_session sets the push demonstrations' translational mass on it)
-            guiding = replace(GuidingConfig(), hand_release=HandReleaseConfig(enabled=True))
-        sim = simulated_session(robot, params, seed=args.seed, record_s=args.record_s,
-                                guiding=guiding, rt_priority=args.rt_priority)
-        live, hand, note = sim.live, sim.hand, sim.params_note
-    print("starting the loop in its own process ...", flush=True)
-    live.start(progress=lambda step: print(f"  {step} ...", flush=True))
-    pendant = Pendant(live, args.output, hand=hand, bind=args.bind, port=args.port,
-                      params_note=note)
-    pendant.start()
-    print(f"pendant: {pendant.url}  (exports to {args.output}; Ctrl-C stops)", flush=True)
-    done = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: done.set())
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    deadline = None if args.duration is None else time.monotonic() + args.duration
-    while not done.wait(0.2):
-        if deadline is not None and time.monotonic() >= deadline:
-            break
-        if not live.running:
-            break
-    pendant.stop()
-    live.stop()
-    snap = live.snapshot()
-    live.close()
+    live, hand, note = _sessions(args, robot, simulated_session)
+    try:
+        check_address(args.bind, args.port)     # just before the start: viser would hang
+        print("starting the loop in its own process ...", flush=True)
+        live.start(progress=lambda step: print(f"  {step} ...", flush=True))
+        pendant = _serve(Pendant, live, hand, note, args)
+        pendant.start()
+        print(f"pendant: {pendant.url}  (exports to {args.output}; Ctrl-C stops)", flush=True)
+        done = threading.Event()
+        signal.signal(signal.SIGINT, lambda *_: done.set())
+        signal.signal(signal.SIGTERM, lambda *_: done.set())
+        deadline = None if args.duration is None else time.monotonic() + args.duration
+        while not done.wait(0.2):
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            if not live.running:
+                break
+        pendant.stop()
+        live.stop()
+        snap = live.snapshot()
+    finally:
+        live.close()
     if snap is not None and snap.error not in (None, "stopped"):
         print(f"the loop stopped: {snap.error}")
         return 1

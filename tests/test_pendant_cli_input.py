@@ -1,0 +1,169 @@
+"""``leadthrough pendant``: bad input is one line naming the option and the value, exit code 2,
+no traceback, before the loop or the page's server starts (which would take seconds, and on a
+bad port or address used to hang), and nothing written."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from leadthrough.cli import main
+from leadthrough.cli.pendant_cmd import check_address, check_export_folder
+from leadthrough.errors import DataError
+
+SHIPPED = (Path(__file__).resolve().parent.parent / "src" / "leadthrough" / "sim" / "data"
+           / "er20_seed1_guiding.toml")
+
+
+def _refused(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    """Run ``leadthrough pendant *argv`` in this process; it must exit 2 with one error line
+    and no traceback, and start nothing. Returns that line."""
+    assert main(["pendant", *argv]) == 2
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err
+    assert "starting the loop" not in captured.out      # refused before any work
+    lines = [line for line in captured.err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("leadthrough: error:"), captured.err
+    return lines[0]
+
+
+@pytest.fixture
+def busy_port() -> Iterator[int]:
+    """A port something listens on, on 127.0.0.1."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize("port", ["-1", "70000", "65536"])
+def test_port_out_of_range(capsys: pytest.CaptureFixture[str], port: str) -> None:
+    err = _refused(capsys, "--port", port, "--duration", "2")
+    assert "'--port'" in err and f"= {port}:" in err and "out of range" in err
+    assert "65535" in err
+
+
+@pytest.mark.parametrize("bind", ["999.1.1.1", "no.such.host.invalid", "192.0.2.1", " "])
+def test_bind_not_an_address_of_this_machine(capsys: pytest.CaptureFixture[str],
+                                             bind: str) -> None:
+    err = _refused(capsys, "--bind", bind, "--duration", "2")
+    assert "'--bind'" in err and repr(bind) in err and "address of this machine" in err
+
+
+@pytest.mark.parametrize("duration", ["nan", "-1", "0", "inf"])
+def test_duration_finite_and_positive(capsys: pytest.CaptureFixture[str],
+                                      duration: str) -> None:
+    err = _refused(capsys, "--duration", duration)
+    assert "'--duration'" in err and f"= {float(duration)!r}:" in err
+    assert "finite, > 0" in err and "until Ctrl-C" in err
+
+
+@pytest.mark.parametrize("record_s", ["-5", "0", "nan", "1e9"])
+def test_record_s_out_of_range(capsys: pytest.CaptureFixture[str], record_s: str) -> None:
+    err = _refused(capsys, "--record-s", record_s, "--duration", "1")
+    assert "'--record-s'" in err and f"= {float(record_s)!r}:" in err
+    assert "0 < seconds <= 3600" in err
+
+
+@pytest.mark.parametrize("priority", ["500", "0", "-3", "100"])
+def test_rt_priority_out_of_range(capsys: pytest.CaptureFixture[str], priority: str) -> None:
+    err = _refused(capsys, "--rt-priority", priority, "--duration", "1")
+    assert "'--rt-priority'" in err and f"= {priority}:" in err and "1..99" in err
+
+
+def test_output_an_existing_file(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    params = tmp_path / "params.toml"
+    params.write_text("x = 1\n")
+    err = _refused(capsys, "-o", str(params), "--duration", "1")
+    assert "'-o'" in err and repr(str(params)) in err and "not a folder" in err
+    assert params.read_text() == "x = 1\n"
+
+
+def test_output_a_file_name(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    out = tmp_path / "points.json"
+    err = _refused(capsys, "-o", str(out), "--duration", "1")
+    assert "'-o'" in err and repr(str(out)) in err and "a folder" in err
+    assert not out.exists()
+
+
+def test_output_in_a_missing_folder(capsys: pytest.CaptureFixture[str],
+                                    tmp_path: Path) -> None:
+    out = tmp_path / "nope" / "x" / "y"
+    err = _refused(capsys, "-o", str(out), "--duration", "1")
+    assert "'-o'" in err and repr(str(out)) in err and "parent folder does not exist" in err
+    assert not (tmp_path / "nope").exists()                  # nothing made
+
+
+def test_output_folder_accepted(tmp_path: Path) -> None:
+    check_export_folder(tmp_path)                               # an existing folder
+    check_export_folder(tmp_path / "taught")                    # a new one, made on export
+    (tmp_path / "run.2026").mkdir()
+    check_export_folder(tmp_path / "run.2026")                  # a folder with a dot
+    assert not (tmp_path / "taught").exists()
+    with pytest.raises(DataError, match="'-o'"):
+        check_export_folder(tmp_path / "a" / "b")
+
+
+def test_explicit_port_in_use(capsys: pytest.CaptureFixture[str], busy_port: int) -> None:
+    err = _refused(capsys, "--port", str(busy_port), "--duration", "1")
+    assert "'--port'" in err and f"= {busy_port}:" in err and "port in use" in err
+    assert "a free port" in err
+
+
+def test_address_and_free_port_accepted(busy_port: int) -> None:
+    check_address("127.0.0.1", None)
+    check_address("127.0.0.1", 0)
+    check_address("localhost", None)        # a busy default port: viser takes the next one
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        free = int(s.getsockname()[1])
+    check_address("127.0.0.1", free)
+
+
+@pytest.mark.parametrize("seed", ["-1", "-100"])
+def test_seed_out_of_range(capsys: pytest.CaptureFixture[str], seed: str) -> None:
+    err = _refused(capsys, "--seed", seed, "--duration", "1")
+    assert "'--seed'" in err and f"= {seed}:" in err and "out of range" in err
+    assert ">= 0" in err and "another simulated robot" not in err
+
+
+@pytest.fixture
+def bare_params(tmp_path: Path) -> Path:
+    """The shipped guiding parameters of the simulated er20 without their friction sweep."""
+    text = SHIPPED.read_text()
+    assert "friction_sweep = true" in text
+    bare = tmp_path / "bare.toml"
+    bare.write_text(text.replace("friction_sweep = true", ""))
+    return bare
+
+
+def test_params_without_a_friction_sweep(capsys: pytest.CaptureFixture[str],
+                                         bare_params: Path) -> None:
+    err = _refused(capsys, "--params", str(bare_params), "--duration", "1")
+    assert "bare.toml" in err and "'meta.friction_sweep' = False" in err
+    assert "--allow-no-sweep" in err and "--friction-sweep" in err
+
+
+def test_allow_no_sweep_passes_the_sweep_check(capsys: pytest.CaptureFixture[str],
+                                               bare_params: Path) -> None:
+    # past the sweep check, the next one refuses: another instance than the params' (seed 1)
+    err = _refused(capsys, "--params", str(bare_params), "--allow-no-sweep", "--seed", "2",
+                   "--duration", "1")
+    assert "friction_sweep" not in err and "'--seed' = 2" in err
+
+
+@pytest.mark.parametrize("argv", [["--port", "-1"], ["--bind", "999.1.1.1"],
+                                  ["--duration", "nan"]])
+def test_console_script_exits_2_at_once(argv: list[str]) -> None:
+    # these used to hang (a traceback in viser's thread, or an endless run)
+    proc = subprocess.run([sys.executable, "-m", "leadthrough", "pendant", *argv,
+                           "--duration" if argv[0] != "--duration" else "--record-s", "2"],
+                          capture_output=True, text=True, check=False, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and "starting the loop" not in proc.stdout
+    assert f"'{argv[0]}'" in proc.stderr and argv[1] in proc.stderr
