@@ -225,3 +225,40 @@ def test_excite_bounds_the_search(tmp_path: Path, capsys: pytest.CaptureFixture[
     err = _error(capsys)
     assert option.lstrip("-") in err and value in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("--duration", "inf", "finite seconds > 0 on the simulator"),
+    ("--duration", "nan", "finite seconds > 0 on the simulator"),
+    ("--duration", "-1", "finite seconds > 0 on the simulator"),
+    ("--seed", "-1", "out of range")])
+def test_guide_on_the_simulator_names_a_bad_duration_or_seed(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str,
+        words: str) -> None:
+    """``--duration inf`` was refused as the loop's internal ``duration_s`` ('no way to stop'),
+    ``--seed -1`` as 'identified on another simulated robot'."""
+    out = tmp_path / "s.parquet"
+    assert main(["guide", "--robot", "er20", "--params", str(shipped_params_path("er20")),
+                 "--operator", "rest", option, value, "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert f"field '{option}'" in err and words in err and "another" not in err
+    assert not out.exists()
+
+
+def test_a_port_that_never_answers_rtde_is_named(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A listener that accepts the connection and says nothing (not a UR controller): the
+    message named only the request, not where it went."""
+    traj = tmp_path / "traj.csv"
+    _trajectory_csv(traj, [[0.01 * i] + [0.0] * 18 for i in range(3)])
+    out = tmp_path / "rec.parquet"
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(1)        # the kernel completes the connection; nobody answers
+        port = silent.getsockname()[1]
+        assert main(["record", "--driver", "ur-rtde", "--host", "127.0.0.1", "--port",
+                     str(port), "--robot", "er20", "--trajectory", str(traj), "-o",
+                     str(out)]) == 2
+    err = _error(capsys)
+    assert f"no answer from 127.0.0.1:{port}" in err and "REQUEST_PROTOCOL_VERSION" in err
+    assert not out.exists()

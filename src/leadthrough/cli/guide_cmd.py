@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -139,6 +140,13 @@ def run(args: argparse.Namespace) -> int:
     refuse_settings(args, ("enable_input", "mark_input", "reset_input", "host", "port"),
                     "a robot setting given for the simulator",
                     "--driver D with it (the simulator scripts its inputs)")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise DataError("out of range", field="--duration", value=args.duration,
+                        expected="finite seconds > 0 on the simulator (leave it out for the "
+                                 "operator script's length)")
+    if args.seed is not None and args.seed < 0:
+        raise DataError("out of range", field="--seed", value=args.seed,
+                        expected="a simulated robot instance >= 0")
     _note_missing_presliding(pf)
     args.operator = args.operator or "push-x"
     seed = sim_robot_seed(args.seed, pf)

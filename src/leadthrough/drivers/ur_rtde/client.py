@@ -182,8 +182,10 @@ class RtdeClient(Transport):
                 continue
             left = deadline - time.monotonic()
             if left <= 0 or not self._fill(left):
-                raise DriverError("no answer", field="request", value=mtype.name,
-                                   expected=f"an answer within {self.timeout} s")
+                raise DriverError(f"no answer from {self.host}:{self.port}", field="request",
+                                   value=mtype.name,
+                                   expected=f"an answer within {self.timeout} s (a UR "
+                                            "controller's RTDE interface at that address)")
 
     def _fill(self, timeout: float) -> bool:
         """Read what arrives within ``timeout``; False on timeout or a closed connection."""
