@@ -262,3 +262,15 @@ def test_a_port_that_never_answers_rtde_is_named(tmp_path: Path,
     err = _error(capsys)
     assert f"no answer from 127.0.0.1:{port}" in err and "REQUEST_PROTOCOL_VERSION" in err
     assert not out.exists()
+
+
+def test_excite_names_the_experiments_that_clash(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """``--sweep --friction-check`` was reported as ``--presliding``."""
+    out = tmp_path / "t.csv"
+    assert main(["excite", "--robot", "er20", "--sweep", "--friction-check", "-o",
+                 str(out)]) == 2
+    err = _error(capsys)
+    assert "field '--sweep and --friction-check'" in err and not out.exists()
+    assert main(["excite", "--robot", "er20", "--start", *["0"] * 6, "-o", str(out)]) == 2
+    assert "--start with --sweep, --presliding or --friction-check" in _error(capsys)

@@ -124,7 +124,8 @@ def run_excite(args: argparse.Namespace) -> int:
         return excite_friction_experiment(args, robot)
     if args.start is not None:
         raise DataError("a start pose is for the friction experiments only", field="--start",
-                        value=args.start, expected="--start with --sweep or --presliding")
+                        value=args.start,
+                        expected="--start with --sweep, --presliding or --friction-check")
     cfg = ExcitationConfig(harmonics=args.harmonics, base_frequency=args.base_frequency,
                            starts=args.starts, seed=args.seed, floor_height=args.floor)
     period = 1.0 / cfg.base_frequency

@@ -40,8 +40,10 @@ def excite_friction_experiment(args: argparse.Namespace, robot: Robot) -> int:
     Raises:
         DataError: Both experiments asked for, or a bad ``--start``.
     """
-    if args.sweep + args.presliding + args.friction_check > 1:
-        raise DataError("choose one of the friction experiments", field="--presliding",
+    given = [name for name, on in (("--sweep", args.sweep), ("--presliding", args.presliding),
+                                    ("--friction-check", args.friction_check)) if on]
+    if len(given) > 1:
+        raise DataError("choose one of the friction experiments", field=" and ".join(given),
                         value=True,
                         expected="--sweep or --presliding or --friction-check, one of them")
     q0 = _start(args, robot)
