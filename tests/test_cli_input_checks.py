@@ -274,3 +274,22 @@ def test_excite_names_the_experiments_that_clash(tmp_path: Path,
     assert "field '--sweep and --friction-check'" in err and not out.exists()
     assert main(["excite", "--robot", "er20", "--start", *["0"] * 6, "-o", str(out)]) == 2
     assert "--start with --sweep, --presliding or --friction-check" in _error(capsys)
+
+
+@pytest.mark.parametrize("extra, field", [
+    (["--method", "ols-cv", "--bound", "0.5"], "'--bound' = 0.5"),
+    (["--method", "ols-cv", "--seed", "5"], "'--seed' = 5"),
+    (["--method", "consistent", "--seed", "5"], "'--seed' = 5"),
+    (["--urdf-out", "links.toml"], "'--urdf-out' = '.toml'")])
+def test_identify_refuses_options_it_would_ignore(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str],
+        field: str) -> None:
+    """``--bound``/``--seed`` for a method that does not use them were ignored, and
+    ``--urdf-out`` wrote a URDF under any suffix."""
+    extra = [str(tmp_path / x) if x.endswith(".toml") else x for x in extra]
+    out = tmp_path / "p.toml"
+    assert main(["identify", str(tmp_path / "rec.parquet"), "--robot", "er20", *extra,
+                 "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert field in err
+    assert not out.exists()

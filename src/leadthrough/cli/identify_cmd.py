@@ -56,8 +56,10 @@ def _register_identify(sub: Any) -> None:
     p.add_argument("--robot", default="er20")
     p.add_argument("--method", choices=METHODS, default="proposed")
     p.add_argument("--columns", type=Path, default=None, help="column map for a raw log")
-    p.add_argument("--seed", type=int, default=0, help="seed of the proposed search")
-    p.add_argument("--bound", type=_bound, default=0.3,
+    # not given: absent (argparse.SUPPRESS), so that a method that does not use one refuses it
+    p.add_argument("--seed", type=int, default=argparse.SUPPRESS,
+                   help="seed of the proposed search (default 0; proposed only)")
+    p.add_argument("--bound", type=_bound, default=argparse.SUPPRESS,
                    help="bounds around the URDF values for proposed/consistent, as a fraction "
                         "(default 0.3 = ±30 %%, the paper's) or 'none' (consistent only)")
     _preprocess_args(p)
@@ -161,6 +163,15 @@ def _load(args: argparse.Namespace, robot: Robot) -> Recording:
 
 
 #: Longest excitation recording ``excite`` writes [s] (an hour at 1 kHz: 3.6 M rows).
+def _check_method_options(args: argparse.Namespace) -> None:
+    """Refuse ``--seed`` and ``--bound`` given for a method that does not use them."""
+    for option, users in (("seed", ("proposed",)), ("bound", ("proposed", "consistent"))):
+        if hasattr(args, option) and args.method not in users:
+            raise DataError(f"--{option} is not used by the {args.method} method",
+                            field=f"--{option}", value=getattr(args, option),
+                            expected=f"--{option} only with --method {' or '.join(users)}")
+
+
 def run_identify(args: argparse.Namespace) -> int:
     """Execute ``leadthrough identify``."""
     if args.friction_sweep is not None and args.method != "consistent":
@@ -171,8 +182,13 @@ def run_identify(args: argparse.Namespace) -> int:
               ("--friction-sweep", args.friction_sweep),
               ("--presliding-test", args.presliding_test))
     check_output(args.output, (".toml",), inputs)
+    _check_method_options(args)
     if args.urdf_out is not None:
         # checked before the identification, so that nothing is written if it cannot be
+        if Path(args.urdf_out).suffix.lower() != ".urdf":
+            raise DataError("unsupported output file type", source=args.urdf_out,
+                            field="--urdf-out", value=Path(args.urdf_out).suffix or "(none)",
+                            expected=".urdf")
         require_folder(args.urdf_out)
         check_not_input(args.urdf_out, "--urdf-out", inputs)
         if Path(args.urdf_out).resolve() == Path(args.output).resolve():
