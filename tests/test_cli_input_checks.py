@@ -3,6 +3,7 @@ message naming the option or field and the value, and nothing written or overwri
 
 from __future__ import annotations
 
+import json
 import socket
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import save_params
 from leadthrough.robot import load_robot
 from leadthrough.session.realtime import RealtimeRequest, setup_realtime
+from leadthrough.session.record import FORMAT_VERSION, session_metadata
 from leadthrough.sim.guiding_params import shipped_params_path
 
 COLUMN_MAP = """delimiter = ","
@@ -292,4 +294,22 @@ def test_identify_refuses_options_it_would_ignore(
                  "-o", str(out)]) == 2
     err = _error(capsys)
     assert field in err
+    assert not out.exists()
+
+
+def test_teach_refuses_a_session_format_it_does_not_read(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A session's metadata with another format number was read as if it were this one."""
+    meta = session_metadata("er20", 6, [], {})
+    ((key, raw),) = meta.items()
+    doc = json.loads(raw)
+    assert doc["format"] == FORMAT_VERSION
+    doc["format"] = 99
+    session = tmp_path / "s.parquet"
+    pq.write_table(pa.table({"t": [0.0]}).replace_schema_metadata({key: json.dumps(doc)}),
+                   session)
+    out = tmp_path / "p.json"
+    assert main(["teach", str(session), "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert "field 'format' = 99" in err and f"expected {FORMAT_VERSION}" in err
     assert not out.exists()

@@ -217,6 +217,10 @@ def load_session(path: str | Path) -> SessionLog:
     except (ValueError, KeyError, TypeError) as e:
         raise DataError(f"corrupt session metadata ({e})", source=path,
                         expected="a session written by 'leadthrough guide'") from e
+    if meta.get("format") != FORMAT_VERSION:
+        raise DataError("a session format this version does not read", source=path,
+                        field="format", value=meta.get("format"),
+                        expected=f"{FORMAT_VERSION} (written by this leadthrough's guide)")
     names = set(table.column_names)
 
     def block(prefix: str, suffixes: tuple[str, ...]) -> Array:
