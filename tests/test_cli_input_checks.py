@@ -76,6 +76,8 @@ def test_outputs_never_overwrite_the_commands_inputs(tmp_path: Path,
     params = tmp_path / "params.toml"
     params.write_bytes(shipped_params_path("er20").read_bytes())
     other = tmp_path / "sub" / ".." / "traj.csv"
+    link = tmp_path / "links.urdf"      # a link to the recording, under a URDF's name
+    link.symlink_to(rec)
     (tmp_path / "sub").mkdir()
     cases = [
         (["record", "--robot", "er20", "--trajectory", str(traj), "-o", str(other)],
@@ -83,7 +85,7 @@ def test_outputs_never_overwrite_the_commands_inputs(tmp_path: Path,
         (["identify", str(rec), "--columns", str(cmap), "--robot", "er20", "-o", str(cmap)],
          "'-o'", "--columns", cmap),
         (["identify", str(rec), "--robot", "er20", "--columns", str(cmap), "-o",
-          str(tmp_path / "p.toml"), "--urdf-out", str(rec)], "'--urdf-out'", "the recording",
+          str(tmp_path / "p.toml"), "--urdf-out", str(link)], "'--urdf-out'", "the recording",
          rec),
         (["refresh-friction", str(params), str(rec), "--robot", "er20", "-o", str(params)],
          "'-o'", "the params", params),
