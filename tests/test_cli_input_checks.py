@@ -315,3 +315,20 @@ def test_teach_refuses_a_session_format_it_does_not_read(
     err = _error(capsys)
     assert "field 'format' = 99" in err and f"expected {FORMAT_VERSION}" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("out, extra, option", [
+    ("seam.script", ["--fanuc-cnt", "30"], "--fanuc-cnt"),
+    ("seam.json", ["--fanuc-cnt", "30"], "--fanuc-cnt"),
+    ("seam.json", ["--tool", "0,0,300,0,0,0"], "--tool"),
+    ("seam.json", ["--joint-space"], "--joint-space")])
+def test_teach_refuses_a_setting_its_output_format_has_not(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], out: str, extra: list[str],
+        option: str) -> None:
+    """FANUC's CNT for a URScript or a JSON path, a tool or joint moves for a JSON path: each
+    was ignored, exit 0."""
+    path = tmp_path / out
+    assert main(["teach", str(tmp_path / "s.parquet"), "-o", str(path), *extra]) == 2
+    err = _error(capsys)
+    assert f"field '{option}'" in err
+    assert not path.exists()

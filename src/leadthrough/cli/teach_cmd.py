@@ -73,8 +73,9 @@ def register(sub: Any) -> None:
     p.add_argument("--zone-mm", type=float, default=1.0, metavar="MM",
                    help="blending radius at waypoints between the marks [mm] (default 1.0; "
                         "0 stops exactly at every waypoint)")
-    p.add_argument("--fanuc-cnt", type=int, default=50, metavar="N",
-                   help="FANUC CNT value (0-100) at blended waypoints (default 50)")
+    p.add_argument("--fanuc-cnt", type=int, default=None, metavar="N",
+                   help="FANUC TP programs (.ls) only: CNT value (0-100) at blended waypoints "
+                        "(default 50)")
     p.add_argument("--tool", default=None, metavar="X,Y,Z,A,B,C",
                    help="program TCP relative to the robot file's TCP frame [mm, deg; A, B, C "
                         "about z, y, x] (default: the robot file's TCP frame; the waypoints and "
@@ -140,13 +141,28 @@ def _check_outputs(args: argparse.Namespace, fmt: str) -> list[Path]:
     return paths
 
 
+def _refuse_program_settings(args: argparse.Namespace) -> None:
+    """A robot program's setting given for the JSON path (which has none of them)."""
+    for option, value in (("--fanuc-cnt", args.fanuc_cnt), ("--tool", args.tool),
+                          ("--joint-space", args.joint_space or None)):
+        if value is not None:
+            raise TeachError("a robot program's setting given for a JSON path", field=option,
+                             value=value, expected="a robot program (-o .script, .src, .ls "
+                                                   "or .mod) with it, or no " + option)
+
+
 def _options(args: argparse.Namespace, fmt: str) -> ProgramOptions:
     """Program options from the command line (bad values: TeachError naming the flag)."""
     if not (math.isfinite(args.zone_mm) and args.zone_mm >= 0.0):
         raise TeachError("out of range", field="--zone-mm", value=args.zone_mm,
                          expected="a finite blending radius ≥ 0 mm")
-    if not 0 <= args.fanuc_cnt <= 100:
-        raise TeachError("out of range", field="--fanuc-cnt", value=args.fanuc_cnt,
+    if args.fanuc_cnt is not None and fmt != "tp":
+        raise TeachError("a FANUC TP setting given for another format", field="--fanuc-cnt",
+                         value=args.fanuc_cnt, expected=f"--fanuc-cnt only with a .ls program "
+                                                        f"(this one is {fmt})")
+    cnt = ProgramOptions.fanuc_cnt if args.fanuc_cnt is None else args.fanuc_cnt
+    if not 0 <= cnt <= 100:
+        raise TeachError("out of range", field="--fanuc-cnt", value=cnt,
                          expected="an integer 0 … 100")
     tool = pin.SE3.Identity()
     if args.tool is not None:
@@ -161,7 +177,7 @@ def _options(args: argparse.Namespace, fmt: str) -> ProgramOptions:
     return ProgramOptions(name=program_name(args.output.stem, fmt), speed_m_s=args.speed,
                           orientation_speed_rad_s=args.orientation_speed,
                           zone_mm=args.zone_mm, tool=tool, joint_space=args.joint_space,
-                          fanuc_cnt=args.fanuc_cnt)
+                          fanuc_cnt=cnt)
 
 
 def _robot_for(log: SessionLog, spec: str | None, session: Path) -> Robot:
@@ -231,6 +247,8 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs(args, fmt)
     if fmt != "json":
         _options(args, fmt)  # bad flags fail before the session is read
+    else:
+        _refuse_program_settings(args)
     log = load_session(args.session)
     robot = _robot_for(log, args.robot, args.session)
     program = teach_session(log, robot, tolerance_mm=args.tolerance_mm, speed_m_s=args.speed,
