@@ -332,3 +332,17 @@ def test_teach_refuses_a_setting_its_output_format_has_not(
     err = _error(capsys)
     assert f"field '{option}'" in err
     assert not path.exists()
+
+
+@pytest.mark.parametrize("extra", [["--watchdog", "0.2"], ["--rt-priority", "50"],
+                                   ["--cpus", "0"], ["--lock-memory"]])
+def test_guide_on_the_simulator_refuses_a_robot_links_settings(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str]) -> None:
+    """The driver link's watchdog and the loop's real-time set-up do nothing on the
+    in-process simulator: each was ignored, exit 0."""
+    out = tmp_path / "s.parquet"
+    assert main(["guide", "--robot", "er20", "--params", str(shipped_params_path("er20")),
+                 "--operator", "rest", *extra, "-o", str(out)]) == 2
+    err = _error(capsys)
+    assert f"field '{extra[0]}'" in err and "given for the simulator" in err
+    assert not out.exists()

@@ -137,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
     if args.driver is not None:
         _note_missing_presliding(pf)
         return guide_on_robot(args, robot, pf, guiding)
-    refuse_settings(args, ("enable_input", "mark_input", "reset_input", "host", "port"),
+    refuse_settings(args, ("enable_input", "mark_input", "reset_input", "host", "port",
+                           "watchdog", "rt_priority", "cpus", "lock_memory"),
                     "a robot setting given for the simulator",
                     "--driver D with it (the simulator scripts its inputs)")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):

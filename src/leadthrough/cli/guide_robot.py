@@ -55,6 +55,8 @@ __all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot"]
 #: The guiding controller's cycle the paper uses [s].
 PAPER_CYCLE_S = 0.01
 _SIM_ONLY = ("operator", "seed", "operator_seed", "run")
+#: ``--watchdog``'s default [s].
+DEFAULT_WATCHDOG_S = 0.05
 #: SCHED_FIFO's highest priority (``sched_get_priority_max(2)`` on Linux).
 MAX_RT_PRIORITY = 99
 #: CPU numbers ``--cpus`` takes: Linux's default CPU mask size (``sched_setaffinity(2)``); a
@@ -77,12 +79,12 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
                    help="the digital input of the fault reset button: a fresh press resets a "
                         "latched fault once its cause has cleared and the robot is at rest "
                         "(then press the enabling device again to guide)")
-    g.add_argument("--watchdog", type=float, default=0.05, metavar="S",
+    g.add_argument("--watchdog", type=float, default=None, metavar="S",
                    help="a driver exchange longer than this is a fault (a commanded stop) "
                         "[s]; one blocked over max(1 s, S) is aborted (default 0.05)")
     g.add_argument("--rt-priority", type=int, default=None, metavar="P",
                    help="run the loop with SCHED_FIFO priority P (1-99; needs CAP_SYS_NICE)")
-    g.add_argument("--lock-memory", action="store_true",
+    g.add_argument("--lock-memory", action="store_true", default=None,
                    help="mlockall the process (no page faults in the loop)")
     g.add_argument("--cpus", type=int, nargs="+", default=None, metavar="CPU",
                    help="run on these CPUs only")
@@ -100,14 +102,15 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
     """Run ``leadthrough guide --driver`` (see the module doc)."""
     _check_args(args)
     # the inputs checked before anything is built (a clash of two inputs: exit 2 at once)
+    watchdog = DEFAULT_WATCHDOG_S if args.watchdog is None else args.watchdog
     options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
                           reset_input=args.reset_input,
-                          watchdog_s=args.watchdog, abort_s=max(1.0, args.watchdog))
+                          watchdog_s=watchdog, abort_s=max(1.0, watchdog))
     # the session writer's process first: started after the real-time set-up, it would
     # inherit the loop's CPUs and SCHED_FIFO (it leaves the policy itself, not the CPUs), and
     # its shared chunks are mapped before mlockall; closed on every way out
     with SessionFileSink(args.output, robot.n) as sink:
-        for line in setup_realtime(RealtimeRequest(args.rt_priority, args.lock_memory,
+        for line in setup_realtime(RealtimeRequest(args.rt_priority, bool(args.lock_memory),
                                                    tuple(args.cpus) if args.cpus else None)):
             print(f"leadthrough: {line}", file=sys.stderr, flush=True)
         driver = connect(args.driver, robot, args.host, args.port)
