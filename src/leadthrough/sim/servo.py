@@ -81,12 +81,16 @@ class CascadedServo:
         self.gains = gains
         self._inv_tpa = 1.0 / np.asarray(torque_per_amp, dtype=float)
         self._imax = np.asarray(max_current, dtype=float)
+        self._neg_imax = -self._imax
         n = self._imax.size
         self.integral = np.zeros(n)   # [N·m]
         self.current = np.zeros(n)    # last current command [A]
         self._q_prev = np.zeros(n)
         self._ev = np.zeros(n)
         self._tmp = np.zeros(n)
+        self._hold = np.zeros(n, dtype=bool)      # anti-windup masks (no allocation per step)
+        self._other = np.zeros(n, dtype=bool)
+        self._below = np.zeros(n, dtype=bool)
 
     def reset(self, q: Array, holding_torque: Array) -> None:
         """Start settled at ``q`` delivering ``holding_torque`` [N·m] (integrator preset)."""
@@ -118,12 +122,19 @@ class CascadedServo:
         self._q_prev[:] = q_meas
         # PI with conditional anti-windup.
         np.multiply(ev, g.ki * dt, out=tmp)
-        sat_hi = self.current >= self._imax
-        sat_lo = self.current <= -self._imax
-        tmp[(sat_hi & (tmp > 0.0)) | (sat_lo & (tmp < 0.0))] = 0.0
+        # no integration where saturated the same way: (sat_hi & tmp > 0) | (sat_lo & tmp < 0)
+        hold, other = self._hold, self._other
+        np.greater_equal(self.current, self._imax, out=hold)
+        hold &= np.greater(tmp, 0.0, out=other)
+        np.less_equal(self.current, self._neg_imax, out=other)
+        other &= np.less(tmp, 0.0, out=self._below)
+        hold |= other
+        np.copyto(tmp, 0.0, where=hold)
         self.integral += tmp
         np.multiply(ev, g.kv, out=tmp)
         tmp += self.integral
         tmp *= self._inv_tpa
-        np.clip(tmp, -self._imax, self._imax, out=self.current)
+        # clip(tmp, -imax, imax), without np.clip's per-call overhead on 6 values
+        np.maximum(tmp, self._neg_imax, out=tmp)
+        np.minimum(tmp, self._imax, out=self.current)
         return self.current
