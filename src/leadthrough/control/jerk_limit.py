@@ -101,6 +101,7 @@ class JerkLimitedInterpolator:
         self._inp.max_jerk = (amax * cfg.jerk_per_acceleration).tolist()
         self._zero = [0.0] * n
         self._amax = amax
+        self._neg_amax = -amax
         self._q = np.zeros(n)
         self._qd_prev = np.zeros(n)
         self._acc = np.zeros(n)
@@ -130,7 +131,7 @@ class JerkLimitedInterpolator:
         """
         np.subtract(qd, self._qd_prev, out=self._acc)
         self._acc *= 1.0 / self.config.period
-        np.clip(self._acc, -self._amax, self._amax, out=self._acc)
+        np.clip(self._acc, self._neg_amax, self._amax, out=self._acc)
         np.equal(qd, 0.0, out=self._rest)
         np.copyto(self._acc, 0.0, where=self._rest)
         self._qd_prev[:] = qd
