@@ -706,6 +706,7 @@ def test_the_first_period_runs_code_the_interpreter_has_specialised() -> None:
     out = subprocess.run([sys.executable, "-c", _SPECIALISED_AT_FIRST_PERIOD],
                          capture_output=True, text=True, timeout=300, check=True)
     specialised = json.loads(out.stdout.strip().splitlines()[-1])
+    assert set(specialised) == {"compute", "_cycle", "EnablingDevice.update"}, specialised
     assert all(count > 0 for count in specialised.values()), specialised
 
 
