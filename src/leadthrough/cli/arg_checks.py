@@ -16,7 +16,7 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 
 __all__ = ["MAX_PAYLOAD_COM_M", "check_not_input", "check_output", "check_trajectory_limits",
-           "warm_up_seconds", "with_command_lag"]
+           "require_sweep", "warm_up_seconds", "with_command_lag"]
 
 #: Farthest payload CoM from the TCP ``record`` simulates [m].
 MAX_PAYLOAD_COM_M = 1.0
@@ -47,6 +47,24 @@ def with_command_lag(pf: ParamsFile, lag: float | None) -> ParamsFile:
         raise DataError("out of range", field="--command-lag", value=lag,
                         expected=f"0 <= seconds <= {MAX_COMMAND_LAG_S:g}")
     return replace(pf, params=replace(pf.params, command_lag=float(lag)))
+
+
+def require_sweep(pf: ParamsFile, allow_no_sweep: bool) -> ParamsFile:
+    """``pf`` if it can guide: identified with a friction sweep, or ``--allow-no-sweep``
+    (``guide`` and ``pendant``).
+
+    Raises:
+        DataError: Naming the file, ``meta.friction_sweep`` and the ways out.
+    """
+    if not (pf.friction_sweep or allow_no_sweep):
+        raise DataError(
+            "these parameters cannot guide: their friction was not measured at guiding speeds",
+            source=pf.path, field="meta.friction_sweep", value=False,
+            expected="true: record a friction sweep (leadthrough excite --sweep, then record) "
+                     "and identify with --method consistent --friction-sweep; or pass "
+                     "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
+                     " low at guiding speeds: a 40 N push barely moves the robot)")
+    return pf
 
 
 def check_output(path: Path, suffixes: tuple[str, ...],

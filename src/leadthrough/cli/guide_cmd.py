@@ -11,7 +11,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from leadthrough.cli.arg_checks import check_not_input, warm_up_seconds, with_command_lag
+from leadthrough.cli.arg_checks import (
+    check_not_input,
+    require_sweep,
+    warm_up_seconds,
+    with_command_lag,
+)
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
 from leadthrough.cli.record_robot import refuse_settings
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
@@ -119,15 +124,8 @@ def _note_missing_presliding(pf: ParamsFile) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough guide``."""
     robot = load_robot(args.robot)
-    pf = with_command_lag(load_params(args.params, robot), args.command_lag)
-    if not (pf.friction_sweep or args.allow_no_sweep):
-        raise DataError(
-            "these parameters cannot guide: their friction was not measured at guiding speeds",
-            source=pf.path, field="meta.friction_sweep", value=False,
-            expected="true: record a friction sweep (leadthrough excite --sweep, then record) "
-                     "and identify with --method consistent --friction-sweep; or pass "
-                     "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
-                     " low at guiding speeds: a 40 N push barely moves the robot)")
+    pf = require_sweep(with_command_lag(load_params(args.params, robot), args.command_lag),
+                       args.allow_no_sweep)
     guiding = GuidingConfig() if args.mass is None else light_guiding(args.mass)
     guiding = replace(guiding, controller=args.controller, friction_mode=args.friction)
     if args.hand_release:

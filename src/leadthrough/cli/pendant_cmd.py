@@ -15,18 +15,18 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
 
+from leadthrough.cli.arg_checks import require_sweep
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError, DataError, LeadthroughError
-from leadthrough.identification.params_file import ParamsFile, load_params
+from leadthrough.identification.params_file import load_params
 from leadthrough.pendant.backend import LiveSession
 from leadthrough.pendant.loop_process import DriverRecipe
 from leadthrough.robot.description import Robot, load_robot
 
-__all__ = ["DRIVERS", "check_address", "check_arguments", "check_export_folder", "register",
-           "require_sweep"]
+__all__ = ["DRIVERS", "check_address", "check_arguments", "check_export_folder", "register"]
 
 #: Drivers of real controllers the pendant's live loop may run, by name: ``(robot, host) ->
 #: Driver``. None yet: the pendant's loop (:class:`~leadthrough.session.loop.ServoPeriods`)
@@ -167,24 +167,6 @@ def check_export_folder(out: Path) -> None:
     where = out if out.exists() else parent
     if not os.access(where, os.W_OK | os.X_OK):
         _refuse("-o", given, f"{where} is not writable", "a writable folder")
-
-
-def require_sweep(pf: ParamsFile, allow_no_sweep: bool) -> ParamsFile:
-    """``pf`` if it can guide: identified with a friction sweep, or ``--allow-no-sweep``
-    (the rule of ``leadthrough guide``).
-
-    Raises:
-        DataError: Naming the file, ``meta.friction_sweep`` and the ways out.
-    """
-    if not (pf.friction_sweep or allow_no_sweep):
-        raise DataError(
-            "these parameters cannot guide: their friction was not measured at guiding speeds",
-            source=pf.path, field="meta.friction_sweep", value=False,
-            expected="true: record a friction sweep (leadthrough excite --sweep, then record) "
-                     "and identify with --method consistent --friction-sweep; or pass "
-                     "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
-                     " low at guiding speeds: a 40 N push barely moves the robot)")
-    return pf
 
 
 def check_address(bind: str, port: int | None) -> None:
