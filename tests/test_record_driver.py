@@ -300,8 +300,10 @@ def test_nan_or_a_closed_link_mid_run_stops_it(kind: str, robots: dict[str, Robo
         with pytest.raises(DriverError) as err:  # TCP: link lost; UDP: silence
             record_trajectory(driver, robot, _trajectory(2.0))
         report = emu.emulator.report()
-    expected = "link lost" if kind == "ur-rtde" else "no fresh sample"   # TCP / UDP
-    assert expected in str(err.value), err.value
+    # TCP (RTDE): the link is lost; UDP (J519, RSI): silence, or the kernel's ICMP "port
+    # unreachable" on the next read once a datagram of ours met the closed port (timing)
+    expected = ("link lost",) if kind == "ur-rtde" else ("no fresh sample", "port is closed")
+    assert any(e in str(err.value) for e in expected), err.value
     assert report.violations == ()
 
 
