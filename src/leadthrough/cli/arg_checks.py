@@ -9,17 +9,33 @@ from pathlib import Path
 import numpy as np
 
 from leadthrough.dynamics.model import MAX_COMMAND_LAG_S
-from leadthrough.errors import DataError
+from leadthrough.errors import ControlError, DataError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
+from leadthrough.session.realtime import MAX_FIFO_PRIORITY
 
-__all__ = ["MAX_PAYLOAD_COM_M", "check_not_input", "check_output", "check_trajectory_limits",
-           "require_sweep", "warm_up_seconds", "with_command_lag"]
+__all__ = ["MAX_DURATION_S", "MAX_PAYLOAD_COM_M", "check_not_input", "check_output",
+           "check_rt_priority", "check_trajectory_limits", "require_sweep", "warm_up_seconds",
+           "with_command_lag"]
 
 #: Farthest payload CoM from the TCP ``record`` simulates [m].
 MAX_PAYLOAD_COM_M = 1.0
+#: Longest ``--duration`` of a command that otherwise runs until Ctrl-C [s] (about 115 days;
+#: ``threading.Timer`` fails far beyond it).
+MAX_DURATION_S = 1e7
+
+
+def check_rt_priority(priority: int | None) -> None:
+    """``--rt-priority``: a SCHED_FIFO priority, or None (the normal scheduler).
+
+    Raises:
+        ControlError: Naming ``--rt-priority`` and its range.
+    """
+    if priority is not None and not 1 <= priority <= MAX_FIFO_PRIORITY:
+        raise ControlError("out of range", field="--rt-priority", value=priority,
+                           expected=f"a SCHED_FIFO priority 1..{MAX_FIFO_PRIORITY}")
 
 
 def warm_up_seconds(minutes: float) -> float:

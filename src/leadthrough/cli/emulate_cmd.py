@@ -23,6 +23,7 @@ import socket
 import threading
 from typing import Any, NamedTuple, NoReturn
 
+from leadthrough.cli.arg_checks import MAX_DURATION_S
 from leadthrough.errors import SimulationError
 from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.emulators import (
@@ -49,9 +50,6 @@ inputs: J519 DI[1] / UR DI0 / KUKA $IN[1] = enabling device, DI[2] / DI1 / $IN[2
 DI[3] / DI2 / $IN[3] = fault reset.
 """
 
-
-#: Longest ``--duration`` [s] (about 115 days; ``threading.Timer`` fails far beyond it).
-MAX_DURATION_S = 1e7
 
 _WINDOW_OPTIONS = ("enable", "mark", "reset", "loss_burst", "late", "nan")
 _TIME_OPTIONS = ("close_at", "estop_at", "protective_stop_at")

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from leadthrough.cli.arg_checks import check_rt_priority
 from leadthrough.cli.record_robot import add_connection_arguments, refuse_settings
 from leadthrough.control.guiding_types import GuidingConfig
 from leadthrough.drivers.controllers import connect
@@ -57,8 +58,6 @@ PAPER_CYCLE_S = 0.01
 _SIM_ONLY = ("operator", "seed", "operator_seed", "run")
 #: ``--watchdog``'s default [s].
 DEFAULT_WATCHDOG_S = 0.05
-#: SCHED_FIFO's highest priority (``sched_get_priority_max(2)`` on Linux).
-MAX_RT_PRIORITY = 99
 #: CPU numbers ``--cpus`` takes: Linux's default CPU mask size (``sched_setaffinity(2)``); a
 #: CPU in range that this machine lacks is the OS's refusal, reported as the loop starts.
 MAX_CPUS = 1024
@@ -148,9 +147,7 @@ def _check_args(args: argparse.Namespace) -> None:
                            "device is pressed", field="--enable-input", value=None,
                            expected="the controller's digital input wired to the enabling "
                                     "device")
-    if args.rt_priority is not None and not 1 <= args.rt_priority <= MAX_RT_PRIORITY:
-        raise ControlError("out of range", field="--rt-priority", value=args.rt_priority,
-                           expected=f"a SCHED_FIFO priority 1..{MAX_RT_PRIORITY}")
+    check_rt_priority(args.rt_priority)
     bad_cpus = [c for c in args.cpus or () if not 0 <= c < MAX_CPUS]
     if bad_cpus:
         raise ControlError("out of range", field="--cpus", value=bad_cpus[0],

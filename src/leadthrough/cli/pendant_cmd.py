@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
 
-from leadthrough.cli.arg_checks import require_sweep
+from leadthrough.cli.arg_checks import MAX_DURATION_S, check_rt_priority, require_sweep
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
@@ -39,10 +39,6 @@ DRIVERS: dict[str, Callable[[Robot, str], Driver]] = {}
 DEFAULT_PORT = 8080
 #: Longest ``--record-s`` [s]: the recording is kept in shared memory, about 50 MB per 100 s.
 MAX_RECORD_S = 3600.0
-#: Longest ``--duration`` [s] (about 115 days).
-MAX_DURATION_S = 1e7
-#: SCHED_FIFO's highest priority (``sched_get_priority_max(2)`` on Linux).
-MAX_RT_PRIORITY = 99
 #: Suffixes of files, not folders: an ``-o`` with one is a file name given for the folder.
 _FILE_SUFFIXES = (".parquet", ".pq", ".csv", ".json", ".toml", ".txt", ".urdf", ".yaml",
                   ".yml", ".npz", ".html", ".md", ".png", ".script", ".src", ".dat", ".ls",
@@ -140,9 +136,7 @@ def check_arguments(args: argparse.Namespace) -> None:
         _refuse("--record-s", r, "out of range", f"0 < seconds <= {MAX_RECORD_S:g}")
     if args.seed is not None and args.seed < 0:
         _refuse("--seed", args.seed, "out of range", "an integer >= 0")
-    if args.rt_priority is not None and not 1 <= args.rt_priority <= MAX_RT_PRIORITY:
-        raise ControlError("out of range", field="--rt-priority", value=args.rt_priority,
-                           expected=f"a SCHED_FIFO priority 1..{MAX_RT_PRIORITY}")
+    check_rt_priority(args.rt_priority)
     check_export_folder(args.output)
 
 

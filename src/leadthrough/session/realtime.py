@@ -16,9 +16,11 @@ import ctypes.util
 import os
 from dataclasses import dataclass
 
-__all__ = ["RealtimeRequest", "setup_realtime"]
+__all__ = ["MAX_FIFO_PRIORITY", "RealtimeRequest", "setup_realtime"]
 
 _MCL_CURRENT, _MCL_FUTURE = 1, 2
+#: SCHED_FIFO's highest priority (``sched_get_priority_max(2)`` on Linux; the lowest is 1).
+MAX_FIFO_PRIORITY = 99
 
 
 @dataclass(frozen=True)
@@ -63,8 +65,8 @@ def _lock_memory() -> str:
 
 
 def _fifo(priority: int) -> str:
-    if not 1 <= priority <= 99:
-        return f"SCHED_FIFO not set: priority {priority} outside 1-99"
+    if not 1 <= priority <= MAX_FIFO_PRIORITY:
+        return f"SCHED_FIFO not set: priority {priority} outside 1-{MAX_FIFO_PRIORITY}"
     if not hasattr(os, "sched_setscheduler"):
         return "SCHED_FIFO not set: this OS has no sched_setscheduler (Linux only)"
     try:
