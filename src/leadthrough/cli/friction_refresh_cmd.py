@@ -13,9 +13,7 @@ import numpy as np
 
 from leadthrough.cli.arg_checks import check_output
 from leadthrough.data.io import load_recording
-from leadthrough.dynamics.model import FrictionModel
-from leadthrough.errors import DataError
-from leadthrough.identification.friction_refresh import refresh_friction
+from leadthrough.identification.friction_refresh import refresh_friction, require_eq15
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import ParamsFile, load_params, save_params
 from leadthrough.robot.description import Robot, load_robot
@@ -75,11 +73,7 @@ def run(args: argparse.Namespace) -> int:
                                            ("--columns", args.columns)))
     robot = load_robot(args.robot)
     pf = load_params(args.params, robot)
-    if pf.params.friction_model is not FrictionModel.STRIBECK:
-        raise DataError("a friction check rescales eq. 15 friction", source=args.params,
-                        field="meta.friction_model", value=pf.params.friction_model.value,
-                        expected="stribeck (identify with --method consistent "
-                                 "--friction-sweep)")
+    require_eq15(pf.params, args.params)     # before the check recording is read
     check = load_recording(args.check, args.columns)
     check.check_joint_range(robot)
     done = refresh_friction(pf.params, check, robot)

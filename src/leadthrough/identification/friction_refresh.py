@@ -37,6 +37,7 @@ identification's split between Stribeck and viscous friction is the least certai
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import scipy.optimize
@@ -50,7 +51,7 @@ from leadthrough.errors import DataError
 from leadthrough.identification.friction_sweep import SweepPoints, sweep_points
 from leadthrough.robot.description import Robot
 
-__all__ = ["MAX_SCALE", "MIN_SCALE", "FrictionRefresh", "refresh_friction"]
+__all__ = ["MAX_SCALE", "MIN_SCALE", "FrictionRefresh", "refresh_friction", "require_eq15"]
 
 Array = NDArray[np.float64]
 
@@ -114,6 +115,28 @@ def _fit(level: Array, viscous: Array, f: Array) -> tuple[float, float, bool]:
     return a, a, False
 
 
+def require_eq15(params: DriveModelParameters, source: str | Path | None = None
+                 ) -> StribeckParameters:
+    """Parameters a friction check can rescale: eq. 15 friction; returns it.
+
+    Args:
+        params: The identified parameters.
+        source: Their params file, if they were read from one (the message names it and its
+            ``meta.friction_model``).
+
+    Raises:
+        DataError: Another friction model.
+    """
+    if params.friction_model is not FrictionModel.STRIBECK or params.stribeck is None:
+        raise DataError("a friction check rescales eq. 15 friction (these parameters have "
+                        "another friction model)", source=source,
+                        field="friction_model" if source is None else "meta.friction_model",
+                        value=params.friction_model.value,
+                        expected="stribeck (identify with --method consistent "
+                                 "--friction-sweep)")
+    return params.stribeck
+
+
 def refresh_friction(params: DriveModelParameters, check: Recording,
                      robot: Robot) -> FrictionRefresh:
     """Rescale the identified friction to a friction check (see the module doc).
@@ -133,11 +156,7 @@ def refresh_friction(params: DriveModelParameters, check: Recording,
             recording).
     """
     check.check_robot(robot)
-    if params.friction_model is not FrictionModel.STRIBECK or params.stribeck is None:
-        raise DataError("a friction check rescales eq. 15 friction (these parameters have "
-                        "another friction model)", field="friction_model",
-                        value=params.friction_model.value,
-                        expected="stribeck (identify with --friction-sweep)")
+    old = require_eq15(params)
     points = sweep_points(check, robot)
     q_mean = np.mean(check.q, axis=0)[None, :]
     zero = np.zeros_like(q_mean)
@@ -162,9 +181,8 @@ def refresh_friction(params: DriveModelParameters, check: Recording,
                                      "(the right params file and robot?)")
         before[j] = _rel_rms(level + viscous, f)
         after[j] = _rel_rms(a[j] * level + b[j] * viscous, f)
-    s = params.stribeck
-    stribeck = StribeckParameters(f1=s.f1 * a, f2=s.f2 * a, qd_sm=s.qd_sm.copy(), f3=s.f3 * a,
-                                  qd_sg=s.qd_sg.copy(), f4=s.f4 * b)
+    stribeck = StribeckParameters(f1=old.f1 * a, f2=old.f2 * a, qd_sm=old.qd_sm.copy(),
+                                  f3=old.f3 * a, qd_sg=old.qd_sg.copy(), f4=old.f4 * b)
     load = params.load_friction * a if params.load_friction.size else params.load_friction
     new = replace(params, stribeck=stribeck, load_friction=load)
     at_bound = separable & _at_bound(b)
