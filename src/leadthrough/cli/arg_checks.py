@@ -3,6 +3,8 @@ trajectory file), done before any work so that a bad argument exits 2 with nothi
 
 from __future__ import annotations
 
+import errno
+import socket
 from dataclasses import replace
 from pathlib import Path
 
@@ -16,7 +18,8 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.session.realtime import MAX_FIFO_PRIORITY
 
-__all__ = ["MAX_DURATION_S", "MAX_PAYLOAD_COM_M", "check_not_input", "check_output",
+__all__ = ["MAX_DURATION_S", "MAX_PAYLOAD_COM_M", "check_bindable", "check_not_input",
+           "check_output",
            "check_rt_priority", "check_trajectory_limits", "require_sweep", "warm_up_seconds",
            "with_command_lag"]
 
@@ -25,6 +28,43 @@ MAX_PAYLOAD_COM_M = 1.0
 #: Longest ``--duration`` of a command that otherwise runs until Ctrl-C [s] (about 115 days;
 #: ``threading.Timer`` fails far beyond it).
 MAX_DURATION_S = 1e7
+
+
+def check_bindable(host: str, option: str, *, family: int = socket.AF_UNSPEC,
+                   kind: int = socket.SOCK_STREAM, port: int | None = None,
+                   port_expected: str = "a free port") -> None:
+    """An address to serve on (``option``, e.g. ``--bind``, ``--host``): it resolves and a
+    socket of ``kind`` binds to it, as a server's would (and to ``port`` when one is given
+    and not 0: then it must be free). Checked before anything starts, so that a server that
+    cannot bind fails with its option named, not later (viser hangs on such an address, and
+    moves on to the next port when one is taken).
+
+    Raises:
+        DataError: Naming ``option`` (or ``--port`` for a port in use, with ``port_expected``),
+            the value and why.
+    """
+    expected = "an address of this machine, e.g. 127.0.0.1, or 0.0.0.0 for all"
+    if not host.strip():
+        raise DataError("empty address", field=option, value=host, expected=expected)
+    try:
+        infos = socket.getaddrinfo(host, port or 0, family, kind, 0, socket.AI_PASSIVE)
+    except (OSError, UnicodeError) as e:
+        raise DataError(f"cannot resolve it: {getattr(e, 'strerror', None) or e}",
+                        field=option, value=host, expected=expected) from e
+    for fam, typ, proto, _, address in infos:
+        with socket.socket(fam, typ, proto) as s:
+            if typ == socket.SOCK_STREAM:
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as asyncio's server
+            if fam == socket.AF_INET6:
+                s.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+            try:
+                s.bind(address)
+            except OSError as e:
+                if port and e.errno == errno.EADDRINUSE:
+                    raise DataError(f"port in use on {host}", field="--port", value=port,
+                                    expected=port_expected) from e
+                raise DataError(f"cannot bind it: {e.strerror or e}", field=option,
+                                value=host, expected=expected) from e
 
 
 def check_rt_priority(priority: int | None) -> None:

@@ -23,7 +23,7 @@ import socket
 import threading
 from typing import Any, NamedTuple, NoReturn
 
-from leadthrough.cli.arg_checks import MAX_DURATION_S
+from leadthrough.cli.arg_checks import MAX_DURATION_S, check_bindable
 from leadthrough.errors import SimulationError
 from leadthrough.robot import Robot, load_robot
 from leadthrough.sim.emulators import (
@@ -166,28 +166,6 @@ def check_arguments(args: argparse.Namespace) -> None:
                         "--operator NAME with it, or no " + _option(name))
 
 
-def check_host(host: str) -> None:
-    """``--host``: resolvable (IPv4) and an address of this machine (every emulator binds
-    to it).
-
-    Raises:
-        SimulationError: Naming ``--host``, its value and why it cannot be used (exit code 2).
-    """
-    try:
-        socket.getaddrinfo(host, None, socket.AF_INET)
-    except (OSError, UnicodeError) as e:
-        raise SimulationError(f"cannot resolve it: {getattr(e, 'strerror', None) or e}",
-                              field="--host", value=host,
-                              expected="an IPv4 address or host name of this machine") from e
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind((host, 0))
-        except OSError as e:
-            raise SimulationError(f"cannot bind it: {e.strerror or e}", field="--host",
-                                  value=host, expected="an address of this machine (e.g. "
-                                                       "127.0.0.1, or 0.0.0.0 for all)") from e
-
-
 def register(sub: Any) -> None:
     """Add the subcommand."""
     p = sub.add_parser(
@@ -299,7 +277,8 @@ def check_start_pose(q0: list[float] | None, robot: Robot) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough emulate``."""
     check_arguments(args)
-    check_host(args.host)
+    # every emulator binds its IPv4 UDP or TCP sockets to --host
+    check_bindable(args.host, "--host", family=socket.AF_INET, kind=socket.SOCK_DGRAM)
     robot = load_robot(args.robot)
     check_start_pose(args.q0, robot)
     emulator = make_emulator(args.kind, robot, args.seed, args.port, _options(args))

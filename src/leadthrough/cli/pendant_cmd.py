@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import errno
 import math
 import os
 import signal
-import socket
 import threading
 import time
 from collections.abc import Callable
@@ -15,7 +13,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
 
-from leadthrough.cli.arg_checks import MAX_DURATION_S, check_rt_priority, require_sweep
+from leadthrough.cli.arg_checks import (
+    MAX_DURATION_S,
+    check_bindable,
+    check_rt_priority,
+    require_sweep,
+)
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
@@ -37,6 +40,8 @@ DRIVERS: dict[str, Callable[[Robot, str], Driver]] = {}
 
 #: The page's port without ``--port`` (the next free one if taken; with ``--port``: that one).
 DEFAULT_PORT = 8080
+_PORT_EXPECTED = (f"a free port; or --port 0 for any free one, or no --port for {DEFAULT_PORT} "
+                  "or the next free one")
 #: Longest ``--record-s`` [s]: the recording is kept in shared memory, about 50 MB per 100 s.
 MAX_RECORD_S = 3600.0
 #: Suffixes of files, not folders: an ``-o`` with one is a file name given for the folder.
@@ -164,37 +169,13 @@ def check_export_folder(out: Path) -> None:
 
 
 def check_address(bind: str, port: int | None) -> None:
-    """``--bind`` (and an explicit ``--port``): the address resolves and the page's server
-    can listen on it, the port free, checked by binding it as the server does (viser would
-    hang on an address it cannot bind, and move on to the next port when one is taken).
+    """``--bind`` and an explicit ``--port`` (:func:`~leadthrough.cli.arg_checks.
+    check_bindable`: the page's server listens there).
 
     Raises:
-        LeadthroughError: Naming ``--bind`` or ``--port``, the value and why (exit code 2).
+        DataError: Naming ``--bind`` or ``--port``, the value and why (exit code 2).
     """
-    expected = "an address of this machine, e.g. 127.0.0.1, or 0.0.0.0 for the network"
-    if not bind.strip():
-        raise LeadthroughError("empty address", field="--bind", value=bind, expected=expected)
-    try:
-        infos = socket.getaddrinfo(bind, port or 0, socket.AF_UNSPEC, socket.SOCK_STREAM, 0,
-                                   socket.AI_PASSIVE)
-    except (OSError, UnicodeError) as e:
-        raise LeadthroughError(f"cannot resolve it: {getattr(e, 'strerror', None) or e}",
-                               field="--bind", value=bind, expected=expected) from e
-    for family, kind, proto, _, address in infos:
-        with socket.socket(family, kind, proto) as s:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as asyncio's server
-            if family == socket.AF_INET6:
-                s.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
-            try:
-                s.bind(address)
-            except OSError as e:
-                if port and e.errno == errno.EADDRINUSE:
-                    raise LeadthroughError(
-                        f"port in use on {bind}", field="--port", value=port,
-                        expected="a free port; or --port 0 for any free one, or no --port for "
-                                 f"{DEFAULT_PORT} or the next free one") from e
-                raise LeadthroughError(f"cannot listen on it: {e.strerror or e}",
-                                       field="--bind", value=bind, expected=expected) from e
+    check_bindable(bind, "--bind", port=port, port_expected=_PORT_EXPECTED)
 
 
 def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession, str]:
@@ -254,9 +235,8 @@ def _serve(pendant_class: Any, live: LiveSession, hand: Any, note: str,
                             params_note=note)
     if args.port not in (None, 0) and pendant.server.get_port() != args.port:
         pendant.stop()    # taken between the check and the start: viser moved on
-        raise LeadthroughError(f"port in use on {args.bind}", field="--port", value=args.port,
-                               expected="a free port; or --port 0 for any free one, or no "
-                                        f"--port for {DEFAULT_PORT} or the next free one")
+        raise DataError(f"port in use on {args.bind}", field="--port", value=args.port,
+                        expected=_PORT_EXPECTED)
     return pendant
 
 
