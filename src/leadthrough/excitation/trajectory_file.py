@@ -60,10 +60,10 @@ def _check_samples(path: Path, data: NDArray[np.float64]) -> None:
         raise DataError("wrong number of columns", source=path, field="columns",
                         value=data.shape[1], expected="time + 3·n columns (q, qd, qdd)")
     n = (data.shape[1] - 1) // 3
-    names = ["time"] + [f"{kind}{j + 1}" for kind in ("q", "qd", "qdd") for j in range(n)]
     bad = ~np.isfinite(data)
     if bad.any():
         row, col = (int(x) for x in np.argwhere(bad)[0])
+        names = ["time"] + [f"{kind}{j + 1}" for kind in ("q", "qd", "qdd") for j in range(n)]
         raise DataError(f"a value that is not finite in row {row + 1}", source=path,
                         field=names[col], value=float(data[row, col]),
                         expected="finite numbers")
