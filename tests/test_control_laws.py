@@ -17,6 +17,7 @@ from leadthrough.control.limits import (
 )
 from leadthrough.control.release import (
     RELEASE_DROP,
+    RELEASE_HOLD,
     RELEASE_SMOOTHING_S,
     RELEASE_WINDOW_S,
     release_step,
@@ -220,7 +221,8 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
     smooth, peak = np.zeros(6), np.zeros(6)
     rng = np.random.default_rng(3)
     noise = rng.uniform(-10.0, 10.0, size=(2000, 6))
-    step = partial(release_step, friction=friction, drop=RELEASE_DROP, alpha=alpha,
+    step = partial(release_step, friction=friction, drop=RELEASE_DROP, hold=RELEASE_HOLD,
+                   alpha=alpha,
                    forget=forget, smooth=smooth, peak=peak)
     assert not any(step(w, moving=False) for w in noise)
     smooth[:], peak[:] = 0.0, 0.0
@@ -243,6 +245,33 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
     np.testing.assert_array_equal(peak, smooth)
 
 
+def test_a_small_hold_that_swings_back_through_zero_is_a_release() -> None:
+    """At rest the estimate reads less than a hand holds (the gears' static friction carries
+    the rest), and after letting go it swings the other way: a hold read at 0.4 δ that falls
+    back by half of δ (so through zero) is a release; a smaller fall is not (an operator
+    easing off), nor a swing from a peak below RELEASE_HOLD·δ (the estimate's noise at rest),
+    nor a rise from zero (a new push)."""
+    alpha = DT / (RELEASE_SMOOTHING_S + DT)
+    forget = float(np.exp(-DT / RELEASE_WINDOW_S))
+    friction = np.full(6, 15.0)
+
+    def released(held: float, after: float) -> bool:
+        smooth, peak, w = np.zeros(6), np.zeros(6), np.zeros(6)
+        seen = False
+        for k in range(150):                 # 1 s steady, then 0.5 s after letting go
+            w[0] = held if k < 100 else after
+            seen = release_step(w, friction, RELEASE_DROP, RELEASE_HOLD, alpha, forget,
+                                smooth, peak, False) or seen
+        return seen
+
+    assert 0.0 < RELEASE_HOLD < RELEASE_DROP
+    assert released(-6.0, 8.0)               # 0.4 δ held, then 8 N the other way
+    assert released(6.0, -8.0)               # either sign
+    assert not released(-6.0, 4.0)           # the peak relaxes: back by less than δ/2
+    assert not released(-3.0, 8.0)           # 0.2 δ held (below RELEASE_HOLD): a new push
+    assert not released(0.0, 8.0)            # a push from zero
+
+
 def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:
     """At rest under a steady 49 N pull the estimate drifts by 10 N/s (the drives' static
     friction takes up load): the peak forgets it, so the stopping friction is not renewed
@@ -256,7 +285,7 @@ def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:
         count = 0
         for k in range(700):                  # 7 s
             w[1] = 49.0 - 10.0 * max(0.0, k * DT - 1.0)
-            count += release_step(w, friction, RELEASE_DROP, alpha, forget, smooth,
+            count += release_step(w, friction, RELEASE_DROP, RELEASE_HOLD, alpha, forget, smooth,
                                           peak, False)
         return count
 

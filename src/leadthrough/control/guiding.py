@@ -21,9 +21,10 @@ One cycle:
    friction (eq. 31–33, :mod:`~leadthrough.control.virtual_friction`) or the velocity baseline
    [14] (:mod:`~leadthrough.control.velocity_baseline`), with fixed friction or eq. 36
    (:mod:`~leadthrough.control.auto_friction`). At rest, for ``settle_s + rezero_s`` after a
-   stop or after a release (the force on an axis falling back from its peak by
-   :data:`RELEASE_DROP` × δ or more within about :data:`RELEASE_WINDOW_S`: the peak forgets
-   slow drifts), breaking away takes the stopping friction: the paper's
+   stop or after a release (:mod:`~leadthrough.control.release`: the force on an axis falling
+   back from a peak of at least ``RELEASE_HOLD`` × δ by ``RELEASE_DROP`` × δ or more within
+   about ``RELEASE_WINDOW_S``: the peak forgets slow drifts), breaking away takes the stopping
+   friction: the paper's
    "larger friction once the force is removed", applied while the drives settle or unload.
    At rest the law's threshold counts from the estimate's slow drift (at no more than
    δ/``drift_s``: the servo's integral loading the gears' static friction;

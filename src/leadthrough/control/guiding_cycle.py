@@ -187,7 +187,8 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
     at_rest = _is_zero(ctl.twist)
     # a release at rest restarts the release clock; while settling (at rest, within hold_s of
     # the last stop or release) breaking away takes the stopping friction
-    released = release_step(ctl.wrench, ctl.friction, ctl.release_drop, ctl.release_alpha,
+    released = release_step(ctl.wrench, ctl.friction, ctl.release_drop, ctl.release_hold,
+                            ctl.release_alpha,
                             ctl.release_forget, ctl.release_smooth, ctl.release_peak,
                             not at_rest)
     if released and at_rest:

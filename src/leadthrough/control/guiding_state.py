@@ -21,7 +21,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control.release import RELEASE_DROP, RELEASE_SMOOTHING_S, RELEASE_WINDOW_S
+from leadthrough.control.release import (
+    RELEASE_DROP,
+    RELEASE_HOLD,
+    RELEASE_SMOOTHING_S,
+    RELEASE_WINDOW_S,
+)
 from leadthrough.state_records import Fields
 
 if TYPE_CHECKING:
@@ -56,7 +61,8 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("velocity_alpha", f8),                  # 1 − e^(−dt/T) of the velocity law
         ("axis_mask", *six),                     # 1.0 for an enabled axis, 0.0 for a disabled
         ("hold_s", f8),                          # settle_s + rezero_s [s]
-        ("release_drop", f8), ("release_alpha", f8), ("release_forget", f8),   # release.py
+        ("release_drop", f8), ("release_hold", f8),                            # release.py
+        ("release_alpha", f8), ("release_forget", f8),
         ("hand_release", b1),                    # HandReleaseConfig.enabled
         ("hand_drop_fraction", f8), ("hand_lockout_s", f8), ("hand_window_s", f8),  # [-, s, s]
         ("hand_alpha", f8), ("hand_forget", f8), ("hand_rise_forget", f8),  # per cycle
@@ -122,6 +128,7 @@ def write_settings(s: Fields, cfg: GuidingConfig) -> None:
     s.drift_alpha_slow = cfg.dt / (RELEASE_WINDOW_S + cfg.dt)
     s.drift_decay = math.exp(-cfg.dt / cfg.drift_s) if cfg.drift_s > 0.0 else 0.0
     s.release_drop = RELEASE_DROP
+    s.release_hold = RELEASE_HOLD
     s.release_alpha = cfg.dt / (RELEASE_SMOOTHING_S + cfg.dt)
     s.release_forget = math.exp(-cfg.dt / RELEASE_WINDOW_S)
     hr = cfg.hand_release

@@ -7,9 +7,13 @@ while after every stop and every release, breaking away takes the stopping frict
 swings the other way, by up to twice the released force.
 
 A release is detected per axis on the estimated wrench (:func:`release_step`, compiled: Numba,
-``nopython``, cached on disk, run by the guiding cycle): the smoothed force falls back from its
-peak by :data:`RELEASE_DROP` × δ or more within about :data:`RELEASE_WINDOW_S` (the peak
-forgets slow drifts, so the estimate's slow drift under a steady hand is not a release).
+``nopython``, cached on disk, run by the guiding cycle): the smoothed force falls back from a
+peak of at least :data:`RELEASE_HOLD` × δ by :data:`RELEASE_DROP` × δ or more within about
+:data:`RELEASE_WINDOW_S` (the peak forgets slow drifts, so the estimate's slow drift under a
+steady hand is not a release). A hand's hold that the estimate read below
+:data:`RELEASE_DROP` × δ counts once the estimate swings past zero by the rest of that fall:
+at rest the estimate reads only part of a hold, and the swing after letting go follows the
+whole of it.
 """
 
 from __future__ import annotations
@@ -18,13 +22,21 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["RELEASE_DROP", "RELEASE_SMOOTHING_S", "RELEASE_WINDOW_S", "release_step"]
+__all__ = ["RELEASE_DROP", "RELEASE_HOLD", "RELEASE_SMOOTHING_S", "RELEASE_WINDOW_S",
+           "release_step"]
 
 Array = NDArray[np.float64]
 
 #: A release at rest: the (smoothed) force on an axis falls back from its peak by this fraction
 #: of that axis's friction δ or more.
 RELEASE_DROP = 0.5
+#: A release needs a peak of at least this fraction of δ before the fall of
+#: :data:`RELEASE_DROP` × δ; from a peak below that, the fall ends on the other side of zero. At
+#: rest the gears' static friction carries part of a hand's hold, so the estimate reads less
+#: than the hand pushes (on the simulated er20 a 23.5 N hold read 7 N), while the swing after
+#: letting go follows what the hand pushed (there: 17 N the other way within 1 s, which moved
+#: the tool by itself). Below this fraction a peak is the estimate's noise at rest.
+RELEASE_HOLD = 0.25
 #: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
 #: below δ must not look like a release).
 RELEASE_SMOOTHING_S = 0.05
@@ -36,18 +48,20 @@ RELEASE_WINDOW_S = 0.3
 
 
 @njit(cache=True, nogil=True)
-def release_step(wrench: Array, friction: Array, drop: float, alpha: float, forget: float,
-                 smooth: Array, peak: Array, moving: bool) -> bool:
-    """A release at rest: on some axis the smoothed w_i held a peak of at least ``drop``·δ_i
-    and fell back from it, toward zero or beyond, by ``drop``·δ_i or more (a smaller hold
-    needs no settling: the estimate's swing after letting go stays below δ). Letting go is
-    quick; the peak forgets slow changes (it relaxes toward w_i by the factor ``forget`` per
-    cycle), so that the estimate's slow drift at rest under a steady hand is not a release.
+def release_step(wrench: Array, friction: Array, drop: float, hold: float, alpha: float,
+                 forget: float, smooth: Array, peak: Array, moving: bool) -> bool:
+    """A release at rest: on some axis the smoothed w_i held a peak of at least ``hold``·δ_i
+    and fell back from it by ``drop``·δ_i or more (from a peak below ``drop``·δ_i, that fall
+    ends past zero: the estimate at rest reads less than the hand held,
+    :data:`RELEASE_HOLD`). Letting go is quick; the peak
+    forgets slow changes (it relaxes toward w_i by the factor ``forget`` per cycle), so that
+    the estimate's slow drift at rest under a steady hand is not a release.
 
     Args:
         wrench: Estimated wrench in the controller's frame, shape (6,).
         friction: δ per axis, shape (6,).
         drop: Fraction of δ that counts as a release.
+        hold: Fraction of δ the peak must reach, <= ``drop``.
         alpha: Weight of the new sample in the first-order smoothing, in (0, 1].
         forget: Per-cycle factor of the peak's relaxation, in [0, 1] (1: never forgets).
         smooth: Smoothed wrench, shape (6,); updated in place.
@@ -66,7 +80,7 @@ def release_step(wrench: Array, friction: Array, drop: float, alpha: float, forg
         p = w + (peak[i] - w) * forget
         back = p - w if p >= 0.0 else w - p      # how far w fell back from the peak
         level = drop * friction[i]
-        if back >= level and abs(p) >= level:
+        if back >= level and abs(p) >= hold * friction[i]:
             released = True
             peak[i] = w
         elif abs(w) > abs(p):
