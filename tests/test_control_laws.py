@@ -248,18 +248,20 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
 def test_a_small_hold_that_swings_back_through_zero_is_a_release() -> None:
     """At rest the estimate reads less than a hand holds (the gears' static friction carries
     the rest), and after letting go it swings the other way: a hold read at 0.4 δ that falls
-    back by half of δ (so through zero) is a release; a smaller fall is not (an operator
-    easing off), nor a swing from a peak below RELEASE_HOLD·δ (the estimate's noise at rest),
-    nor a rise from zero (a new push)."""
+    back by half of δ (so through zero) is a release while the force's magnitude stays under
+    δ/2 (the hand's force gone); a smaller fall is not (an operator easing off), nor a swing
+    from a peak below RELEASE_HOLD·δ (the estimate's noise at rest), nor a rise from zero, nor
+    a push against the small hold that adds force on another axis (a new push)."""
     alpha = DT / (RELEASE_SMOOTHING_S + DT)
     forget = float(np.exp(-DT / RELEASE_WINDOW_S))
     friction = np.full(6, 15.0)
 
-    def released(held: float, after: float) -> bool:
+    def released(held: float, after: float, other: float = 0.0) -> bool:
         smooth, peak, w = np.zeros(6), np.zeros(6), np.zeros(6)
         seen = False
         for k in range(150):                 # 1 s steady, then 0.5 s after letting go
             w[0] = held if k < 100 else after
+            w[2] = 0.0 if k < 100 else other
             seen = release_step(w, friction, RELEASE_DROP, RELEASE_HOLD, alpha, forget,
                                 smooth, peak, False) or seen
         return seen
@@ -270,6 +272,9 @@ def test_a_small_hold_that_swings_back_through_zero_is_a_release() -> None:
     assert not released(-6.0, 4.0)           # the peak relaxes: back by less than δ/2
     assert not released(-3.0, 8.0)           # 0.2 δ held (below RELEASE_HOLD): a new push
     assert not released(0.0, 8.0)            # a push from zero
+    # a push against a standing 6 N phantom adds force (here 16 N along z): no release
+    assert not released(-6.0, 8.0, other=-16.0)
+    assert released(-6.0, 8.0, other=-3.0)  # a letting go that leaves a small z phantom
 
 
 def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:

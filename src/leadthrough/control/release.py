@@ -18,6 +18,8 @@ whole of it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -31,11 +33,13 @@ Array = NDArray[np.float64]
 #: of that axis's friction δ or more.
 RELEASE_DROP = 0.5
 #: A release needs a peak of at least this fraction of δ before the fall of
-#: :data:`RELEASE_DROP` × δ; from a peak below that, the fall ends on the other side of zero. At
+#: :data:`RELEASE_DROP` × δ (from a peak under the fall, the fall ends past zero). At
 #: rest the gears' static friction carries part of a hand's hold, so the estimate reads less
 #: than the hand pushes (on the simulated er20 a 23.5 N hold read 7 N), while the swing after
 #: letting go follows what the hand pushed (there: 17 N the other way within 1 s, which moved
-#: the tool by itself). Below this fraction a peak is the estimate's noise at rest.
+#: the tool by itself). Below this fraction a peak is the estimate's noise at rest. The cost:
+#: a push at rest against a phantom that stands between this and :data:`RELEASE_DROP` × δ on
+#: an axis (the estimate after a stop) counts as a release too, and restarts the settling.
 RELEASE_HOLD = 0.25
 #: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
 #: below δ must not look like a release).
@@ -50,15 +54,17 @@ RELEASE_WINDOW_S = 0.3
 @njit(cache=True, nogil=True)
 def release_step(wrench: Array, friction: Array, drop: float, hold: float, alpha: float,
                  forget: float, smooth: Array, peak: Array, moving: bool) -> bool:
-    """A release at rest: on some axis the smoothed w_i held a peak of at least ``hold``·δ_i
-    and fell back from it by ``drop``·δ_i or more (from a peak below ``drop``·δ_i, that fall
-    ends past zero: the estimate at rest reads less than the hand held,
-    :data:`RELEASE_HOLD`). Letting go is quick; the peak
+    """A release at rest: on some axis the smoothed w_i held a peak of at least ``drop``·δ_i
+    and fell back from it by ``drop``·δ_i or more; or it held at least ``hold``·δ_i, fell
+    back by ``drop``·δ_i (so past zero) and its part's (force or torque) smoothed magnitude
+    is under ``drop``·δ_i (:data:`RELEASE_HOLD`: the estimate at rest reads less than the
+    hand held; a letting go leaves little force at first, where a push against a standing
+    phantom adds force). Letting go is quick; the peak
     forgets slow changes (it relaxes toward w_i by the factor ``forget`` per cycle), so that
     the estimate's slow drift at rest under a steady hand is not a release.
 
     Args:
-        wrench: Estimated wrench in the controller's frame, shape (6,).
+        wrench: Estimated wrench in the controller's frame, force first, shape (6,).
         friction: δ per axis, shape (6,).
         drop: Fraction of δ that counts as a release.
         hold: Fraction of δ the peak must reach, <= ``drop``.
@@ -74,13 +80,17 @@ def release_step(wrench: Array, friction: Array, drop: float, hold: float, alpha
         Whether some axis was released this cycle.
     """
     released = False
-    for i in range(wrench.size):
+    for i in range(6):
         smooth[i] += alpha * (wrench[i] - smooth[i])
+    for i in range(6):
         w = smooth[i]
         p = w + (peak[i] - w) * forget
         back = p - w if p >= 0.0 else w - p      # how far w fell back from the peak
         level = drop * friction[i]
-        if back >= level and abs(p) >= hold * friction[i]:
+        first = i - i % 3                        # the part's (force or torque) first axis
+        part = math.sqrt(smooth[first] ** 2 + smooth[first + 1] ** 2 + smooth[first + 2] ** 2)
+        held = abs(p) >= level or (abs(p) >= hold * friction[i] and part < level)
+        if back >= level and held:
             released = True
             peak[i] = w
         elif abs(w) > abs(p):
