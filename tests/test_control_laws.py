@@ -222,8 +222,7 @@ def test_release_is_a_fall_back_from_the_peak_not_noise() -> None:
     rng = np.random.default_rng(3)
     noise = rng.uniform(-10.0, 10.0, size=(2000, 6))
     step = partial(release_step, friction=friction, drop=RELEASE_DROP, hold=RELEASE_HOLD,
-                   alpha=alpha,
-                   forget=forget, smooth=smooth, peak=peak)
+                   alpha=alpha, forget=forget, smooth=smooth, peak=peak)
     assert not any(step(w, moving=False) for w in noise)
     smooth[:], peak[:] = 0.0, 0.0
     w = np.zeros(6)
@@ -290,8 +289,8 @@ def test_a_slow_drift_under_a_steady_hand_is_not_a_release() -> None:
         count = 0
         for k in range(700):                  # 7 s
             w[1] = 49.0 - 10.0 * max(0.0, k * DT - 1.0)
-            count += release_step(w, friction, RELEASE_DROP, RELEASE_HOLD, alpha, forget, smooth,
-                                          peak, False)
+            count += release_step(w, friction, RELEASE_DROP, RELEASE_HOLD, alpha, forget,
+                                  smooth, peak, False)
         return count
 
     assert releases(float(np.exp(-DT / RELEASE_WINDOW_S))) == 0

@@ -188,9 +188,8 @@ def _guide(ctl: Record, ik: Record, sup: Record, events: Events, t: float,
     # a release at rest restarts the release clock; while settling (at rest, within hold_s of
     # the last stop or release) breaking away takes the stopping friction
     released = release_step(ctl.wrench, ctl.friction, ctl.release_drop, ctl.release_hold,
-                            ctl.release_alpha,
-                            ctl.release_forget, ctl.release_smooth, ctl.release_peak,
-                            not at_rest)
+                            ctl.release_alpha, ctl.release_forget, ctl.release_smooth,
+                            ctl.release_peak, not at_rest)
     if released and at_rest:
         ctl.release_s = 0.0
     if ctl.hand_release:

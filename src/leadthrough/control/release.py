@@ -11,9 +11,10 @@ A release is detected per axis on the estimated wrench (:func:`release_step`, co
 peak of at least :data:`RELEASE_HOLD` × δ by :data:`RELEASE_DROP` × δ or more within about
 :data:`RELEASE_WINDOW_S` (the peak forgets slow drifts, so the estimate's slow drift under a
 steady hand is not a release). A hand's hold that the estimate read below
-:data:`RELEASE_DROP` × δ counts once the estimate swings past zero by the rest of that fall:
-at rest the estimate reads only part of a hold, and the swing after letting go follows the
-whole of it.
+:data:`RELEASE_DROP` × δ counts once the estimate swings past zero by the rest of that fall
+while the force (or torque) stays small: at rest the estimate reads only part of a hold, the
+swing after letting go follows the whole of it, and a push adds force where a letting go
+leaves little.
 """
 
 from __future__ import annotations
@@ -37,9 +38,11 @@ RELEASE_DROP = 0.5
 #: rest the gears' static friction carries part of a hand's hold, so the estimate reads less
 #: than the hand pushes (on the simulated er20 a 23.5 N hold read 7 N), while the swing after
 #: letting go follows what the hand pushed (there: 17 N the other way within 1 s, which moved
-#: the tool by itself). Below this fraction a peak is the estimate's noise at rest. The cost:
-#: a push at rest against a phantom that stands between this and :data:`RELEASE_DROP` × δ on
-#: an axis (the estimate after a stop) counts as a release too, and restarts the settling.
+#: the tool by itself). Below this fraction a peak is the estimate's noise at rest. Such a
+#: fall counts only while the part's (force or torque) magnitude is under
+#: :data:`RELEASE_DROP` × δ: a push against a standing phantom adds force. The cost: a push
+#: along the phantom's own axis, against it, counts until it has added that much, and restarts
+#: the settling.
 RELEASE_HOLD = 0.25
 #: Time constant of the first-order smoothing of the force for the release [s] (estimator noise
 #: below δ must not look like a release).
@@ -82,13 +85,14 @@ def release_step(wrench: Array, friction: Array, drop: float, hold: float, alpha
     released = False
     for i in range(6):
         smooth[i] += alpha * (wrench[i] - smooth[i])
+    force = math.sqrt(smooth[0] ** 2 + smooth[1] ** 2 + smooth[2] ** 2)
+    torque = math.sqrt(smooth[3] ** 2 + smooth[4] ** 2 + smooth[5] ** 2)
     for i in range(6):
         w = smooth[i]
         p = w + (peak[i] - w) * forget
         back = p - w if p >= 0.0 else w - p      # how far w fell back from the peak
         level = drop * friction[i]
-        first = i - i % 3                        # the part's (force or torque) first axis
-        part = math.sqrt(smooth[first] ** 2 + smooth[first + 1] ** 2 + smooth[first + 2] ** 2)
+        part = force if i < 3 else torque        # the axis's part's smoothed magnitude
         held = abs(p) >= level or (abs(p) >= hold * friction[i] and part < level)
         if back >= level and held:
             released = True
