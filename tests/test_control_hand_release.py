@@ -16,6 +16,8 @@ from leadthrough.control import (
     HandReleaseConfig,
     VirtualFrictionConfig,
 )
+from leadthrough.control.hand_release import hand_activity
+from leadthrough.control.release import RELEASE_DROP, RELEASE_WINDOW_S
 from leadthrough.errors import ControlError
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot import Robot
@@ -151,6 +153,73 @@ def test_a_hold_at_rest_let_go_stays_put_while_the_estimate_swings(er20: Robot) 
     assert np.all(tr.twist_base == 0.0) and np.all(tr.fault == Fault.NONE)
     paper = run(GuidingController(er20, _config(False)), Q_WORK, w, interpolate=False)
     assert paper.twist_base[-1, 0] < 0.0
+
+
+def _estimate(k_n: int, steps: list[tuple[int, tuple[float, float, float]]]) -> np.ndarray:
+    """The force estimate of ``k_n`` cycles: from each (cycle, force) on, toward that force at
+    the estimator's pace (its 3 Hz low-pass), from where the one before had got to."""
+    w = np.zeros((k_n, 6))
+    now = np.zeros(3)
+    for (start, force), (stop, _) in zip(steps, [*steps[1:], (k_n, (0.0, 0.0, 0.0))],
+                                         strict=True):
+        t = np.arange(stop - start)[:, None] * DT
+        target = np.array(force)
+        w[start:stop, :3] = target + (now - target) * np.exp(-t / TAU)
+        now = w[stop - 1, :3]
+    return w
+
+
+def test_hand_activity_is_a_quick_change_in_any_direction_not_a_drift() -> None:
+    """A grip or a letting go, a step of 20 N (4/3 δ) at the estimator's pace, is activity
+    whichever its direction and sign, also where it lowers the magnitude (a grip against a
+    standing phantom); the drives' drift at rest (10 N/s, rest_drift.py) and a step of a third
+    of δ are not; the torque part is measured against the torque's δ."""
+    forget = float(np.exp(-DT / RELEASE_WINDOW_S))
+    alpha = HandReleaseConfig().alpha(DT)
+    friction = np.array([15.0, 15.0, 15.0, 3.0, 3.0, 3.0])
+
+    def active(start: np.ndarray, change: np.ndarray, ramp: bool = False) -> bool:
+        smooth, reference = start.copy(), start.copy()
+        seen = False
+        for k in range(300):
+            t = k * DT
+            w = start + (change * t if ramp else change * (1.0 - np.exp(-t / TAU)))
+            smooth += alpha * (w - smooth)
+            seen = hand_activity(smooth, friction, RELEASE_DROP, forget, reference) or seen
+        return seen
+
+    phantom = np.array([20.0, 0.0, -20.0, 0.0, 0.0, 0.0])
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            step = np.zeros(6)
+            step[axis] = 20.0 * sign
+            assert active(phantom, step)
+    assert active(phantom, np.array([-18.0, 0.0, -5.0, 0.0, 0.0, 0.0]))   # magnitude falls
+    assert not active(phantom, np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert not active(phantom, np.array([0.0, 10.0, 0.0, 0.0, 0.0, 0.0]), ramp=True)
+    assert active(np.zeros(6), np.array([0.0, 0.0, 0.0, 0.0, 4.0, 0.0]))  # 4 N·m > 3/2
+    assert not active(np.zeros(6), np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0]))
+
+
+def test_a_hold_taken_in_during_the_stop_does_not_resume_at_its_letting_go(
+        er20: Robot) -> None:
+    """During the stop after a letting go the estimate swings to a 28 N phantom; a hand grips
+    against it (the estimate falls to a 25 N hold: no fresh rise, and x's fall is taken for a
+    release at rest, which restarts the settling), holds 2.5 s, and lets go (x back to the
+    phantom's level). Read against the hold as the settled level, that letting go is a rise
+    of 18 N (> δ) with no hand on the tool: the hand's activity keeps the level from settling
+    until the estimate is quiet again, so the tool stays put. A grip that adds 40 N then moves
+    it, as before."""
+    k_n, grip, letting_go, new_grip = 1100, 200, 450, 950
+    w = _estimate(k_n, [(0, (40.0, 0.0, 0.0)), (50, (12.0, 0.0, -10.0)),
+                        (120, (20.0, 0.0, -20.0)), (grip, (2.0, 0.0, -25.0)),
+                        (letting_go, (20.0, 0.0, -14.0)), (new_grip, (60.0, 0.0, -14.0))])
+    tr = run(GuidingController(er20, _config(settle_s=1.5)), _q0(er20), w, interpolate=False)
+    vx = tr.twist_base[:, 0]
+    stopped = 50 + int(np.argmax(vx[50:] == 0.0))
+    assert vx[49] > 0.0 and stopped < grip and np.all(tr.fault == Fault.NONE)
+    assert np.all(tr.twist_base[stopped:new_grip] == 0.0)
+    assert np.any(vx[new_grip:] > 0.0)
 
 
 def _friction_scaled(er20: Robot, scale: float) -> ParamsFile:

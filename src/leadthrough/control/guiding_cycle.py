@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from leadthrough.control import safety_rules as rules
 from leadthrough.control.guiding_state import Law
 from leadthrough.control.guiding_types import GuidingStatus
-from leadthrough.control.hand_release import fresh_rise, let_go_step
+from leadthrough.control.hand_release import fresh_rise, hand_activity, let_go_step
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
 from leadthrough.control.release import release_step
@@ -234,9 +234,11 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     """The hand's state (:mod:`leadthrough.control.hand_release`): a letting go, in motion or
     at rest (``release.py``'s), starts the stop (``hand_released``, ``hand_release_s`` = 0;
     ``release_s`` = 0: the settling after a release). Only a fresh rise after the lockout
-    ends it: a quick one, or once the drives have settled (``hold_s``) a rise of δ over the
-    level the estimate settled to, which follows the drives' drift at rest
-    (:mod:`leadthrough.control.rest_drift`: the baseline restarts from the estimate then)."""
+    ends it: a quick one, or once the drives have settled (``hold_s`` after the letting go) a
+    rise of δ over the level the estimate settled to, which follows the drives' drift at rest
+    (:mod:`leadthrough.control.rest_drift`: the baseline restarts from the estimate then).
+    Hand activity (a grip or a letting go) after that level was taken clears it, and it is
+    taken again ``hold_s`` after the last activity."""
     let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
                          ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
                          ctl.hand_peak, ctl.hand_peak_age)
@@ -246,14 +248,20 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.hand_peak_age[:] = 0.0
     if (let_go and not at_rest) or released_at_rest:
         ctl.hand_released = True
-        ctl.hand_settled = False
-        ctl.hand_release_s = 0.0
+        ctl.hand_settled = ctl.hand_level_taken = False
+        ctl.hand_release_s = ctl.hand_settle_s = 0.0
         ctl.release_s = 0.0
+    # a hand that grips or lets go once the level was taken: it may have taken up a hold, so
+    # the level is taken again once the estimate has been quiet for hold_s
+    if (hand_activity(ctl.hand_smooth, ctl.friction, ctl.release_drop, ctl.release_forget,
+                      ctl.hand_activity_reference) and ctl.hand_level_taken):
+        ctl.hand_settled = False
+        ctl.hand_settle_s = 0.0
     # a quick rise is a grip; once the drives have settled, so is a rise of δ over the level
     # the estimate settled to, followed at the drives' drift rate (the law's rest input)
     if (ctl.hand_released and not ctl.hand_settled and at_rest
-            and ctl.hand_release_s >= ctl.hold_s):
-        ctl.hand_settled = True
+            and ctl.hand_settle_s >= ctl.hold_s):
+        ctl.hand_settled = ctl.hand_level_taken = True
         for i in range(6):
             ctl.rest_baseline[i] = ctl.drift_fast[i]
             ctl.rest_wrench[i] = ctl.wrench[i] - ctl.drift_fast[i]
@@ -264,6 +272,7 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     if ctl.hand_released and ctl.hand_release_s >= ctl.hand_lockout_s and rose:
         ctl.hand_released = False
     ctl.hand_release_s += ctl.dt
+    ctl.hand_settle_s += ctl.dt
 
 
 @njit(cache=True, nogil=True)

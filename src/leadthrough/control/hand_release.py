@@ -29,10 +29,22 @@ So the guiding cycle watches the estimate itself, not only its level:
   the time constant ``rise_window_s`` (a hand that grips again: a step, passed at the
   estimator filter's pace; the drives unloading after a release swing the estimate the other
   way, by up to twice the released force, but over about a second, too slowly to count).
-  Nothing else resumes it, not a level however high: on the simulated er20 the swing after
+  A level alone does not resume it, however high: on the simulated er20 the swing after
   letting go of a 37 N hold at rest reached 54 N (above δ_s) 1.7 s later. A letting go at
   rest (a hand that held the tool still, :mod:`leadthrough.control.release`) holds the tool
-  the same way.
+  the same way;
+* **the settled level**: once the drives have settled (``GuidingConfig.settle_s`` after the
+  letting go) the estimate's level is taken as the drives' own
+  (:mod:`leadthrough.control.rest_drift` follows its slow drift from there), and a rise of δ
+  over it on some axis resumes guiding too (a hand that leans in slowly). A hand may already
+  hold the tool then: its grip is no fresh rise where it pushes against a standing phantom
+  (the magnitude falls), and a level that took up its hold reads its letting go, the
+  estimate's return to the phantom, as a rise of δ with no hand on the tool (issue 24: the
+  late restarts of the run-on benchmark). So **hand activity** after the level was taken
+  (:func:`hand_activity`: a change of δ/2 within about 0.3 s in any direction, a grip or a
+  letting go) clears the level, and it is taken again ``settle_s`` after the last activity.
+  A quick lean is then a fresh rise or nothing; a slow one (slower than the activity's
+  ~30 N/s) still counts over the level.
 
 After guiding resumes, the law is the paper's again, with the settling after a stop or a
 release (``GuidingConfig.settle_s``: eq. 33's δ_s at rest).
@@ -52,7 +64,7 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import ControlError, check_fields
 
-__all__ = ["HandReleaseConfig", "fresh_rise", "let_go_step", "part_level"]
+__all__ = ["HandReleaseConfig", "fresh_rise", "hand_activity", "let_go_step", "part_level"]
 
 Array = NDArray[np.float64]
 
@@ -201,3 +213,39 @@ def fresh_rise(smooth: Array, friction: Array, forget: float, reference: Array) 
             else:
                 reference[k] = smooth[k] + (reference[k] - smooth[k]) * forget
     return rose
+
+
+@njit(cache=True, nogil=True)
+def hand_activity(smooth: Array, friction: Array, band: float, forget: float,
+                  reference: Array) -> bool:
+    """Whether a hand gripped or let go, whichever: on some part the smoothed wrench moved
+    away from a lagging reference by ``band``·δ (the part's largest) or more, in any
+    direction. The reference relaxes toward the smoothed wrench by ``forget`` per cycle, so a
+    step of S (a grip or a letting go, passed by the estimator's 3 Hz filter) leaves a gap of
+    about half of S, and a ramp of rate ρ a gap of ρ times the reference's lag.
+
+    The stop after a letting go takes the level the estimate settles to as the drives' own
+    (``guiding_cycle._hand_release``); a hand that gripped against a standing phantom is no
+    :func:`fresh_rise` (the magnitude falls), and if that level took up its hold, its letting go
+    would read as a rise over it. Hand activity after the level was taken clears it until the
+    estimate has been quiet again.
+
+    Args:
+        smooth: Smoothed wrench (:func:`let_go_step`'s) [N, N·m], shape (6,).
+        friction: δ per axis [N, N·m], shape (6,).
+        band: Fraction of δ that counts as a hand's change, > 0.
+        forget: Per-cycle relaxation factor of the reference, in [0, 1].
+        reference: The reference, shape (6,); updated in place.
+
+    Returns:
+        Whether some part moved by ``band``·δ or more from its reference this cycle.
+    """
+    active = False
+    for part in range(2):
+        i = 3 * part
+        d2 = 0.0
+        for k in range(i, i + 3):
+            reference[k] = smooth[k] + (reference[k] - smooth[k]) * forget
+            d2 += (smooth[k] - reference[k]) * (smooth[k] - reference[k])
+        active = active or math.sqrt(d2) >= band * part_level(friction, part)
+    return active
