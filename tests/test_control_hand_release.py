@@ -169,36 +169,40 @@ def _estimate(k_n: int, steps: list[tuple[int, tuple[float, float, float]]]) -> 
     return w
 
 
-def test_hand_activity_is_a_quick_change_in_any_direction_not_a_drift() -> None:
-    """A grip or a letting go, a step of 20 N (4/3 δ) at the estimator's pace, is activity
-    whichever its direction and sign, also where it lowers the magnitude (a grip against a
-    standing phantom); the drives' drift at rest (10 N/s, rest_drift.py) and a step of a third
-    of δ are not; the torque part is measured against the torque's δ."""
+def test_hand_activity_is_a_quick_fall_back_against_the_level() -> None:
+    """Against a level that took up a hold, a letting go (a step of 20 N, 4/3 δ, at the
+    estimator's pace, back against the level, on any axis where the level has a component)
+    is activity, also where the magnitude rises (the estimate swings past zero); a change
+    along the level (a lean, the drives' ramp), a slow drift back (10 N/s, rest_drift.py) and
+    a step of a third of δ are not; the torque part is measured against the torque's δ."""
     forget = float(np.exp(-DT / RELEASE_WINDOW_S))
     alpha = HandReleaseConfig().alpha(DT)
     friction = np.array([15.0, 15.0, 15.0, 3.0, 3.0, 3.0])
 
-    def active(start: np.ndarray, change: np.ndarray, ramp: bool = False) -> bool:
-        smooth, reference = start.copy(), start.copy()
+    def active(level: np.ndarray, change: np.ndarray, ramp: bool = False) -> bool:
+        smooth, reference = level.copy(), level.copy()
         seen = False
         for k in range(300):
             t = k * DT
-            w = start + (change * t if ramp else change * (1.0 - np.exp(-t / TAU)))
+            w = level + (change * t if ramp else change * (1.0 - np.exp(-t / TAU)))
             smooth += alpha * (w - smooth)
-            seen = hand_activity(smooth, friction, RELEASE_DROP, forget, reference) or seen
+            seen = hand_activity(smooth, friction, RELEASE_DROP, forget, level,
+                                 reference) or seen
         return seen
 
-    phantom = np.array([20.0, 0.0, -20.0, 0.0, 0.0, 0.0])
-    for axis in range(3):
-        for sign in (1.0, -1.0):
-            step = np.zeros(6)
-            step[axis] = 20.0 * sign
-            assert active(phantom, step)
-    assert active(phantom, np.array([-18.0, 0.0, -5.0, 0.0, 0.0, 0.0]))   # magnitude falls
-    assert not active(phantom, np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
-    assert not active(phantom, np.array([0.0, 10.0, 0.0, 0.0, 0.0, 0.0]), ramp=True)
-    assert active(np.zeros(6), np.array([0.0, 0.0, 0.0, 0.0, 4.0, 0.0]))  # 4 N·m > 3/2
-    assert not active(np.zeros(6), np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0]))
+    hold = np.array([-6.0, 5.0, -16.0, 0.0, 0.0, 0.0])     # a hold the level took up
+    assert active(hold, np.array([22.0, -7.0, 7.0, 0.0, 0.0, 0.0]))  # |w| 17.8 -> 18.7 N
+    for axis, sign in ((0, 1.0), (1, -1.0), (2, 1.0)):
+        step = np.zeros(6)
+        step[axis] = 20.0 * sign
+        assert active(hold, step)
+        assert not active(hold, -step)               # along the level: a lean
+    assert not active(hold, np.array([0.0, 0.0, 5.0, 0.0, 0.0, 0.0]))
+    assert not active(hold, np.array([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), ramp=True)
+    assert not active(hold, np.array([0.0, 0.0, -60.0, 0.0, 0.0, 0.0]), ramp=True)
+    twist = np.array([0.0, 0.0, 0.0, 0.0, 2.0, 0.0])
+    assert active(twist, np.array([0.0, 0.0, 0.0, 0.0, -4.0, 0.0]))  # 4 N·m > 3/2
+    assert not active(twist, np.array([0.0, 0.0, 0.0, 0.0, -1.0, 0.0]))
 
 
 def test_a_hold_taken_in_during_the_stop_does_not_resume_at_its_letting_go(
@@ -207,9 +211,9 @@ def test_a_hold_taken_in_during_the_stop_does_not_resume_at_its_letting_go(
     against it (the estimate falls to a 25 N hold: no fresh rise, and x's fall is taken for a
     release at rest, which restarts the settling), holds 2.5 s, and lets go (x back to the
     phantom's level). Read against the hold as the settled level, that letting go is a rise
-    of 18 N (> δ) with no hand on the tool: the hand's activity keeps the level from settling
-    until the estimate is quiet again, so the tool stays put. A grip that adds 40 N then moves
-    it, as before."""
+    of 18 N (> δ) with no hand on the tool: the fall back against the level clears it until
+    the estimate is quiet again, so the tool stays put. A grip that adds 40 N then moves it,
+    as before."""
     k_n, grip, letting_go, new_grip = 1100, 200, 450, 950
     w = _estimate(k_n, [(0, (40.0, 0.0, 0.0)), (50, (12.0, 0.0, -10.0)),
                         (120, (20.0, 0.0, -20.0)), (grip, (2.0, 0.0, -25.0)),
@@ -220,6 +224,24 @@ def test_a_hold_taken_in_during_the_stop_does_not_resume_at_its_letting_go(
     assert vx[49] > 0.0 and stopped < grip and np.all(tr.fault == Fault.NONE)
     assert np.all(tr.twist_base[stopped:new_grip] == 0.0)
     assert np.any(vx[new_grip:] > 0.0)
+
+
+def test_a_lean_along_the_settled_level_resumes_as_before(er20: Robot) -> None:
+    """The same hold taken up as the settled level, then the hand leans on along it at 50 N/s
+    to 65 N (a seam's operator whose target moved on): a rise of δ over the level within about 0.3 s
+    resumes guiding, toward the lean. Only a fall back against the level clears it; a rule
+    that cleared it on any quick change would leave leans of 30–100 N/s to nothing (too slow
+    for a fresh rise)."""
+    k_n, grip, lean = 800, 200, 450
+    w = _estimate(k_n, [(0, (40.0, 0.0, 0.0)), (50, (12.0, 0.0, -10.0)),
+                        (120, (20.0, 0.0, -20.0)), (grip, (2.0, 0.0, -25.0))])
+    w[lean:, 2] -= np.minimum(50.0 * np.arange(k_n - lean) * DT, 40.0)   # to 65 N
+    tr = run(GuidingController(er20, _config(settle_s=1.5)), _q0(er20), w, interpolate=False)
+    stopped = 50 + int(np.argmax(tr.twist_base[50:, 0] == 0.0))
+    assert stopped < grip and np.all(tr.fault == Fault.NONE)
+    assert np.all(tr.twist_base[stopped:lean] == 0.0)
+    moved = lean + int(np.argmax(tr.twist_base[lean:, 2] < 0.0))
+    assert tr.twist_base[moved, 2] < 0.0 and (moved - lean) * DT <= 0.45
 
 
 def _friction_scaled(er20: Robot, scale: float) -> ParamsFile:

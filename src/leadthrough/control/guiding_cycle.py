@@ -237,8 +237,8 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     ends it: a quick one, or once the drives have settled (``hold_s`` after the letting go) a
     rise of δ over the level the estimate settled to, which follows the drives' drift at rest
     (:mod:`leadthrough.control.rest_drift`: the baseline restarts from the estimate then).
-    Hand activity (a grip or a letting go) after that level was taken clears it, and it is
-    taken again ``hold_s`` after the last activity."""
+    A letting go of a hold that level took up (``hand_release.hand_activity``) clears it, and
+    it is taken again ``hold_s`` after the last such fall."""
     let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
                          ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
                          ctl.hand_peak, ctl.hand_peak_age)
@@ -251,10 +251,11 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.hand_settled = ctl.hand_level_taken = False
         ctl.hand_release_s = ctl.hand_settle_s = 0.0
         ctl.release_s = 0.0
-    # a hand that grips or lets go once the level was taken: it may have taken up a hold, so
-    # the level is taken again once the estimate has been quiet for hold_s
+    # a letting go of a hold the level took up (a quick fall back against it): the level is
+    # taken again once the estimate has been quiet for hold_s
     if (hand_activity(ctl.hand_smooth, ctl.friction, ctl.release_drop, ctl.release_forget,
-                      ctl.hand_activity_reference) and ctl.hand_level_taken):
+                      ctl.rest_baseline, ctl.hand_activity_reference)
+            and ctl.hand_level_taken):
         ctl.hand_settled = False
         ctl.hand_settle_s = 0.0
     # a quick rise is a grip; once the drives have settled, so is a rise of δ over the level

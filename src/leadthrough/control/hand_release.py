@@ -40,11 +40,14 @@ So the guiding cycle watches the estimate itself, not only its level:
   hold the tool then: its grip is no fresh rise where it pushes against a standing phantom
   (the magnitude falls), and a level that took up its hold reads its letting go, the
   estimate's return to the phantom, as a rise of δ with no hand on the tool (issue 24: the
-  late restarts of the run-on benchmark). So **hand activity** after the level was taken
-  (:func:`hand_activity`: a change of δ/2 within about 0.3 s in any direction, a grip or a
-  letting go) clears the level, and it is taken again ``settle_s`` after the last activity.
-  A quick lean is then a fresh rise or nothing; a slow one (slower than the activity's
-  ~30 N/s) still counts over the level.
+  late restarts of the run-on benchmark). So a **letting go of a hold the level took up**
+  (:func:`hand_activity`: a change of δ/2 within about 0.3 s back against the level, toward
+  zero and beyond) clears the level, and it is taken again ``settle_s`` after the last such
+  change. A change along the level is not one: a hand that leans on harder, or the drives'
+  ramp at rest, still counts as a rise over it (the ramp is what restarts the stop with no
+  hand on the tool in the rest of the run-on benchmark's late releases; with a hand on it, as
+  on the seam, it is what resumes guiding there, and no rule on the estimate tells the two
+  apart: README, Limitations).
 
 After guiding resumes, the law is the paper's again, with the settling after a stop or a
 release (``GuidingConfig.settle_s``: eq. 33's δ_s at rest).
@@ -216,36 +219,40 @@ def fresh_rise(smooth: Array, friction: Array, forget: float, reference: Array) 
 
 
 @njit(cache=True, nogil=True)
-def hand_activity(smooth: Array, friction: Array, band: float, forget: float,
+def hand_activity(smooth: Array, friction: Array, band: float, forget: float, level: Array,
                   reference: Array) -> bool:
-    """Whether a hand gripped or let go, whichever: on some part the smoothed wrench moved
-    away from a lagging reference by ``band``·δ (the part's largest) or more, in any
-    direction. The reference relaxes toward the smoothed wrench by ``forget`` per cycle, so a
-    step of S (a grip or a letting go, passed by the estimator's 3 Hz filter) leaves a gap of
-    about half of S, and a ramp of rate ρ a gap of ρ times the reference's lag.
+    """Whether a hand let go of a hold that ``level`` took up: on some part the smoothed wrench
+    moved away from a lagging reference by ``band``·δ (the part's largest) or more, back
+    against the level's direction (the change's dot product with the level is negative: the
+    estimate leaves the hold toward zero and beyond). The reference relaxes toward the
+    smoothed wrench by ``forget`` per cycle, so a step of S (a letting go, passed by the
+    estimator's 3 Hz filter) leaves a gap of about half of S, and a ramp of rate ρ a gap of ρ
+    times the reference's lag.
 
     The stop after a letting go takes the level the estimate settles to as the drives' own
     (``guiding_cycle._hand_release``); a hand that gripped against a standing phantom is no
     :func:`fresh_rise` (the magnitude falls), and if that level took up its hold, its letting go
-    would read as a rise over it. Hand activity after the level was taken clears it until the
-    estimate has been quiet again.
+    would read as a rise over it. A change along the level (a hand that leans on harder, or
+    the drives' ramp at rest) is not counted: it is what the rise over the level is for.
 
     Args:
         smooth: Smoothed wrench (:func:`let_go_step`'s) [N, N·m], shape (6,).
         friction: δ per axis [N, N·m], shape (6,).
         band: Fraction of δ that counts as a hand's change, > 0.
         forget: Per-cycle relaxation factor of the reference, in [0, 1].
+        level: The level the estimate settled to [N, N·m], shape (6,).
         reference: The reference, shape (6,); updated in place.
 
     Returns:
-        Whether some part moved by ``band``·δ or more from its reference this cycle.
+        Whether some part moved back against the level by ``band``·δ or more this cycle.
     """
     active = False
     for part in range(2):
         i = 3 * part
-        d2 = 0.0
+        d2 = along = 0.0
         for k in range(i, i + 3):
             reference[k] = smooth[k] + (reference[k] - smooth[k]) * forget
             d2 += (smooth[k] - reference[k]) * (smooth[k] - reference[k])
-        active = active or math.sqrt(d2) >= band * part_level(friction, part)
+            along += (smooth[k] - reference[k]) * level[k]
+        active = active or (along < 0.0 and math.sqrt(d2) >= band * part_level(friction, part))
     return active
