@@ -16,7 +16,7 @@ from leadthrough.control import (
     HandReleaseConfig,
     VirtualFrictionConfig,
 )
-from leadthrough.control.hand_release import hand_activity
+from leadthrough.control.hand_release import level_let_go
 from leadthrough.control.release import RELEASE_DROP, RELEASE_WINDOW_S
 from leadthrough.errors import ControlError
 from leadthrough.identification.params_file import ParamsFile
@@ -169,7 +169,7 @@ def _estimate(k_n: int, steps: list[tuple[int, tuple[float, float, float]]]) -> 
     return w
 
 
-def test_hand_activity_is_a_quick_fall_back_against_the_level() -> None:
+def test_a_let_go_of_the_level_is_a_quick_fall_back_against_it() -> None:
     """Against a level that took up a hold, a letting go (a step of 20 N, 4/3 δ, at the
     estimator's pace, back against the level, on any axis where the level has a component)
     is activity, also where the magnitude rises (the estimate swings past zero); a change
@@ -186,8 +186,8 @@ def test_hand_activity_is_a_quick_fall_back_against_the_level() -> None:
             t = k * DT
             w = level + (change * t if ramp else change * (1.0 - np.exp(-t / TAU)))
             smooth += alpha * (w - smooth)
-            seen = hand_activity(smooth, friction, RELEASE_DROP, forget, level,
-                                 reference) or seen
+            seen = level_let_go(smooth, friction, RELEASE_DROP, forget, level,
+                                reference) or seen
         return seen
 
     hold = np.array([-6.0, 5.0, -16.0, 0.0, 0.0, 0.0])     # a hold the level took up

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from leadthrough.control import safety_rules as rules
 from leadthrough.control.guiding_state import Law
 from leadthrough.control.guiding_types import GuidingStatus
-from leadthrough.control.hand_release import fresh_rise, hand_activity, let_go_step
+from leadthrough.control.hand_release import fresh_rise, let_go_step, level_let_go
 from leadthrough.control.ik_step import ik_step, joint_stop_cycles, update_manipulability
 from leadthrough.control.limits import decelerate_twist, limit_twist, twist_stop_cycles
 from leadthrough.control.release import release_step
@@ -237,7 +237,7 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
     ends it: a quick one, or once the drives have settled (``hold_s`` after the letting go) a
     rise of δ over the level the estimate settled to, which follows the drives' drift at rest
     (:mod:`leadthrough.control.rest_drift`: the baseline restarts from the estimate then).
-    A letting go of a hold that level took up (``hand_release.hand_activity``) clears it, and
+    A letting go of a hold that level took up (``hand_release.level_let_go``) clears it, and
     it is taken again ``hold_s`` after the last such fall."""
     let_go = let_go_step(ctl.wrench, ctl.friction, ctl.hand_alpha, ctl.dt, ctl.hand_window_s,
                          ctl.hand_forget, ctl.hand_drop_fraction, ctl.hand_smooth,
@@ -253,8 +253,8 @@ def _hand_release(ctl: Record, at_rest: bool, released_at_rest: bool) -> None:
         ctl.release_s = 0.0
     # a letting go of a hold the level took up (a quick fall back against it): the level is
     # taken again once the estimate has been quiet for hold_s
-    if (hand_activity(ctl.hand_smooth, ctl.friction, ctl.release_drop, ctl.release_forget,
-                      ctl.rest_baseline, ctl.hand_activity_reference)
+    if (level_let_go(ctl.hand_smooth, ctl.friction, ctl.release_drop, ctl.release_forget,
+                     ctl.rest_baseline, ctl.hand_level_reference)
             and ctl.hand_level_taken):
         ctl.hand_settled = False
         ctl.hand_settle_s = 0.0

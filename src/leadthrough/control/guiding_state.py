@@ -84,7 +84,7 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("rest_s", f8),                          # time at rest [s] (0 while moving)
         ("release_s", f8),                       # time since the last release at rest [s]
         ("hand_release_s", f8),                  # time since the hand let go in motion [s]
-        ("hand_settle_s", f8),                   # since the letting go, or the activity
+        ("hand_settle_s", f8),                   # since it, or a fall back from the level [s]
         ("stop_plan", f8),                       # cycles of the stop the last check planned
         ("residual", f8),                        # ‖log6(T(q_cmd)⁻¹·T_cmd)‖ [m, rad]
         ("speed_scale", f8), ("ik_scale", f8),
@@ -96,7 +96,7 @@ def controller_dtype(n: int) -> np.dtype[Any]:
         ("friction", *six), ("stopping_friction", *six),   # δ, δ_s [N, N·m]
         ("release_smooth", *six), ("release_peak", *six),  # release.py
         ("hand_smooth", *six), ("hand_peak", *six), ("hand_reference", *six),  # hand_release
-        ("hand_activity_reference", *six),       # hand_release.hand_activity's
+        ("hand_level_reference", *six),          # hand_release.level_let_go's
         ("hand_peak_age", f8, (2,)),             # time since each part's peak [s]
         ("drift_fast", *six), ("drift_slow", *six),  # rest_drift.py: the two smoothings
         ("rest_baseline", *six),                 # rest_drift.py: b
@@ -189,7 +189,7 @@ def write_reset_state(s: Fields, rotation: Array, position: Array, has_box: bool
     s.twist = s.release_peak = s.release_smooth = s.rest_baseline = 0.0
     s.drift_fast = s.drift_slow = 0.0
     s.hand_smooth = s.hand_peak = s.hand_reference = s.hand_peak_age = 0.0
-    s.hand_activity_reference = 0.0
+    s.hand_level_reference = 0.0
     s.hand_released = s.hand_settled = s.hand_level_taken = False
     s.hand_release_s = s.hand_settle_s = math.inf
     s.pose_rotation = rotation

@@ -41,7 +41,7 @@ So the guiding cycle watches the estimate itself, not only its level:
   (the magnitude falls), and a level that took up its hold reads its letting go, the
   estimate's return to the phantom, as a rise of δ with no hand on the tool (issue 24: the
   late restarts of the run-on benchmark). So a **letting go of a hold the level took up**
-  (:func:`hand_activity`: a change of δ/2 within about 0.3 s back against the level, toward
+  (:func:`level_let_go`: a change of δ/2 within about 0.3 s back against the level, toward
   zero and beyond) clears the level, and it is taken again ``settle_s`` after the last such
   change. A change along the level is not one: a hand that leans on harder, or the drives'
   ramp at rest, still counts as a rise over it (the ramp is what restarts the stop with no
@@ -67,7 +67,7 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import ControlError, check_fields
 
-__all__ = ["HandReleaseConfig", "fresh_rise", "hand_activity", "let_go_step", "part_level"]
+__all__ = ["HandReleaseConfig", "fresh_rise", "let_go_step", "level_let_go", "part_level"]
 
 Array = NDArray[np.float64]
 
@@ -219,8 +219,8 @@ def fresh_rise(smooth: Array, friction: Array, forget: float, reference: Array) 
 
 
 @njit(cache=True, nogil=True)
-def hand_activity(smooth: Array, friction: Array, band: float, forget: float, level: Array,
-                  reference: Array) -> bool:
+def level_let_go(smooth: Array, friction: Array, band: float, forget: float, level: Array,
+                 reference: Array) -> bool:
     """Whether a hand let go of a hold that ``level`` took up: on some part the smoothed wrench
     moved away from a lagging reference by ``band``·δ (the part's largest) or more, back
     against the level's direction (the change's dot product with the level is negative: the
