@@ -187,10 +187,13 @@ def test_more_bad_inputs_exit_2_and_write_nothing(workdir: Path, tmp_path: Path,
     # a CoM without a mass, or far from the tool; a mass the simulator cannot carry
     for extra, text in ((["--payload-com", "0", "0", "0.1"], "a CoM without a mass"),
                         (["--payload-mass", "5", "--payload-com", "0", "0", "100"],
-                         "--payload-com")):
+                         "--payload-com"),
+                        (["--payload-mass", "200"], "'--payload-mass' = 200.0: the robot "
+                         "cannot carry this payload")):
         assert main(["record", "--robot", "er20", "--trajectory", str(traj), *extra,
                      "-o", str(tmp_path / "r.parquet")]) == 2
         assert text in _err(capsys)
+        assert not (tmp_path / "r.parquet").exists()
     # options out of range, irrelevant, or an output of the wrong type
     assert main(["excite", "--start", "0", "0", "0", "0", "0", "0", "-o",
                  str(tmp_path / "x.csv")]) == 2

@@ -8,13 +8,16 @@ import socket
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
 from leadthrough.cli import main
+from leadthrough.cli.arg_checks import check_payload_torques
 from leadthrough.dynamics.model import FrictionModel, nominal_drive_parameters
 from leadthrough.errors import DataError
+from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.fileio import require_text
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import save_params
@@ -346,3 +349,36 @@ def test_guide_on_the_simulator_refuses_a_robot_links_settings(
     err = _error(capsys)
     assert f"field '{extra[0]}'" in err and "given for the simulator" in err
     assert not out.exists()
+
+
+def test_a_payload_is_checked_against_the_joints_max_torque(tmp_path: Path) -> None:
+    """At rest the check is statics: the heaviest payload a pose holds is where the gravity
+    torque of the payload (m·g times its lever, here from Pinocchio's RNEA of a unit mass)
+    plus the arm's own reaches a joint's max torque; a payload 1 % under it passes, 1 % over
+    it is refused naming the option, the value and that joint."""
+    robot = load_robot("er20")
+    q = np.tile(np.array([0.0, -0.4, 0.6, 0.0, 0.5, 0.0]), (3, 1))
+    traj = TrajectorySamples(time=np.array([0.0, 0.5, 1.0]), q=q, qd=np.zeros_like(q),
+                             qdd=np.zeros_like(q))
+    zero = np.zeros(robot.n)
+    arm = pin.rnea(robot.model, robot.model.createData(), q[0], zero, zero)
+    model = pin.Model(robot.model)
+    frame = model.frames[robot.tcp_frame_id]
+    model.inertias[frame.parentJoint] += frame.placement.act(
+        pin.Inertia(1.0, np.zeros(3), np.zeros((3, 3))))
+    unit = pin.rnea(model, model.createData(), q[0], zero, zero) - arm     # per kg [N·m]
+    # |arm_j + m·unit_j| <= max_j for m > 0: m <= (max_j − sgn(unit_j)·arm_j) / |unit_j|
+    limit = ((robot.max_torque - np.sign(unit) * arm)
+             / np.abs(np.where(unit == 0.0, np.nan, unit)))
+    j = int(np.nanargmin(limit))
+    heaviest = float(limit[j])
+    assert 5.0 < heaviest < 200.0
+
+    def check(mass: float) -> None:
+        check_payload_torques(tmp_path / "t.csv", traj, robot,
+                              pin.Inertia(mass, np.zeros(3), np.zeros((3, 3))),
+                              "--payload-mass", mass)
+
+    check(0.99 * heaviest)
+    with pytest.raises(DataError, match=rf"'--payload-mass' = .*joint {j + 1} needs"):
+        check(1.01 * heaviest)

@@ -15,6 +15,7 @@ import numpy as np
 from leadthrough.cli.arg_checks import (
     MAX_PAYLOAD_COM_M,
     check_output,
+    check_payload_torques,
     check_trajectory_limits,
     warm_up_seconds,
 )
@@ -195,6 +196,9 @@ def run_record(args: argparse.Namespace) -> int:
         raise DataError("out of range", field="--payload-com", value=list(com),
                         expected=f"a CoM within {MAX_PAYLOAD_COM_M:g} m of the TCP")
     payload = None if args.payload_mass is None else Payload(args.payload_mass, com)
+    if payload is not None:
+        check_payload_torques(Path(args.trajectory), traj, robot, payload.as_pin_inertia(),
+                              "--payload-mass", args.payload_mass)
     sim = SimRobot(robot, config, payload=payload, q0=q_cmd[0])
     bar = Progress("recording", t.size)
     log = run_trajectory(sim, q_cmd, qd_cmd, progress=bar)
