@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from leadthrough.cli import main
-from leadthrough.cli.pendant_cmd import check_address, check_export_folder
-from leadthrough.errors import DataError
+from leadthrough.cli import build_parser, main
+from leadthrough.cli.pendant_cmd import check_address, check_export_folder, run
+from leadthrough.errors import DataError, MissingPackageError
 
 SHIPPED = (Path(__file__).resolve().parent.parent / "src" / "leadthrough" / "sim" / "data"
            / "er20_seed1_guiding.toml")
@@ -167,3 +167,15 @@ def test_console_script_exits_2_at_once(argv: list[str]) -> None:
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr and "starting the loop" not in proc.stdout
     assert f"'{argv[0]}'" in proc.stderr and argv[1] in proc.stderr
+
+
+def test_a_missing_web_stack_names_the_extra(capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the pendant's extra (its import fails) the command exits 2 with one line that
+    says how to install it, raised as MissingPackageError, before anything starts."""
+    monkeypatch.setitem(sys.modules, "leadthrough.pendant.app", None)
+    line = _refused(capsys, "--port", "0")
+    assert "web stack is not installed" in line
+    assert "pip install 'leadthrough[pendant]'" in line
+    with pytest.raises(MissingPackageError, match="extra"):
+        run(build_parser().parse_args(["pendant", "--port", "0"]))

@@ -17,6 +17,7 @@ __all__ = [
     "DataWarning",
     "DriverError",
     "LeadthroughError",
+    "MissingPackageError",
     "RobotFileError",
     "SimulationError",
     "TeachError",
@@ -91,6 +92,11 @@ class TeachError(LeadthroughError):
 class ControlError(LeadthroughError):
     """The guiding controller was configured with invalid settings or started from an invalid
     state (pose outside the joint limits or the workspace box, missing optional package)."""
+
+
+class MissingPackageError(LeadthroughError):
+    """An optional package that a command needs (an extra, e.g. the pendant's web stack) is
+    not installed; ``expected`` says how to install it."""
 
 
 class DriverError(LeadthroughError):

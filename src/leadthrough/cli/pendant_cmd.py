@@ -23,7 +23,7 @@ from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
-from leadthrough.errors import ControlError, DataError, LeadthroughError
+from leadthrough.errors import ControlError, DataError, MissingPackageError
 from leadthrough.identification.params_file import load_params
 from leadthrough.pendant.backend import LiveSession
 from leadthrough.pendant.loop_process import DriverRecipe
@@ -247,9 +247,9 @@ def run(args: argparse.Namespace) -> int:
         from leadthrough.pendant.app import Pendant
         from leadthrough.pendant.simulated import simulated_session
     except ImportError as e:
-        raise LeadthroughError(f"the pendant's web stack is not installed ({e.name})",
-                               field="extra", value="pendant",
-                               expected="pip install 'leadthrough[pendant]'") from e
+        raise MissingPackageError(f"the pendant's web stack is not installed ({e.name})",
+                                  field="extra", value="pendant",
+                                  expected="pip install 'leadthrough[pendant]'") from e
     robot = load_robot(args.robot)
     live, hand, note = _sessions(args, robot, simulated_session)
     try:
