@@ -197,7 +197,7 @@ def run_record(args: argparse.Namespace) -> int:
                         expected=f"a CoM within {MAX_PAYLOAD_COM_M:g} m of the TCP")
     payload = None if args.payload_mass is None else Payload(args.payload_mass, com)
     if payload is not None:
-        check_payload_torques(Path(args.trajectory), traj, robot, payload.as_pin_inertia(),
+        check_payload_torques(args.trajectory, traj, robot, payload.as_pin_inertia(),
                               "--payload-mass", args.payload_mass)
     sim = SimRobot(robot, config, payload=payload, q0=q_cmd[0])
     bar = Progress("recording", t.size)
