@@ -328,6 +328,26 @@ def test_realistic_currents_lag_the_positions(er20: Robot) -> None:
     np.testing.assert_allclose(log.current[3:], late[:log.current.shape[0] - 3], atol=1e-6)
 
 
+@pytest.mark.parametrize(("plant", "jitter"), [("ideal", 0.0), ("realistic", 0.0),
+                                               ("realistic", 6e-4)])
+def test_the_sampled_current_is_the_truth_the_sensor_measured(er20: Robot, plant: str,
+                                                             jitter: float) -> None:
+    """``true_sampled_current`` is the current at the instant the sensor sampled it: with a
+    noise-free sensor it is the measured current, and with a lag it trails the step's own."""
+    sim = SimRobot(er20, _quiet(plant), q0=POSE)
+    driver = SimDriver(sim, sample_jitter_s=jitter)
+    np.testing.assert_array_equal(sim.true_sampled_current, sim.true_current)  # at rest
+    apart = []
+    for k in range(400):
+        sim.command(POSE + 0.1 * np.sin(2 * np.pi * 2.0 * k * 1e-3) * np.ones(er20.n))
+        driver.step()
+        np.testing.assert_allclose(sim.read().current, sim.true_sampled_current, rtol=0,
+                                   atol=1e-6)
+        apart.append(np.abs(sim.true_sampled_current - sim.true_current).max())
+    late = sim.truth.current_lag_s > 0 or jitter > 0
+    assert (max(apart) > 1e-3) == late, (plant, jitter, max(apart))
+
+
 def test_a_driver_can_ask_for_sample_jitter(er20: Robot) -> None:
     """Each sample is taken up to the jitter before its reported instant: in motion the reported
     positions trail the unjittered ones by e·q̇, e uniform in [0, jitter]."""

@@ -255,6 +255,8 @@ class SampleTiming:
         self._delay = None if lag_s == 0.0 else DelayLine(n, MAX_LAG_S / timestep)
         #: Encoder positions of the last jittered instant [rad], shape (n,) (with a jitter).
         self.q_jittered = np.zeros(n)
+        #: True current at the instant the last late sample was taken [A], shape (n,).
+        self.sampled_current = np.zeros(n)
 
     @property
     def late(self) -> bool:
@@ -302,7 +304,8 @@ class SampleTiming:
         assert self._delay is not None
         self._delay.push(current)
         early = self._jitter_steps * self._rng.uniform() if self._jitter_steps else 0.0
-        measured = sensor.read(self._delay.delayed(self._lag_steps + early), speed)
+        self.sampled_current[:] = self._delay.delayed(self._lag_steps + early)
+        measured = sensor.read(self.sampled_current, speed)
         if self._jitter_steps:
             qj = self.q_jittered
             np.multiply(qd, -early * self._dt, out=qj)
