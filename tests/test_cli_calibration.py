@@ -278,6 +278,45 @@ def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
     assert "meta.sim_seed" in capsys.readouterr().err
 
 
+def test_payload_against_an_unloaded_run(workdir: Path, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """record the same trajectory with a 10 kg payload → payload --reference (the unloaded
+    run) prints the library's estimate against that run, aligned with no shift; a reference
+    of another simulated robot is refused (exit 2, nothing printed on stdout)."""
+    from leadthrough.estimation.payload import estimate_payload
+    from leadthrough.identification.params_file import load_params
+    from leadthrough.robot import load_robot
+
+    params = tmp_path / "p.toml"
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "ols-cv", "-o", str(params)]) == 0
+    loaded = tmp_path / "loaded.parquet"
+    assert main(["record", "--robot", "er20", "--trajectory", str(workdir / "traj.csv"),
+                 "--seed", "1", "--run", "2", "--payload-mass", "10", "--payload-com", "0", "0",
+                 "0.1", "-o", str(loaded)]) == 0
+    capsys.readouterr()
+    base = ["payload", str(loaded), "--robot", "er20", "--params", str(params), "--json"]
+    assert main(base) == 0
+    alone = _json(capsys)
+    assert main([*base, "--reference", str(workdir / "rec1.parquet")]) == 0
+    against = _json(capsys)
+    assert against["reference"] == str(workdir / "rec1.parquet") and alone["reference"] is None
+    assert alone["reference_shift_s"] is None
+    assert against["reference_shift_s"] == pytest.approx(0.0, abs=1e-9)
+    robot = load_robot("er20")
+    est = estimate_payload(load_recording(loaded), robot, load_params(params, robot).params,
+                           reference=load_recording(workdir / "rec1.parquet"))
+    assert against["mass_kg"] == est.mass_kg != alone["mass_kg"]
+    assert abs(against["mass_kg"] - 10.0) < 0.5
+    other = tmp_path / "seed2.parquet"
+    assert main(["record", "--robot", "er20", "--trajectory", str(workdir / "traj.csv"),
+                 "--seed", "2", "-o", str(other)]) == 0
+    capsys.readouterr()
+    assert main([*base, "--reference", str(other)]) == 2
+    out = capsys.readouterr()
+    assert out.out == "" and "sim_seed" in out.err and str(other) in out.err
+
+
 def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """excite --presliding → record → identify --presliding-test writes each joint's z₀ and

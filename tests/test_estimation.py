@@ -460,6 +460,44 @@ def test_no_payload_gives_no_com_and_a_negative_mass_warns(er20: Robot) -> None:
     assert est.mass_kg == pytest.approx(-1.0, abs=0.05) and est.com_tcp is None
 
 
+def test_payload_against_an_unloaded_run_of_the_same_trajectory(er20: Robot) -> None:
+    """An unloaded model with wrong links reads the payload wrong; against an unloaded run of
+    the same trajectory the model's error cancels and the mass is exact. A reference on
+    another path, or with the static method, is refused."""
+    from leadthrough.dynamics import FrictionModel
+    from test_identification import _data, _true_params
+
+    truth = _true_params(er20, FrictionModel.STRIBECK)
+    phi_p = pin.Inertia(10.0, np.array([0.0, 0.02, 0.1]),
+                        pin.Inertia.FromBox(10.0, 0.1, 0.1, 0.1).inertia).toDynamicParameters()
+    loaded_phi = truth.phi.copy()
+    loaded_phi[10 * (er20.n - 1):] += phi_p
+    loaded = _data(er20, replace(truth, phi=loaded_phi), seed=4)
+    unloaded = _data(er20, truth, seed=4)              # the same trajectory, no payload
+    wrong = truth.phi.copy()
+    wrong[20:30] *= 1.15                                # link 3 15 % heavy (a scaled body)
+    wrong[40:50] *= 0.9                                 # link 5 10 % light
+    model = replace(truth, phi=wrong)
+    alone = estimate_payload(loaded, er20, model, "motion")
+    assert abs(alone.mass_kg - 10.0) > 0.1              # the links' error reads as payload
+    est = estimate_payload(loaded, er20, model, "motion", reference=unloaded)
+    assert est.mass_kg == pytest.approx(10.0, rel=1e-6)
+    assert est.com_tcp is not None and est.reference_shift_s == pytest.approx(0.0, abs=1e-9)
+    # a reference that starts 3.7 s later in the program: found and aligned
+    late = replace(unloaded, **{k: getattr(unloaded, k)[370:] for k in
+                                ("q", "qd", "qdd", "torque", "moving")},
+                   time=unloaded.time[370:] - unloaded.time[370] + 5.0)
+    est = estimate_payload(loaded, er20, model, "motion", reference=late)
+    assert est.reference_shift_s == pytest.approx(-3.7, abs=1e-9)
+    assert est.mass_kg == pytest.approx(10.0, rel=1e-6)
+    other = _data(er20, truth, seed=5)
+    with pytest.raises(DataError, match="another path") as e:
+        estimate_payload(loaded, er20, model, "motion", reference=other)
+    assert e.value.field.startswith("q")
+    with pytest.raises(DataError, match="only from motion"):
+        estimate_payload(loaded, er20, model, "static", reference=unloaded)
+
+
 @pytest.mark.parametrize("model", ["stribeck", "coulomb-viscous", "cbrt", "stribeck-load",
                                    "cbrt-load"])
 def test_real_time_model_equals_eq21_away_from_standstill(er20: Robot, model: str) -> None:

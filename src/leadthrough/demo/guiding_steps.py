@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig
-from leadthrough.data.preprocess import preprocess
+from leadthrough.data.preprocess import ProcessedData, preprocess
 from leadthrough.dynamics.model import DriveModelParameters
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.identification.params_file import ParamsFile
@@ -63,8 +63,8 @@ class PayloadRow:
 
 def payload_table(robot: Robot, cal: CalibrationSet,
                   params: Mapping[str, DriveModelParameters], seed: int,
-                  seconds: float, plant: PlantPreset | str = PlantPreset.REALISTIC
-                  ) -> dict[str, list[PayloadRow]]:
+                  seconds: float, plant: PlantPreset | str = PlantPreset.REALISTIC,
+                  reference: bool = False) -> dict[str, list[PayloadRow]]:
     """Table III: each payload on its own run of the held-out trajectory, weight from motion.
 
     Each payload is recorded once and estimated with every parameter set.
@@ -76,21 +76,33 @@ def payload_table(robot: Robot, cal: CalibrationSet,
         seed: Simulated robot instance.
         seconds: Length of each payload run [s].
         plant: Simulated plant (the one ``cal`` was recorded on).
+        reference: Also record the trajectory once without a payload and estimate every
+            payload against that run too (``estimate_payload``'s ``reference``), under the
+            label ``"<label> vs unloaded"``.
 
     Returns:
         Label → one row per payload of :data:`PAPER_WEIGHTS_N`.
     """
     g = float(np.linalg.norm(robot.model.gravity.linear))
-    rows: dict[str, list[PayloadRow]] = {label: [] for label in params}
+
+    def run(k: int, payload: Payload | None) -> ProcessedData:
+        config = SimConfig(seed=seed, run=10 + k, plant=plant_preset(plant))
+        return preprocess(record_excitation(robot, cal.held_out_excitation, seconds, config,
+                                            payload=payload).measured, robot)
+
+    unloaded = run(-1, None) if reference else None
+    labels = [*params, *(f"{label} vs unloaded" for label in params if reference)]
+    rows: dict[str, list[PayloadRow]] = {label: [] for label in labels}
     for k, weight in enumerate(PAPER_WEIGHTS_N):
-        rec = record_excitation(robot, cal.held_out_excitation, seconds,
-                                SimConfig(seed=seed, run=10 + k, plant=plant_preset(plant)),
-                                payload=Payload(weight / g, (0.0, 0.0, 0.1))).measured
-        data = preprocess(rec, robot)
+        data = run(k, Payload(weight / g, (0.0, 0.0, 0.1)))
         for label, p in params.items():
-            est = estimate_payload(data, robot, p, "motion")
-            rows[label].append(PayloadRow(true_n=weight, estimated_n=est.weight_n,
-                                          error_pct=100.0 * (est.weight_n - weight) / weight))
+            estimates = {label: estimate_payload(data, robot, p, "motion")}
+            if unloaded is not None:
+                estimates[f"{label} vs unloaded"] = estimate_payload(data, robot, p, "motion",
+                                                                     reference=unloaded)
+            for key, est in estimates.items():
+                rows[key].append(PayloadRow(true_n=weight, estimated_n=est.weight_n,
+                                            error_pct=100.0 * (est.weight_n - weight) / weight))
     return rows
 
 

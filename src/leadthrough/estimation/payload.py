@@ -14,10 +14,28 @@ r = τ_measured − τ̂_d over the recording:
   robots this method is biased; it suits direct-drive or low-friction arms.
 
 The mass gives the weight m·|g|; the CoM is reported in the TCP frame where it is identifiable.
+
+**Against an unloaded run** (``reference``, ``motion`` only). Whatever the unloaded model gets
+wrong along the recording's path (links outside its bounds, friction it lacks) is in the
+residual r = τ_measured − τ̂_d too, and the part of it that
+correlates with the payload's columns reads as payload: on the simulated er20's realistic
+plant a bias of 2–6 N, which is 3–8 % of the paper's lightest payload (README, Table III). A
+run of the same trajectory without the payload has the same error: with it, the fit takes
+the difference of the two runs' residuals, r_loaded(t) − r_unloaded(t + s), at the same point
+of the path (s aligns the two runs' positions: :func:`reference_shift`; real runs seldom start
+at the same instant of the program). The model's error along the path cancels; the model
+still accounts for the small difference between the two runs' states (the loaded robot
+follows the trajectory a little differently). The drive-gain identification of Gautier and
+Briot (IROS 2011) likewise records the robot on a trajectory without and with a payload. Both
+runs must follow the same path: a reference whose positions differ by more than
+:data:`SAME_PATH_RAD` is refused. What the difference cannot cancel is what the payload itself
+changes: an error of a drive's torque constant scales the payload's torque, and a gear's
+friction grows with the load it carries (the constant part of that growth is fitted, above).
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -25,6 +43,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.data.align import interp_columns
 from leadthrough.data.preprocess import PreprocessConfig, ProcessedData, preprocess
 from leadthrough.data.recording import Recording
 from leadthrough.dynamics.model import DriveModelParameters, model_torque
@@ -32,7 +51,7 @@ from leadthrough.dynamics.regressor import link_regressor_batch
 from leadthrough.errors import DataError, DataWarning
 from leadthrough.robot.description import Robot
 
-__all__ = ["PayloadEstimate", "estimate_payload"]
+__all__ = ["PayloadEstimate", "estimate_payload", "reference_shift"]
 
 Array = NDArray[np.float64]
 
@@ -40,6 +59,15 @@ Array = NDArray[np.float64]
 #: A mass this many standard errors from zero is significant: only then is the CoM reported
 #: (for a positive mass) or a negative mass warned about.
 SIGNIFICANT_SIGMAS = 5.0
+
+#: A reference run (module docstring) follows the same path if, once aligned in time
+#: (:func:`reference_shift`), every joint's position stays within this of the loaded run's
+#: [rad]; the two runs must have at least this fraction of the shorter one in common.
+SAME_PATH_RAD, MIN_OVERLAP = 0.02, 0.5
+
+#: The alignment's coarse search rate [Hz], and the RMS position difference [rad] within
+#: which two shifts count as equally good (a periodic trajectory repeats).
+SHIFT_SEARCH_HZ, SHIFT_TIE_RAD = 10.0, 1e-3
 
 
 @dataclass(frozen=True)
@@ -59,6 +87,9 @@ class PayloadEstimate:
             :data:`SIGNIFICANT_SIGMAS` standard errors of zero).
         samples: Joint equations used.
         residual_rms: RMS of the fit residual per joint [N·m], shape (n,).
+        reference_shift_s: With an unloaded reference run, the time [s] by which the
+            reference was shifted onto the recording's path (:func:`reference_shift`); else
+            None.
     """
 
     method: str
@@ -68,6 +99,7 @@ class PayloadEstimate:
     com_tcp: Array | None
     samples: int
     residual_rms: Array
+    reference_shift_s: float | None = None
 
 
 def estimate_payload(
@@ -79,6 +111,7 @@ def estimate_payload(
     static_velocity: float = 0.01,
     settle_s: float = 1.0,
     refit_friction: bool = True,
+    reference: Recording | ProcessedData | None = None,
 ) -> PayloadEstimate:
     """Estimate the payload at the flange from a recording made with it attached.
 
@@ -93,12 +126,16 @@ def estimate_payload(
         settle_s: A sample counts as static only after the robot has rested this long [s].
         refit_friction: ``motion`` only: fit a change of each joint's Coulomb friction along
             with the payload (gear friction grows with the transmitted torque).
+        reference: ``motion`` only: a run of the same trajectory without the payload, whose
+            residual is subtracted (module docstring).
 
     Returns:
         The estimate.
 
     Raises:
-        DataError: Unknown method, too little motion or too few static samples.
+        DataError: Unknown method, too little motion or too few static samples; a
+            ``reference`` with ``static``, for another robot, not overlapping the recording
+            in time or on another path.
 
     Warns:
         DataWarning: A mass significantly below zero (no payload, or a model that does not
@@ -108,8 +145,16 @@ def estimate_payload(
         raise DataError("unknown method", field="method", value=method,
                         expected="'motion' or 'static'")
     data = rec if isinstance(rec, ProcessedData) else preprocess(rec, robot, preprocess_config)
+    shift = None
     if method == "motion":
         system = _motion_system(data, robot, params, refit_friction)
+        if reference is not None:
+            ref = reference if isinstance(reference, ProcessedData) else preprocess(
+                reference, robot, preprocess_config)
+            system, shift = _against_reference(system, data, ref, robot, params)
+    elif reference is not None:
+        raise DataError("an unloaded reference run is used only from motion", field="method",
+                        value=method, expected="'motion' with a reference")
     else:
         system = _static_system(data, robot, params, static_velocity, settle_s)
     A = system.regressor[system.used][:, system.columns]
@@ -140,7 +185,7 @@ def estimate_payload(
     g = float(np.linalg.norm(robot.model.gravity.linear))
     return PayloadEstimate(method=method, mass_kg=mass, mass_std_kg=mass_std,
                            weight_n=mass * g, com_tcp=com,
-                           samples=int(used.sum()), residual_rms=rms)
+                           samples=int(used.sum()), residual_rms=rms, reference_shift_s=shift)
 
 
 class _PayloadSystem(NamedTuple):
@@ -171,6 +216,84 @@ def _motion_system(data: ProcessedData, robot: Robot, params: DriveModelParamete
     else:
         cols = np.arange(10)
     return _PayloadSystem(K, residual, data.moving, cols)
+
+
+def reference_shift(t: Array, q: Array, t_ref: Array, q_ref: Array) -> tuple[float, float]:
+    """The time shift s [s] that puts a reference run on a recording's path: q_ref(t + s)
+    closest to q(t), RMS over the overlap, which must cover at least :data:`MIN_OVERLAP` of
+    the shorter run. Both runs' times count from their start. A periodic trajectory fits
+    equally well at every period: of the shifts within :data:`SHIFT_TIE_RAD` of the best, the
+    one with the longest overlap is taken.
+
+    Searched on a grid of 1/:data:`SHIFT_SEARCH_HZ`, then refined to 1 ms around the best.
+
+    Args:
+        t: The recording's times since its start [s], shape (N,).
+        q: Its positions [rad], shape (N, n).
+        t_ref: The reference's times since its start [s], shape (M,).
+        q_ref: Its positions [rad], shape (M, n).
+
+    Returns:
+        s [s] and the RMS position difference there [rad] (inf if no shift overlaps enough).
+    """
+    step = 1.0 / SHIFT_SEARCH_HZ
+    grid = np.arange(0.0, t[-1] + 0.5 * step, step)
+    grid_ref = np.arange(0.0, t_ref[-1] + 0.5 * step, step)
+    a, b = interp_columns(grid, t, q), interp_columns(grid_ref, t_ref, q_ref)
+    need = max(2, int(MIN_OVERLAP * min(grid.size, grid_ref.size)))
+    shifts, costs, spans = [], [], []
+    for m in range(-(grid.size - need), grid_ref.size - need + 1):
+        lo, hi = max(0, -m), min(grid.size, grid_ref.size - m)   # a[i] against b[i + m]
+        d = a[lo:hi] - b[lo + m:hi + m]
+        shifts.append(m * step)
+        costs.append(float(np.sqrt(np.mean(d * d))))
+        spans.append(hi - lo)
+    if not costs:
+        return 0.0, math.inf
+    c, spans_a = np.array(costs), np.array(spans)
+    tied = np.flatnonzero(c <= c.min() + SHIFT_TIE_RAD)
+    coarse = shifts[int(tied[np.argmax(spans_a[tied])])]
+
+    def rms(shift: float) -> float:
+        tt = t[(t + shift >= 0.0) & (t + shift <= t_ref[-1])]
+        d = interp_columns(tt, t, q) - interp_columns(tt + shift, t_ref, q_ref)
+        return float(np.sqrt(np.mean(d * d)))
+
+    fine = np.round(coarse + np.arange(-step, step + 5e-4, 1e-3), 9)
+    best = min(fine, key=rms)
+    return float(best), rms(float(best))
+
+
+def _against_reference(system: _PayloadSystem, data: ProcessedData, ref: ProcessedData,
+                       robot: Robot, params: DriveModelParameters
+                       ) -> tuple[_PayloadSystem, float]:
+    """``system`` with the unloaded run ``ref``'s residual subtracted, at the same point of
+    the path (:func:`reference_shift`), on the loaded run's samples that ``ref`` covers and
+    where both move; and the shift [s]."""
+    if ref.q.shape[1] != robot.n:
+        raise DataError("the reference run has another number of joints", source=ref.source,
+                        field="q", value=ref.q.shape[1], expected=f"{robot.n} ({robot.name})")
+    t, t_ref = data.time - data.time[0], ref.time - ref.time[0]
+    shift, _ = reference_shift(t, data.q, t_ref, ref.q)
+    inside = (t + shift >= 0.0) & (t + shift <= t_ref[-1])
+    if inside.sum() < 2:
+        raise DataError("the reference run does not overlap the recording",
+                        source=ref.source, field="time", value=float(t_ref[-1]),
+                        expected="a run of the same trajectory, at least "
+                                 f"{MIN_OVERLAP:.0%} of the shorter run in common")
+    at = t[inside] + shift
+    apart = np.abs(interp_columns(at, t_ref, ref.q) - data.q[inside]).max(axis=0)
+    if apart.max() > SAME_PATH_RAD:
+        j = int(np.argmax(apart))
+        raise DataError("the reference run follows another path", source=ref.source,
+                        field=f"q{j + 1}", value=float(apart[j]),
+                        expected=f"within {SAME_PATH_RAD} rad of the recording all along "
+                                 "(the same trajectory, unloaded)")
+    residual_ref = ref.torque - model_torque(robot, params, ref.q, ref.qd, ref.qdd)
+    moving_ref = interp_columns(at, t_ref, ref.moving.astype(float)) == 1.0
+    residual = system.residual[inside] - interp_columns(at, t_ref, residual_ref)
+    return _PayloadSystem(system.regressor[inside], residual, system.used[inside] & moving_ref,
+                          system.columns), shift
 
 
 def _static_system(data: ProcessedData, robot: Robot, params: DriveModelParameters,
