@@ -144,19 +144,19 @@ def estimate_payload(
     if method not in ("motion", "static"):
         raise DataError("unknown method", field="method", value=method,
                         expected="'motion' or 'static'")
-    data = rec if isinstance(rec, ProcessedData) else preprocess(rec, robot, preprocess_config)
-    shift = None
-    if method == "motion":
-        system = _motion_system(data, robot, params, refit_friction)
-        if reference is not None:
-            ref = reference if isinstance(reference, ProcessedData) else preprocess(
-                reference, robot, preprocess_config)
-            system, shift = _against_reference(system, data, ref, robot, params)
-    elif reference is not None:
+    if method == "static" and reference is not None:
         raise DataError("an unloaded reference run is used only from motion", field="method",
                         value=method, expected="'motion' with a reference")
-    else:
+    data = rec if isinstance(rec, ProcessedData) else preprocess(rec, robot, preprocess_config)
+    shift = None
+    if method == "static":
         system = _static_system(data, robot, params, static_velocity, settle_s)
+    else:
+        system = _motion_system(data, robot, params, refit_friction)
+    if reference is not None:
+        ref = reference if isinstance(reference, ProcessedData) else preprocess(
+            reference, robot, preprocess_config)
+        system, shift = _against_reference(system, data, ref, robot, params)
     A = system.regressor[system.used][:, system.columns]
     b = system.residual[system.used]
     norms = np.linalg.norm(A, axis=0)
@@ -170,13 +170,6 @@ def estimate_payload(
         warnings.warn(f"{where}the estimated payload mass is negative ({mass:.3f} ± "
                       f"{mass_std:.3f} kg): no payload is attached, or the unloaded model does "
                       "not fit this recording", DataWarning, stacklevel=2)
-    # identifiability of the CoM: the three first-moment columns must be well conditioned
-    sv = np.linalg.svd(A[:, 1:4] / np.maximum(norms[1:4], 1e-300), compute_uv=False)
-    com = None
-    # the CoM is a first moment divided by the mass: only where the mass is clearly nonzero
-    if mass > SIGNIFICANT_SIGMAS * mass_std and sv[-1] > 1e-3 * sv[0] and np.all(keep[1:4]):
-        frame = robot.model.frames[robot.tcp_frame_id]
-        com = np.asarray(frame.placement.actInv(sol[1:4] / mass))
     used, residual = system.used, system.residual
     fitted = np.zeros_like(residual)
     fitted[used] = A @ sol
@@ -184,8 +177,22 @@ def estimate_payload(
     rms = np.sqrt((err**2).sum(axis=0) / np.maximum(used.sum(axis=0), 1))
     g = float(np.linalg.norm(robot.model.gravity.linear))
     return PayloadEstimate(method=method, mass_kg=mass, mass_std_kg=mass_std,
-                           weight_n=mass * g, com_tcp=com,
+                           weight_n=mass * g, com_tcp=_com(robot, A, norms, sol, keep, mass_std),
                            samples=int(used.sum()), residual_rms=rms, reference_shift_s=shift)
+
+
+def _com(robot: Robot, A: Array, norms: Array, sol: Array, keep: NDArray[np.bool_],
+         mass_std: float) -> Array | None:
+    """The payload's CoM in the TCP frame [m], or None where the motion does not excite the
+    first moments or the mass is within :data:`SIGNIFICANT_SIGMAS` of zero."""
+    # identifiability of the CoM: the three first-moment columns must be well conditioned
+    sv = np.linalg.svd(A[:, 1:4] / np.maximum(norms[1:4], 1e-300), compute_uv=False)
+    mass = float(sol[0])
+    # the CoM is a first moment divided by the mass: only where the mass is clearly nonzero
+    if mass > SIGNIFICANT_SIGMAS * mass_std and sv[-1] > 1e-3 * sv[0] and np.all(keep[1:4]):
+        frame = robot.model.frames[robot.tcp_frame_id]
+        return np.asarray(frame.placement.actInv(sol[1:4] / mass))
+    return None
 
 
 class _PayloadSystem(NamedTuple):
