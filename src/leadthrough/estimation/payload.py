@@ -17,20 +17,20 @@ The mass gives the weight m·|g|; the CoM is reported in the TCP frame where it 
 
 **Against an unloaded run** (``reference``, ``motion`` only). Whatever the unloaded model gets
 wrong along the recording's path (links outside its bounds, friction it lacks) is in the
-residual r = τ_measured − τ̂_d too, and the part of it that
-correlates with the payload's columns reads as payload: on the simulated er20's realistic
-plant a bias of 2–6 N, which is 3–8 % of the paper's lightest payload (README, Table III). A
-run of the same trajectory without the payload has the same error: with it, the fit takes
-the difference of the two runs' residuals, r_loaded(t) − r_unloaded(t + s), at the same point
-of the path (s aligns the two runs' positions: :func:`reference_shift`; real runs seldom start
-at the same instant of the program). The model's error along the path cancels; the model
-still accounts for the small difference between the two runs' states (the loaded robot
-follows the trajectory a little differently). The drive-gain identification of Gautier and
-Briot (IROS 2011) likewise records the robot on a trajectory without and with a payload. Both
-runs must follow the same path: a reference whose positions differ by more than
-:data:`SAME_PATH_RAD` is refused. What the difference cannot cancel is what the payload itself
-changes: an error of a drive's torque constant scales the payload's torque, and a gear's
-friction grows with the load it carries (the constant part of that growth is fitted, above).
+residual r = τ_measured − τ̂_d too, and the part of it that correlates with the payload's
+columns reads as payload: on the simulated er20's realistic plant a bias of 1.5–6 N, 2–8 % of
+the paper's lightest payload (README, Table III). A run of the same trajectory without the
+payload has the same error: with it, the fit takes the difference of the two runs' residuals,
+r_loaded(t) − r_unloaded(t + s), at the same point of the path (s aligns the two runs'
+positions: :func:`reference_shift`; real runs seldom start at the same instant of the program).
+The model's error along the path cancels; the model still accounts for the small difference
+between the two runs' states (the loaded robot follows the trajectory a little differently). The
+drive-gain identification of Gautier and Briot (IROS 2011) likewise records the robot on a
+trajectory without and with a payload. Both runs must follow the same path: a reference whose
+positions differ by more than :data:`SAME_PATH_RAD` is refused. What the difference cannot
+cancel is what the payload itself changes: an error of a drive's torque constant scales the
+payload's torque, and a gear's friction grows with the load it carries (the constant part of
+that growth is fitted, above).
 """
 
 from __future__ import annotations
