@@ -100,7 +100,6 @@ class SimRobot:
         self._tau_ext = np.zeros(n)
         self._wrench = np.zeros(6)
         self._i_true = np.zeros(n)
-        self._i_sampled = np.zeros(n)
         self._i_meas = np.zeros(n)
         self._speed = np.zeros(n)
         # sample timing: the current's lag and the jitter a driver asks for (sensors module)
@@ -216,7 +215,7 @@ class SimRobot:
         self._q_cmd[:] = q0
         self._qd_ff[:] = 0.0
         self._i_true[:] = self._servo.current
-        self._i_sampled[:] = self._servo.current
+        self._timing.sampled_current[:] = self._servo.current
         self._seq = 0
 
     def _quantise(self, q: Array) -> Array:
@@ -257,12 +256,10 @@ class SimRobot:
         self._i_true[:] = current
         np.abs(d.qvel, out=self._speed)
         if not self._timing.late:
-            self._i_sampled[:] = current
             self._i_meas[:] = self._sensor.read(current, self._speed)
         else:
             self._i_meas[:] = self._timing.read_late(self._sensor, current, self._speed, d.qpos,
                                                      d.qvel)
-            self._i_sampled[:] = self._timing.sampled_current
         np.multiply(current, self._tpa, out=self._tau_motor)
         self._drive.update(d.qpos, d.qvel, self._tau_motor, dt)
         mujoco.mj_step1(m, d)
@@ -292,7 +289,9 @@ class SimRobot:
         Raises:
             SimulationError: Out of range.
         """
+        sampled = self.true_sampled_current     # the last sample stays the one taken
         self._timing.set_jitter(jitter_s)
+        self._timing.sampled_current[:] = sampled
         self._q_read = self._timing.q_jittered if jitter_s > 0.0 else self._q_meas
 
     def _add_cogging(self, q: Array, out: Array) -> None:
@@ -341,7 +340,7 @@ class SimRobot:
     def true_sampled_current(self) -> Array:
         """Actual motor current at the instant the last sample was taken (behind the step by
         the current's lag and any jitter), before the sensor's errors [A] (simulator truth)."""
-        return self._i_sampled.copy()
+        return (self._timing.sampled_current if self._timing.late else self._i_true).copy()
 
     @property
     def true_friction_torque(self) -> Array:
