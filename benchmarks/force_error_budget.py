@@ -66,10 +66,11 @@ from numpy.typing import NDArray
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.drivers.protocol import Driver, DriverFeedback, WrappedDriver
 from leadthrough.estimation.estimator import ExternalForceEstimator
+from leadthrough.estimation.filters import low_pass_alpha
 from leadthrough.estimation.wrench import wrench_from_torque
 from leadthrough.robot import Robot, load_robot
 from leadthrough.session.loop_config import LoopConfig, LoopParts
-from leadthrough.session.metrics import MOTION_SPEED, PHANTOM_WINDOW_S
+from leadthrough.session.metrics import MOTION_SPEED, PHANTOM_WINDOW_S, hands_off_intervals
 from leadthrough.session.record import SessionLog
 from leadthrough.sim.driver import SimDriver
 from leadthrough.sim.plant import PLANT_NAMES
@@ -172,7 +173,7 @@ def _floor_filters(dt: float) -> dict[str, tuple[Array, Array]]:
     fs = 1.0 / dt
     out: dict[str, tuple[Array, Array]] = {}
     for fc in (1.0, 1.5, 2.0, 3.0, 4.5):
-        a = 1.0 - np.exp(-2.0 * np.pi * fc * dt)
+        a = low_pass_alpha(fc, dt)      # the estimator's first-order low-pass
         out[f"first order {fc:g} Hz"] = (np.array([a]), np.array([1.0, a - 1.0]))
     for fc in (1.5, 2.0, 3.0, 4.5, 6.0):
         out[f"Butterworth 2 {fc:g} Hz"] = scipy.signal.butter(2, fc, fs=fs)
@@ -278,11 +279,11 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
 
     fric = tau_parts["friction"]
     slow = np.abs(np.array(samples.state[:N])[:, 1]) < SLOW_JOINT
-    idx = np.flatnonzero(moving)
 
-    def fit_moving(tau: Array) -> Array:
+    def fit_at(tau: Array, at: NDArray[np.bool_] = moving) -> Array:
+        """``tau``'s force through the estimator's fit at the samples ``at`` (0 elsewhere)."""
         out = np.zeros((N, 3))
-        for k in idx:
+        for k in np.flatnonzero(at):
             out[k] = _fit(est, jac[k], weights[k], tau[k])
         return out
 
@@ -290,25 +291,17 @@ def budget(robot: Robot, samples: Samples, est: ExternalForceEstimator, log: Ses
     for j in range(robot.n):
         only = np.zeros_like(fric)
         only[:, j] = fric[:, j]
-        joint.append(rms(fit_moving(only)))
+        joint.append(rms(fit_at(only)))
     window = release_windows(applied, cfg.dt)
-    needed = np.flatnonzero(moving | window)
-
-    def force_at(tau: Array) -> Array:
-        out = np.zeros((N, 3))
-        for k in needed:
-            out[k] = _fit(est, jac[k], weights[k], tau[k])
-        return out
-
-    floor = sensing_floor(np.array(samples.sensing[:N]), ext, alpha, cfg.dt, force_at, moving,
-                          window)
+    floor = sensing_floor(np.array(samples.sensing[:N]), ext, alpha, cfg.dt,
+                          lambda tau: fit_at(tau, moving | window), moving, window)
     if abs(floor[LAG_ALONE].in_motion - rms(forces["output filter"])) > 1e-9:
         raise RuntimeError("the floor's filter is not the estimator's")
     return Budget(total=rms(error), part={k: rms(v) for k, v in forces.items()},
                   without={k: rms(error - v) for k, v in forces.items()},
                   moving=int(moving.sum()), closure=closure,
-                  friction_slow=rms(fit_moving(np.where(slow, fric, 0.0))),
-                  friction_sliding=rms(fit_moving(np.where(slow, 0.0, fric))),
+                  friction_slow=rms(fit_at(np.where(slow, fric, 0.0))),
+                  friction_sliding=rms(fit_at(np.where(slow, 0.0, fric))),
                   friction_joint=tuple(joint), floor=floor)
 
 
@@ -332,12 +325,10 @@ def release_windows(applied: Array, dt: float, window_s: float = PHANTOM_WINDOW_
         dt: Sample period [s].
         window_s: Window after each release [s].
     """
-    on = np.linalg.norm(applied, axis=1) > 0.0
-    window = np.zeros(on.size, dtype=bool)
-    for start in np.flatnonzero(on[:-1] & ~on[1:]) + 1:
-        stop = min(on.size, start + round(window_s / dt))
-        pushed = np.flatnonzero(on[start:stop])
-        window[start:start + pushed[0] if pushed.size else stop] = True
+    window = np.zeros(applied.shape[0], dtype=bool)
+    for start, stop in hands_off_intervals(applied):
+        if start > 0:   # a release follows a push
+            window[start:min(stop, start + round(window_s / dt))] = True
     return window
 
 

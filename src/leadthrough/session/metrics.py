@@ -15,8 +15,8 @@ from leadthrough.session.loop import LoopResult
 from leadthrough.session.record import SessionLog
 
 __all__ = ["CycleTime", "SessionSummary", "faults_without_hand", "force_error_in_motion",
-           "force_errors_in_motion", "phantom_forces", "release_motion_times", "release_overruns",
-           "rest_drift", "summarize"]
+           "force_errors_in_motion", "hands_off_intervals", "phantom_forces",
+           "release_motion_times", "release_overruns", "rest_drift", "summarize"]
 
 #: TCP speed from which the force error counts as "in motion" [m/s] (issue 24).
 MOTION_SPEED = 0.02
@@ -108,14 +108,20 @@ def rest_drift(log: SessionLog) -> float | None:
     return drift
 
 
-def _hands_off(log: SessionLog) -> list[tuple[int, int]] | None:
-    """The intervals [start, stop) of samples where the applied wrench (the simulator's truth)
-    is exactly zero, in time order; None without the truth."""
-    if log.wrench_applied_base is None:
-        return None
-    free = ~np.any(log.wrench_applied_base != 0.0, axis=1)
+def hands_off_intervals(applied: Array) -> list[tuple[int, int]]:
+    """The intervals [start, stop) of samples where ``applied`` (a wrench or force per sample,
+    shape (samples, k)) is exactly zero, in time order."""
+    free = ~np.any(applied != 0.0, axis=1)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _hands_off(log: SessionLog) -> list[tuple[int, int]] | None:
+    """:func:`hands_off_intervals` of the log's applied wrench (the simulator's truth); None
+    without the truth."""
+    if log.wrench_applied_base is None:
+        return None
+    return hands_off_intervals(log.wrench_applied_base)
 
 
 def force_errors_in_motion(log: SessionLog, min_speed: float = MOTION_SPEED) -> Array | None:
