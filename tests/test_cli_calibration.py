@@ -317,6 +317,70 @@ def test_payload_against_an_unloaded_run(workdir: Path, tmp_path: Path,
     assert out.out == "" and "sim_seed" in out.err and str(other) in out.err
 
 
+def test_drive_gains_with_a_known_mass(workdir: Path, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """record the trajectory with a known 12 kg → drive-gains against the unloaded run writes
+    the gains file (as the library measures them: over 20 s some joint's gain to 1 %);
+    payload --drive-gains prints the library's estimate through the file's gains. A bad mass,
+    a gains file out of range or of another simulated robot: exit 2, naming the field, nothing
+    written or printed."""
+    from leadthrough.estimation.drive_gains import KnownPayload, estimate_drive_gains
+    from leadthrough.estimation.drive_gains_file import load_drive_gains
+    from leadthrough.estimation.payload import estimate_payload
+    from leadthrough.identification.params_file import load_params
+    from leadthrough.robot import load_robot
+
+    params = tmp_path / "p.toml"
+    assert main(["identify", str(workdir / "rec0.parquet"), "--robot", "er20", "--method",
+                 "ols-cv", "-o", str(params)]) == 0
+    known, loaded = tmp_path / "known.parquet", tmp_path / "loaded.parquet"
+    for path, run, mass, com in ((known, "3", "12", ("0.03", "0", "0.12")),
+                                 (loaded, "2", "10", ("0", "0", "0.1"))):
+        assert main(["record", "--robot", "er20", "--trajectory", str(workdir / "traj.csv"),
+                     "--seed", "1", "--run", run, "--payload-mass", mass, "--payload-com",
+                     *com, "-o", str(path)]) == 0
+    capsys.readouterr()
+    unloaded, gains_file = workdir / "rec1.parquet", tmp_path / "gains.toml"
+    base = ["drive-gains", str(known), "--reference", str(unloaded), "--robot", "er20",
+            "--params", str(params), "--com", "0.03", "0", "0.12"]
+    assert main([*base, "--mass", "0", "-o", str(gains_file)]) == 2
+    assert "--mass" in capsys.readouterr().err and not gains_file.exists()
+    assert main([*base, "--mass", "12", "-o", str(gains_file), "--json"]) == 0
+    out = _json(capsys)
+    robot = load_robot("er20")
+    model = load_params(params, robot).params
+    lib = estimate_drive_gains(load_recording(known), load_recording(unloaded), robot, model,
+                               KnownPayload(12.0, (0.03, 0.0, 0.12)))
+    assert out["gain"] == lib.gain.tolist() and out["applied"] == lib.applied.tolist()
+    assert any(out["applied"]) and out["output"] == str(gains_file)
+    read, seed = load_drive_gains(gains_file, robot)
+    assert seed == 1
+    np.testing.assert_array_equal(read.gain, lib.gain)
+    np.testing.assert_array_equal(read.gain_std, lib.gain_std)
+    np.testing.assert_array_equal(read.load_friction, lib.load_friction)
+    pay = ["payload", str(loaded), "--robot", "er20", "--params", str(params), "--reference",
+           str(unloaded), "--json"]
+    assert main([*pay, "--drive-gains", str(gains_file)]) == 0
+    through = _json(capsys)
+    est = estimate_payload(load_recording(loaded), robot, model,
+                           reference=load_recording(unloaded), drive_gains=read)
+    assert through["mass_kg"] == est.mass_kg and through["drive_gains"] == str(gains_file)
+    assert abs(est.mass_kg - 10.0) < 0.5
+    name = robot.joint_names[1]
+    text = gains_file.read_text()
+    bad = tmp_path / "bad.toml"
+    start = text.index(f"[joints.{name}]")
+    gain_at = text.index("gain = ", start)
+    bad.write_text(text[:gain_at] + "gain = 2.5" + text[text.index("\n", gain_at):])
+    assert main([*pay, "--drive-gains", str(bad)]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and f"joints.{name}.gain" in err.err and "2.5" in err.err
+    bad.write_text(text.replace("sim_seed = 1", "sim_seed = 2"))
+    assert main([*pay, "--drive-gains", str(bad)]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and "meta.sim_seed" in err.err
+
+
 def test_presliding_test_excite_record_identify(workdir: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """excite --presliding → record → identify --presliding-test writes each joint's z₀ and

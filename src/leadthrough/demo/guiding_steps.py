@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.data.preprocess import ProcessedData, preprocess
 from leadthrough.dynamics.model import DriveModelParameters
+from leadthrough.estimation.drive_gains import DriveGains
 from leadthrough.estimation.payload import estimate_payload
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
@@ -30,8 +31,8 @@ from leadthrough.sim.session import (
     run_sim_session,
 )
 
-__all__ = ["PAPER_WEIGHTS_N", "PAPER_WORST", "PAYLOAD_RUN_S", "GuidingDemo", "PayloadRow",
-           "payload_table", "run_guiding_demo"]
+__all__ = ["KNOWN_MASS_RUN", "PAPER_WEIGHTS_N", "PAPER_WORST", "PAYLOAD_RUN_S", "UNLOADED_RUN",
+           "GuidingDemo", "PayloadRow", "payload_run", "payload_table", "run_guiding_demo"]
 
 Array = NDArray[np.float64]
 
@@ -44,6 +45,9 @@ PAPER_WORST = "up to 7.84 N, 5.6 %"
 #: 60 s runs of the same payload its spread was 0.4 N (1σ), 0.55 % of the lightest payload, so
 #: one 60 s run misses 1 % about one time in four. Four minutes halve the spread.
 PAYLOAD_RUN_S = 240.0
+#: The simulated runs' noise numbers (``SimConfig.run``) of the held-out trajectory without a
+#: payload and with the known mass of the drive gains.
+UNLOADED_RUN, KNOWN_MASS_RUN = 9, 20
 
 
 @dataclass(frozen=True)
@@ -61,10 +65,21 @@ class PayloadRow:
     error_pct: float
 
 
+def payload_run(robot: Robot, cal: CalibrationSet, seed: int, seconds: float,
+                plant: PlantPreset | str, payload: Payload | None, run: int) -> ProcessedData:
+    """One run of the held-out trajectory on simulated robot ``seed`` (``run`` numbers the
+    run's noise: :data:`UNLOADED_RUN`, :data:`KNOWN_MASS_RUN`, Table III's from 10 on)."""
+    config = SimConfig(seed=seed, run=run, plant=plant_preset(plant))
+    return preprocess(record_excitation(robot, cal.held_out_excitation, seconds, config,
+                                        payload=payload).measured, robot)
+
+
 def payload_table(robot: Robot, cal: CalibrationSet,
                   params: Mapping[str, DriveModelParameters], seed: int,
                   seconds: float, plant: PlantPreset | str = PlantPreset.REALISTIC,
-                  reference: bool = False) -> dict[str, list[PayloadRow]]:
+                  reference: bool = False, unloaded: ProcessedData | None = None,
+                  drive_gains: Mapping[str, DriveGains] | None = None
+                  ) -> dict[str, list[PayloadRow]]:
     """Table III: each payload on its own run of the held-out trajectory, weight from motion.
 
     Each payload is recorded once and estimated with every parameter set.
@@ -76,30 +91,36 @@ def payload_table(robot: Robot, cal: CalibrationSet,
         seed: Simulated robot instance.
         seconds: Length of each payload run [s].
         plant: Simulated plant (the one ``cal`` was recorded on).
-        reference: Also record the trajectory once without a payload and estimate every
-            payload against that run too (``estimate_payload``'s ``reference``), under the
-            label ``"<label> vs unloaded"``.
+        reference: Also estimate every payload against a run of the trajectory without a
+            payload (``estimate_payload``'s ``reference``), under the label
+            ``"<label> vs unloaded"``.
+        unloaded: That run (:func:`payload_run` with :data:`UNLOADED_RUN`); None: recorded
+            here where needed.
+        drive_gains: Label → drive gains measured with a known mass; each payload is then
+            also estimated against the unloaded run through them, under
+            ``"<label> vs unloaded, gains"``.
 
     Returns:
         Label → one row per payload of :data:`PAPER_WEIGHTS_N`.
     """
     g = float(np.linalg.norm(robot.model.gravity.linear))
-
-    def run(k: int, payload: Payload | None) -> ProcessedData:
-        config = SimConfig(seed=seed, run=10 + k, plant=plant_preset(plant))
-        return preprocess(record_excitation(robot, cal.held_out_excitation, seconds, config,
-                                            payload=payload).measured, robot)
-
-    unloaded = run(-1, None) if reference else None
-    labels = [*params, *(f"{label} vs unloaded" for label in params if reference)]
+    gains = dict(drive_gains or {})
+    if (reference or gains) and unloaded is None:
+        unloaded = payload_run(robot, cal, seed, seconds, plant, None, UNLOADED_RUN)
+    labels = [*params, *(f"{label} vs unloaded" for label in params if reference),
+              *(f"{label} vs unloaded, gains" for label in gains)]
     rows: dict[str, list[PayloadRow]] = {label: [] for label in labels}
     for k, weight in enumerate(PAPER_WEIGHTS_N):
-        data = run(k, Payload(weight / g, (0.0, 0.0, 0.1)))
+        data = payload_run(robot, cal, seed, seconds, plant, Payload(weight / g, (0.0, 0.0, 0.1)),
+                           10 + k)
         for label, p in params.items():
             estimates = {label: estimate_payload(data, robot, p, "motion")}
-            if unloaded is not None:
+            if reference:
                 estimates[f"{label} vs unloaded"] = estimate_payload(data, robot, p, "motion",
                                                                      reference=unloaded)
+            if label in gains:
+                estimates[f"{label} vs unloaded, gains"] = estimate_payload(
+                    data, robot, p, "motion", reference=unloaded, drive_gains=gains[label])
             for key, est in estimates.items():
                 rows[key].append(PayloadRow(true_n=weight, estimated_n=est.weight_n,
                                             error_pct=100.0 * (est.weight_n - weight) / weight))
