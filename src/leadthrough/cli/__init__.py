@@ -38,6 +38,10 @@ _EPILOG = """examples:
   leadthrough identify rec.parquet --robot er20 --method proposed -o params.toml
   leadthrough validate params.toml heldout.parquet --robot er20
   leadthrough payload loaded.parquet --robot er20 --params params.toml
+  leadthrough drive-gains known.parquet --reference unloaded.parquet --params params.toml
+      --mass 20 --com 0 0 0.08 -o gains.toml   drive gains from a known mass
+  leadthrough payload loaded.parquet --params params.toml --reference unloaded.parquet
+      --drive-gains gains.toml              a payload through them
   leadthrough guide --robot er20 --params params.toml --operator seam -o session.parquet
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
   leadthrough emulate ur-rtde --robot ur5 --seed 1   an emulated controller on its real protocol

@@ -31,7 +31,7 @@ from leadthrough.sim.session import (
     run_sim_session,
 )
 
-__all__ = ["KNOWN_MASS_RUN", "PAPER_WEIGHTS_N", "PAPER_WORST", "PAYLOAD_RUN_S", "UNLOADED_RUN",
+__all__ = ["PAPER_WEIGHTS_N", "PAPER_WORST", "PAYLOAD_RUN_S", "UNLOADED_RUN",
            "GuidingDemo", "PayloadRow", "payload_run", "payload_table", "run_guiding_demo"]
 
 Array = NDArray[np.float64]
@@ -45,9 +45,9 @@ PAPER_WORST = "up to 7.84 N, 5.6 %"
 #: 60 s runs of the same payload its spread was 0.4 N (1σ), 0.55 % of the lightest payload, so
 #: one 60 s run misses 1 % about one time in four. Four minutes halve the spread.
 PAYLOAD_RUN_S = 240.0
-#: The simulated runs' noise numbers (``SimConfig.run``) of the held-out trajectory without a
-#: payload and with the known mass of the drive gains.
-UNLOADED_RUN, KNOWN_MASS_RUN = 9, 20
+#: The simulated run's noise number (``SimConfig.run``) of the held-out trajectory without a
+#: payload.
+UNLOADED_RUN = 9
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ class PayloadRow:
 def payload_run(robot: Robot, cal: CalibrationSet, seed: int, seconds: float,
                 plant: PlantPreset | str, payload: Payload | None, run: int) -> ProcessedData:
     """One run of the held-out trajectory on simulated robot ``seed`` (``run`` numbers the
-    run's noise: :data:`UNLOADED_RUN`, :data:`KNOWN_MASS_RUN`, Table III's from 10 on)."""
+    run's noise: :data:`UNLOADED_RUN`, Table III's from 10 on)."""
     config = SimConfig(seed=seed, run=run, plant=plant_preset(plant))
     return preprocess(record_excitation(robot, cal.held_out_excitation, seconds, config,
                                         payload=payload).measured, robot)
