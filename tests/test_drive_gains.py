@@ -114,6 +114,9 @@ def test_a_joint_the_mass_barely_loads_is_not_applied(er20: Robot, runs: dict) -
         estimate_drive_gains(noisy(_data(er20, light, seed=4)), unloaded, er20, truth,
                              KnownPayload(0.02))
     assert e.value.field is not None and e.value.field.startswith("gain_std")
+    with pytest.raises(DataError, match="with and without the known mass follow different") as e:
+        estimate_drive_gains(known, noisy(_data(er20, truth, seed=5)), er20, truth, KNOWN)
+    assert e.value.field is not None and e.value.field.startswith("q")
     foreign = replace(gains, robot="ur5")
     with pytest.raises(DataError, match="another robot"):
         estimate_payload(known, er20, truth, "motion", reference=unloaded, drive_gains=foreign)

@@ -157,15 +157,24 @@ def estimate_drive_gains(
         The gains.
 
     Raises:
-        DataError: The runs do not overlap or follow different paths, or the known payload
-            loads no joint enough to measure its gain.
+        DataError: The runs do not overlap or follow different paths (another trajectory,
+            or a mass that takes a drive to its limit), or the known payload loads no joint
+            enough to measure its gain.
     """
     data = loaded if isinstance(loaded, ProcessedData) else preprocess(
         loaded, robot, preprocess_config)
     ref = unloaded if isinstance(unloaded, ProcessedData) else preprocess(
         unloaded, robot, preprocess_config)
-    system, shift = against_reference(motion_system(data, robot, params, True), data, ref,
-                                      robot, params)
+    try:
+        system, shift = against_reference(motion_system(data, robot, params, True), data, ref,
+                                          robot, params)
+    except DataError as e:
+        if e.message != "the reference run follows another path":
+            raise
+        raise DataError("the runs with and without the known mass follow different paths",
+                        source=data.source, field=e.field, value=e.value,
+                        expected=f"{e.expected}; the same trajectory both times, with a mass "
+                                 "its drives carry without reaching their limits") from e
     y = system.regressor[:, :, :PAYLOAD_COLUMNS] @ known.parameters(robot)
     n = robot.n
     gain, std, load = np.ones(n), np.full(n, np.inf), np.zeros(n)
