@@ -80,16 +80,22 @@ def test_gains_and_load_friction_are_exact_on_a_known_model(er20: Robot, runs: d
     assert abs(off.mass_kg / OTHER_MASS - 1.0) > 0.01
 
 
-def test_the_payloads_own_load_friction_comes_from_the_params(er20: Robot, runs: dict) -> None:
-    """With the drive file's gains right, the identified load coefficients model the
-    friction the payload itself adds: the payload is exact; without them it is not."""
+def test_without_drive_gains_the_payloads_own_load_friction_is_not_modelled(
+        er20: Robot, runs: dict) -> None:
+    """The drive file's gains right, no drive gains: the identified load coefficients are not
+    used for the payload's own friction (one fit, as with none identified), so the mass is off
+    by that friction; drive gains measured with the known mass (all 1 here) make it exact."""
     truth = runs["truth"]
     est = estimate_payload(runs["other"], er20, truth, "motion", reference=runs["unloaded"])
-    assert est.mass_kg == pytest.approx(OTHER_MASS, rel=1e-6)
     blind = replace(truth, load_friction=np.zeros(0))
-    est = estimate_payload(runs["other"], er20, blind, "motion", reference=runs["unloaded"])
-    assert est.iterations == 1
+    same = estimate_payload(runs["other"], er20, blind, "motion", reference=runs["unloaded"])
+    assert est.iterations == 1 and est.mass_kg == same.mass_kg
     assert abs(est.mass_kg / OTHER_MASS - 1.0) > 1e-3
+    gains = estimate_drive_gains(runs["known"], runs["unloaded"], er20, truth, KNOWN)
+    np.testing.assert_allclose(gains.gain, 1.0, rtol=1e-6)
+    est = estimate_payload(runs["other"], er20, truth, "motion", reference=runs["unloaded"],
+                           drive_gains=gains)
+    assert est.mass_kg == pytest.approx(OTHER_MASS, rel=1e-6) and est.iterations > 1
 
 
 def test_a_joint_the_mass_barely_loads_is_not_applied(er20: Robot, runs: dict) -> None:
