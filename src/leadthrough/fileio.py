@@ -7,15 +7,18 @@ A crash or a bad input never leaves a half-written file behind.
 from __future__ import annotations
 
 import codecs
+import math
 import os
 import tempfile
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from leadthrough.errors import DataError, LeadthroughError
 
-__all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "require_file",
-           "require_folder", "require_text"]
+__all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "read_toml", "require_file",
+           "require_folder", "require_text", "toml_number", "toml_table"]
 
 #: The first bytes of a Parquet file (its magic number).
 PARQUET_MAGIC = b"PAR1"
@@ -168,3 +171,47 @@ def read_comment_header(path: Path) -> tuple[int, dict[str, str]]:
             if sep:
                 meta[key.strip()] = value.strip()
     return count, meta
+
+
+def read_toml(path: str | Path, what: str) -> dict[str, Any]:
+    """A TOML file's document.
+
+    Args:
+        path: The file.
+        what: What it is, for the message (``"params file"``).
+
+    Raises:
+        DataError: Missing, a folder, not UTF-8 or not valid TOML.
+    """
+    path = Path(path)
+    require_file(path, what, "an existing TOML file")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"not valid TOML: {e}", source=path) from e
+
+
+def toml_number(path: Path, field: str, value: Any) -> float:
+    """A TOML value that must be a finite number (not a boolean).
+
+    Raises:
+        DataError: Anything else, naming ``path`` and ``field``.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise DataError("not a finite number", source=path, field=field, value=value,
+                        expected="a finite number")
+    return float(value)
+
+
+def toml_table(path: Path, doc: dict[str, Any], key: str, name: str | None = None
+               ) -> dict[str, Any]:
+    """The table ``doc[key]`` (named ``name`` in messages, default ``key``).
+
+    Raises:
+        DataError: Missing or not a table.
+    """
+    t = doc.get(key)
+    if not isinstance(t, dict):
+        raise DataError("missing", source=path, field=name or key,
+                        expected=f"a [{name or key}] table")
+    return t

@@ -61,7 +61,6 @@ MATLAB files (``format = "mat"``) name a struct and, per signal, a field holding
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -70,7 +69,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.errors import DataError
-from leadthrough.fileio import require_file
+from leadthrough.fileio import read_toml
 
 __all__ = ["ColumnMap", "Signal", "parse_column_map"]
 
@@ -215,11 +214,7 @@ def parse_column_map(path: str | Path) -> ColumnMap:
         DataError: The file is missing or malformed; the message names the field.
     """
     path = Path(path)
-    require_file(path, "column map", "an existing TOML file")
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"not valid TOML: {e}", source=path) from e
+    doc = read_toml(path, "column map")
     for required in ("time", "q"):
         if required not in doc:
             raise DataError("missing", source=path, field=required,

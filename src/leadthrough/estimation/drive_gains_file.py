@@ -23,7 +23,6 @@ Layout::
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +32,7 @@ from leadthrough.data.recording import is_sim_seed
 from leadthrough.dynamics.model import MAX_LOAD_FRICTION
 from leadthrough.errors import DataError
 from leadthrough.estimation.drive_gains import DriveGains, KnownPayload
-from leadthrough.fileio import atomic_write_text, require_file
+from leadthrough.fileio import atomic_write_text, read_toml, toml_number, toml_table
 from leadthrough.robot.description import Robot
 
 __all__ = ["MAX_GAIN_ERROR", "load_drive_gains", "save_drive_gains"]
@@ -83,12 +82,8 @@ def load_drive_gains(path: str | Path, robot: Robot) -> tuple[DriveGains, int | 
         DataError: Missing, malformed, out of range, or written for another robot.
     """
     path = Path(path)
-    require_file(path, "drive-gains file", "an existing TOML file")
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"not valid TOML: {e}", source=path) from e
-    meta = _table(path, doc, "meta")
+    doc = read_toml(path, "drive-gains file")
+    meta = toml_table(path, doc, "meta")
     if meta.get("robot") != robot.name:
         raise DataError("drive gains of another robot", source=path, field="meta.robot",
                         value=meta.get("robot"), expected=f"'{robot.name}'")
@@ -100,8 +95,8 @@ def load_drive_gains(path: str | Path, robot: Robot) -> tuple[DriveGains, int | 
     if not isinstance(com, list) or len(com) != 3:
         raise DataError("malformed", source=path, field="meta.known_com_m", value=com,
                         expected="3 numbers [m]")
-    c = [_number(path, "meta.known_com_m", v) for v in com]
-    mass = _number(path, "meta.known_mass_kg", meta.get("known_mass_kg"))
+    c = [toml_number(path, "meta.known_com_m", v) for v in com]
+    mass = toml_number(path, "meta.known_mass_kg", meta.get("known_mass_kg"))
     if mass <= 0.0:
         raise DataError("out of range", source=path, field="meta.known_mass_kg", value=mass,
                         expected="> 0 kg")
@@ -109,27 +104,27 @@ def load_drive_gains(path: str | Path, robot: Robot) -> tuple[DriveGains, int | 
     if not isinstance(inertia, list) or len(inertia) != 9:
         raise DataError("malformed", source=path, field="meta.known_inertia_kgm2",
                         value=inertia, expected="9 numbers [kg·m²], row by row")
-    i = [_number(path, "meta.known_inertia_kgm2", v) for v in inertia]
+    i = [toml_number(path, "meta.known_inertia_kgm2", v) for v in inertia]
     try:
         known = KnownPayload(mass, (c[0], c[1], c[2]),
                              ((i[0], i[1], i[2]), (i[3], i[4], i[5]), (i[6], i[7], i[8])))
     except DataError as e:
         raise DataError(e.message, source=path, field="meta.known_inertia_kgm2",
                         value=inertia, expected=e.expected) from e
-    joints = _table(path, doc, "joints")
+    joints = toml_table(path, doc, "joints")
     columns: dict[str, list[Any]] = {"gain": [], "gain_std": [], "load_friction": [],
                                      "applied": []}
     for name in robot.joint_names:
-        table = _table(path, joints, name, f"joints.{name}")
+        table = toml_table(path, joints, name, f"joints.{name}")
         for key, values in columns.items():
             values.append(_joint_value(path, f"joints.{name}.{key}", key, table.get(key)))
     return DriveGains(robot=robot.name, gain=np.array(columns["gain"]),
                       gain_std=np.array(columns["gain_std"]),
                       load_friction=np.array(columns["load_friction"]),
                       applied=np.array(columns["applied"], dtype=bool), known=known,
-                      reference_shift_s=_number(path, "meta.reference_shift_s",
+                      reference_shift_s=toml_number(path, "meta.reference_shift_s",
                                                 meta.get("reference_shift_s", 0.0)),
-                      samples=int(_number(path, "meta.samples", meta.get("samples", 0)))), seed
+                      samples=int(toml_number(path, "meta.samples", meta.get("samples", 0)))), seed
 
 
 def _joint_value(path: Path, field: str, key: str, value: Any) -> float | bool:
@@ -141,7 +136,7 @@ def _joint_value(path: Path, field: str, key: str, value: Any) -> float | bool:
         return value
     if key == "gain_std" and value == math.inf:
         return math.inf
-    v = _number(path, field, value)
+    v = toml_number(path, field, value)
     ranges = {"gain": (1.0 - MAX_GAIN_ERROR < v < 1.0 + MAX_GAIN_ERROR,
                        f"between {1 - MAX_GAIN_ERROR:g} and {1 + MAX_GAIN_ERROR:g}"),
               "gain_std": (v >= 0.0, ">= 0, or inf"),
@@ -151,19 +146,3 @@ def _joint_value(path: Path, field: str, key: str, value: Any) -> float | bool:
     if not ok:
         raise DataError("out of range", source=path, field=field, value=v, expected=expected)
     return v
-
-
-def _number(path: Path, field: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise DataError("not a finite number", source=path, field=field, value=value,
-                        expected="a finite number")
-    return float(value)
-
-
-def _table(path: Path, doc: dict[str, Any], key: str, name: str | None = None
-           ) -> dict[str, Any]:
-    t = doc.get(key)
-    if not isinstance(t, dict):
-        raise DataError("missing", source=path, field=name or key,
-                        expected=f"a [{name or key}] table")
-    return t

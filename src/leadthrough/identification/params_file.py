@@ -32,8 +32,6 @@ Files are written atomically.
 
 from __future__ import annotations
 
-import math
-import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -54,7 +52,7 @@ from leadthrough.dynamics.model import (
 )
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
 from leadthrough.errors import DataError
-from leadthrough.fileio import atomic_write_text, require_file
+from leadthrough.fileio import atomic_write_text, read_toml, toml_number, toml_table
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.robot.description import Robot
 
@@ -178,20 +176,6 @@ def save_params(
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def _number(path: Path, field: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise DataError("not a finite number", source=path, field=field, value=value,
-                        expected="a finite number")
-    return float(value)
-
-
-def _table(path: Path, doc: dict[str, Any], key: str) -> dict[str, Any]:
-    t = doc.get(key)
-    if not isinstance(t, dict):
-        raise DataError("missing", source=path, field=key, expected=f"a [{key}] table")
-    return t
-
-
 def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     """Read a params file and check it belongs to ``robot``.
 
@@ -199,15 +183,11 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
         DataError: Missing, malformed, or written for another robot.
     """
     path = Path(path)
-    require_file(path, "params file", "an existing TOML file")
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"not valid TOML: {e}", source=path) from e
+    doc = read_toml(path, "params file")
     meta, model = _read_meta(path, doc, robot)
-    joints = _JointTables(path, robot, model, _table(path, doc, "joints"),
-                          _table(path, doc, "links"))
-    noise_mean, noise_std = _read_noise(path, _table(path, doc, "noise"), robot.n)
+    joints = _JointTables(path, robot, model, toml_table(path, doc, "joints"),
+                          toml_table(path, doc, "links"))
+    noise_mean, noise_std = _read_noise(path, toml_table(path, doc, "noise"), robot.n)
     seed = meta.get("sim_seed")
     if seed is not None and not is_sim_seed(seed):
         raise DataError("malformed", source=path, field="meta.sim_seed", value=seed,
@@ -230,7 +210,7 @@ def load_params(path: str | Path, robot: Robot) -> ParamsFile:
 def _read_meta(path: Path, doc: dict[str, Any], robot: Robot
                ) -> tuple[dict[str, Any], FrictionModel]:
     """The ``[meta]`` table, checked to belong to ``robot``, and its friction model."""
-    meta = _table(path, doc, "meta")
+    meta = toml_table(path, doc, "meta")
     if meta.get("robot") != robot.name:
         raise DataError("params file belongs to another robot", source=path, field="meta.robot",
                         value=meta.get("robot"), expected=f"'{robot.name}' (identify this robot "
@@ -252,7 +232,7 @@ def _read_noise(path: Path, noise: dict[str, Any], n: int) -> tuple[Array, Array
         if not isinstance(v, list) or len(v) != n:
             raise DataError("malformed", source=path, field=f"noise.{key}", value=v,
                             expected=f"a list of {n} numbers")
-        arrays[key] = np.array([_number(path, f"noise.{key}", x) for x in v])
+        arrays[key] = np.array([toml_number(path, f"noise.{key}", x) for x in v])
     if np.any(arrays["std"] <= 0):
         j = int(np.argmax(arrays["std"] <= 0))
         raise DataError("out of range", source=path, field=f"noise.std[{j}]",
@@ -303,30 +283,30 @@ class _JointTables:
         _only(path, f"joints.{jn}", jt, {*self.drive, "offset", "presliding",
                                          "presliding_relaxation", "load_friction"})
         if "offset" in jt:
-            self.offset[k] = _number(path, f"joints.{jn}.offset", jt["offset"])
+            self.offset[k] = toml_number(path, f"joints.{jn}.offset", jt["offset"])
             self.has_offset = True
         if "presliding" in jt:
-            z0 = self.presliding[k] = _number(path, f"joints.{jn}.presliding", jt["presliding"])
+            z0 = self.presliding[k] = toml_number(path, f"joints.{jn}.presliding", jt["presliding"])
             if not 0 < z0 <= MAX_PRESLIDING_RAD:
                 raise DataError("out of range", source=path, field=f"joints.{jn}.presliding",
                                 value=z0, expected=f"0 < z0 <= {MAX_PRESLIDING_RAD:g} rad")
             self.presliding_joints += 1
         if "presliding_relaxation" in jt:
             field = f"joints.{jn}.presliding_relaxation"
-            rate = self.relaxation[k] = _number(path, field, jt["presliding_relaxation"])
+            rate = self.relaxation[k] = toml_number(path, field, jt["presliding_relaxation"])
             if not 0 <= rate <= MAX_PRESLIDING_RELAXATION:
                 raise DataError("out of range", source=path, field=field, value=rate,
                                 expected=f"0 <= rate <= {MAX_PRESLIDING_RELAXATION:g} 1/s")
             self.relaxation_joints += 1
         if "load_friction" in jt:
-            fl = self.load[k] = _number(path, f"joints.{jn}.load_friction", jt["load_friction"])
+            fl = self.load[k] = toml_number(path, f"joints.{jn}.load_friction", jt["load_friction"])
             if not 0 <= fl < MAX_LOAD_FRICTION:
                 raise DataError("out of range", source=path, field=f"joints.{jn}.load_friction",
                                 value=fl, expected=f"0 <= f_cL < {MAX_LOAD_FRICTION:g} (extra "
                                                    "Coulomb friction per N·m transmitted)")
             self.load_joints += 1
         for key, values in self.drive.items():
-            values[k] = _number(path, f"joints.{jn}.{key}", _required(path, f"joints.{jn}", jt,
+            values[k] = toml_number(path, f"joints.{jn}.{key}", _required(path, f"joints.{jn}", jt,
                                                                        key))
             if self.model is FrictionModel.STRIBECK and key != "rotor_inertia":
                 # the paper's bounds (friction > 0, met by the solvers to their tolerance);
@@ -340,7 +320,7 @@ class _JointTables:
     def _read_link(self, k: int, jn: str, lt: dict[str, Any]) -> None:
         _only(self.path, f"links.{jn}", lt, set(LINK_PARAMETER_NAMES))
         for i, p in enumerate(LINK_PARAMETER_NAMES):
-            self.phi[10 * k + i] = _number(self.path, f"links.{jn}.{p}",
+            self.phi[10 * k + i] = toml_number(self.path, f"links.{jn}.{p}",
                                            _required(self.path, f"links.{jn}", lt, p))
 
     def parameters(self) -> DriveModelParameters:
@@ -378,7 +358,7 @@ def _required(path: Path, where: str, table: dict[str, Any], key: str) -> Any:
 
 
 def _nonnegative(path: Path, field: str, value: object) -> float:
-    x = _number(path, field, value)
+    x = toml_number(path, field, value)
     if x < 0:
         raise DataError("out of range", source=path, field=field, value=x, expected=">= 0")
     return x
