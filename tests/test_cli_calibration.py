@@ -345,6 +345,10 @@ def test_drive_gains_with_a_known_mass(workdir: Path, tmp_path: Path,
             "--params", str(params), "--com", "0.03", "0", "0.12"]
     assert main([*base, "--mass", "0", "-o", str(gains_file)]) == 2
     assert "--mass" in capsys.readouterr().err and not gains_file.exists()
+    assert main([*base, "--mass", "12", "--inertia", "0.1", "-0.1", "0.1",
+                 "-o", str(gains_file)]) == 2
+    err = capsys.readouterr().err
+    assert "--inertia" in err and "-0.1" in err and not gains_file.exists()
     assert main([*base, "--mass", "12", "-o", str(gains_file), "--json"]) == 0
     out = _json(capsys)
     robot = load_robot("er20")

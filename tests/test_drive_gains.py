@@ -142,6 +142,8 @@ def test_known_payload_parameters_follow_pinocchio(er20: Robot) -> None:
     for bad, name in ((dict(mass_kg=0.0), "mass_kg"), (dict(mass_kg=float("nan")), "mass_kg"),
                       (dict(mass_kg=1.0, com_tcp=(0.0, 0.1)), "com_tcp"),
                       (dict(mass_kg=1.0, inertia_com=((1, 0, 0), (0, -1, 0), (0, 0, 1))),
+                       "inertia_com"),
+                      (dict(mass_kg=1.0, inertia_com=((-1e-13, 0, 0), (0, 1, 0), (0, 0, 1))),
                        "inertia_com")):
         with pytest.raises(DataError) as e:
             KnownPayload(**bad)  # type: ignore[arg-type]

@@ -22,6 +22,10 @@ from leadthrough.robot.description import Robot, load_robot
 
 __all__ = ["register"]
 
+#: The option of each of ``KnownPayload``'s fields.
+_KNOWN_PAYLOAD_OPTIONS = {"known_payload.mass_kg": "--mass", "known_payload.com_tcp": "--com",
+                          "known_payload.inertia_com": "--inertia"}
+
 
 def register(sub: Any) -> None:
     """Add the subcommands."""
@@ -80,19 +84,26 @@ def _inputs(args: argparse.Namespace
     pf = load_params(args.params, robot)
     rec = load_recording(args.recording, args.columns)
     rec.check_joint_range(robot)
-    if None not in (rec.sim_seed, pf.sim_seed) and rec.sim_seed != pf.sim_seed:
-        raise DataError("recorded on another simulated robot than the params were identified "
-                        "on", source=args.recording, field="sim_seed", value=rec.sim_seed,
-                        expected=f"{pf.sim_seed} (the params' [meta] sim_seed)")
+    _same_simulated_robot(rec.sim_seed, pf.sim_seed, "recorded on another simulated robot than "
+                          "the params were identified on", args.recording, "sim_seed",
+                          "the params' [meta] sim_seed")
     reference = None
     if args.reference is not None:
         reference = load_recording(args.reference, args.columns)
         reference.check_joint_range(robot)
-        if None not in (rec.sim_seed, reference.sim_seed) and rec.sim_seed != reference.sim_seed:
-            raise DataError("recorded on another simulated robot than the payload's recording",
-                            source=args.reference, field="sim_seed", value=reference.sim_seed,
-                            expected=f"{rec.sim_seed} (the recording's sim_seed)")
+        _same_simulated_robot(reference.sim_seed, rec.sim_seed, "recorded on another simulated "
+                              "robot than the payload's recording", args.reference, "sim_seed",
+                              "the recording's sim_seed")
     return robot, pf, rec, reference
+
+
+def _same_simulated_robot(seed: int | None, other: int | None, message: str, source: Path,
+                          field: str, what: str) -> None:
+    """Refuse ``source`` (its ``field`` = ``seed``) made on another simulated robot instance than
+    ``other`` (``what``); a real robot's None matches anything."""
+    if None not in (seed, other) and seed != other:
+        raise DataError(message, source=source, field=field, value=seed,
+                        expected=f"{other} ({what})")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,10 +112,8 @@ def run(args: argparse.Namespace) -> int:
     gains = None
     if args.drive_gains is not None:
         gains, seed = load_drive_gains(args.drive_gains, robot)
-        if None not in (rec.sim_seed, seed) and rec.sim_seed != seed:
-            raise DataError("drive gains of another simulated robot", source=args.drive_gains,
-                            field="meta.sim_seed", value=seed,
-                            expected=f"{rec.sim_seed} (the recording's sim_seed)")
+        _same_simulated_robot(seed, rec.sim_seed, "drive gains of another simulated robot",
+                              args.drive_gains, "meta.sim_seed", "the recording's sim_seed")
     est = estimate_payload(rec, robot, pf.params, args.method, reference=reference,
                            drive_gains=gains)
     out: dict[str, Any] = {"robot": robot.name, "method": est.method, "mass_kg": est.mass_kg,
@@ -130,19 +139,16 @@ def run(args: argparse.Namespace) -> int:
 
 def run_gains(args: argparse.Namespace) -> int:
     """Execute ``leadthrough drive-gains``."""
-    if args.inertia is not None and (not np.all(np.isfinite(args.inertia))
-                                     or min(args.inertia) < 0.0):
-        raise DataError("out of range", field="--inertia", value=list(args.inertia),
-                        expected="three finite values >= 0 kg·m²")
     inertia = None
     if args.inertia is not None:
         ixx, iyy, izz = (float(v) for v in args.inertia)
         inertia = ((ixx, 0.0, 0.0), (0.0, iyy, 0.0), (0.0, 0.0, izz))
-    try:
+    try:       # KnownPayload checks the values; the message names the option
         known = KnownPayload(args.mass, tuple(args.com), inertia)
     except DataError as e:
-        flag = "--mass" if e.field and "mass" in e.field else "--com"
-        raise DataError(e.message, field=flag, value=e.value, expected=e.expected) from e
+        flag = _KNOWN_PAYLOAD_OPTIONS.get(e.field or "", "--mass")
+        value = list(args.inertia) if flag == "--inertia" else e.value
+        raise DataError(e.message, field=flag, value=value, expected=e.expected) from e
     robot, pf, rec, reference = _inputs(args)
     if reference is None:
         raise DataError("a run without the mass is needed", field="--reference",

@@ -35,7 +35,8 @@ from leadthrough.robot.description import Robot
 
 __all__ = ["MAX_COMMAND_LAG_S", "MAX_LOAD_FRICTION", "MAX_PRESLIDING_RAD",
            "MAX_PRESLIDING_RELAXATION",
-           "DriveModelParameters", "FrictionModel", "model_torque", "nominal_drive_parameters"]
+           "DriveModelParameters", "FrictionModel", "model_torque", "model_torque_from_links",
+           "nominal_drive_parameters"]
 
 Array = NDArray[np.float64]
 
@@ -200,6 +201,24 @@ def model_torque(
     """
     q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
     links = link_torque(robot.model, params.phi, q, qd, qdd)
+    return model_torque_from_links(robot, params, links, qd, qdd)
+
+
+def model_torque_from_links(
+    robot: Robot, params: DriveModelParameters, links: Array, qd: Array, qdd: Array
+) -> Array:
+    """:func:`model_torque` given its link torque K·φ (for a caller that needs that too).
+
+    Args:
+        robot: The robot.
+        params: Model parameters.
+        links: Link torque K·φ of ``params.phi`` [N·m], shape (N, n).
+        qd: Joint velocities [rad/s], shape (N, n).
+        qdd: Joint accelerations [rad/s²], shape (N, n).
+
+    Returns:
+        Joint torque the drives must deliver [N·m], shape (N, n).
+    """
     tau = (
         links
         + params.friction(qd, robot.gear_ratio, links)

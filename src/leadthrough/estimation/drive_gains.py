@@ -41,6 +41,7 @@ from leadthrough.estimation.payload_system import (
     PAYLOAD_COLUMNS,
     PayloadSystem,
     against_reference,
+    correlation_factor,
     motion_system,
 )
 from leadthrough.robot.description import Robot
@@ -86,6 +87,7 @@ class KnownPayload:
         inertia = self.inertia()
         if (inertia.shape != (3, 3) or not np.all(np.isfinite(inertia))
                 or not np.allclose(inertia, inertia.T, atol=1e-12)
+                or np.diag(inertia).min() < 0.0
                 or np.linalg.eigvalsh(0.5 * (inertia + inertia.T)).min() < -1e-12):
             raise DataError("the known payload's inertia must be a symmetric positive "
                             "semidefinite 3×3 matrix", field="known_payload.inertia_com",
@@ -218,17 +220,15 @@ def _joint_gain(system: PayloadSystem, y: Array, j: int) -> tuple[float, float, 
 
 
 def _least_squares(A: Array, b: Array) -> tuple[Array, Array]:
-    """The solution and its covariance, with the residual's variance inflated by
-    (1 + ρ)/(1 − ρ) for its lag-1 autocorrelation ρ (a smooth residual is worth fewer
-    independent samples)."""
+    """The solution and its covariance, with the residual's variance inflated by its
+    :func:`~leadthrough.estimation.payload_system.correlation_factor` (a smooth residual is
+    worth fewer independent samples)."""
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0.0] = 1.0
     An = A / scale
     sol, *_ = np.linalg.lstsq(An, b, rcond=None)
     r = b - An @ sol
     dof = max(b.size - A.shape[1], 1)
-    rr = float(r @ r)
-    rho = 0.0 if rr == 0.0 else min(max(float(r[:-1] @ r[1:]) / rr, 0.0), 1.0 - 1.0 / r.size)
-    sigma2 = rr / dof * (1.0 + rho) / (1.0 - rho)
+    sigma2 = float(r @ r) / dof * correlation_factor(r)
     cov = sigma2 * np.linalg.pinv(An.T @ An) / np.outer(scale, scale)
     return sol / scale, cov

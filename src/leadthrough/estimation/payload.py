@@ -54,6 +54,7 @@ from leadthrough.estimation.payload_system import (
     PAYLOAD_COLUMNS,
     PayloadSystem,
     against_reference,
+    correlation_factor,
     motion_system,
     payload_regressor,
     reference_shift,
@@ -265,16 +266,8 @@ def _fit(A: Array, b: Array, norms: Array, used: NDArray[np.bool_]
 
 
 def _correlation_factor(residual: Array, used: NDArray[np.bool_]) -> float:
-    """max over the joints of (1 + ρ)/(1 − ρ), ρ the lag-1 autocorrelation of the joint's
-    residual (``residual`` stacked sample-major as ``used``'s True entries), in [1, samples]."""
+    """max over the joints of :func:`correlation_factor` of the joint's residual
+    (``residual`` stacked sample-major as ``used``'s True entries), in [1, samples]."""
     full = np.zeros(used.shape)
     full[used] = residual
-    worst = 1.0
-    for j in range(used.shape[1]):
-        e = full[used[:, j], j]
-        if e.size < 3 or not np.any(e):
-            continue
-        rho = float(np.dot(e[:-1], e[1:]) / np.dot(e, e))
-        rho = min(max(rho, 0.0), 1.0 - 1.0 / e.size)
-        worst = max(worst, (1.0 + rho) / (1.0 - rho))
-    return worst
+    return max([1.0, *(correlation_factor(full[used[:, j], j]) for j in range(used.shape[1]))])

@@ -35,13 +35,18 @@ from numpy.typing import NDArray
 from leadthrough.data.align import interp_columns
 from leadthrough.data.preprocess import ProcessedData
 from leadthrough.dynamics.friction import StribeckParameters
-from leadthrough.dynamics.model import DriveModelParameters, model_torque
+from leadthrough.dynamics.model import (
+    DriveModelParameters,
+    model_torque,
+    model_torque_from_links,
+)
 from leadthrough.dynamics.regressor import link_regressor_batch, link_torque
 from leadthrough.errors import DataError
 from leadthrough.robot.description import Robot
 
 __all__ = ["MIN_OVERLAP", "SAME_PATH_RAD", "PayloadSystem", "against_reference",
-           "motion_system", "payload_regressor", "reference_shift", "static_system"]
+           "correlation_factor", "motion_system", "payload_regressor", "reference_shift",
+           "static_system"]
 
 Array = NDArray[np.float64]
 
@@ -87,7 +92,8 @@ def motion_system(data: ProcessedData, robot: Robot, params: DriveModelParameter
     n, model = robot.n, robot.model
     last = n  # joint index of the last link in the Pinocchio model
     K = link_regressor_batch(model, data.q, data.qd, data.qdd)[:, :, 10 * (last - 1):]
-    residual = data.torque - model_torque(robot, params, data.q, data.qd, data.qdd)
+    links = link_torque(model, params.phi, data.q, data.qd, data.qdd)
+    residual = data.torque - model_torque_from_links(robot, params, links, data.qd, data.qdd)
     sign = np.sign(data.qd)
     cols = np.arange(PAYLOAD_COLUMNS + n)
     if refit_friction:
@@ -97,7 +103,6 @@ def motion_system(data: ProcessedData, robot: Robot, params: DriveModelParameter
         K = np.concatenate([K, coulomb], axis=2)
     else:
         cols = np.arange(PAYLOAD_COLUMNS)
-    links = link_torque(model, params.phi, data.q, data.qd, data.qdd)
     return PayloadSystem(K, residual, data.moving, cols, links, sign)
 
 
@@ -116,9 +121,9 @@ def static_system(data: ProcessedData, robot: Robot, params: DriveModelParameter
     # at rest: no friction and no inertial terms; the model's static torque is gravity
     zero = 0 * data.qd[still]
     K = link_regressor_batch(robot.model, data.q[still], zero, zero)[:, :, 10 * (robot.n - 1):]
-    static_model = model_torque(robot, _without_friction(params), data.q[still], zero, zero)
-    residual = data.torque[still] - static_model
     links = link_torque(robot.model, params.phi, data.q[still], zero, zero)
+    static_model = model_torque_from_links(robot, _without_friction(params), links, zero, zero)
+    residual = data.torque[still] - static_model
     return PayloadSystem(K, residual, np.ones(residual.shape, dtype=bool), np.arange(4),
                          links, zero)
 
@@ -150,6 +155,21 @@ def payload_regressor(system: PayloadSystem, phi_p: Array, gain: Array,
         scale *= 1.0 + load_friction * system.velocity_sign * secant
     payload *= scale[:, :, None]
     return regressor
+
+
+def correlation_factor(residual: Array) -> float:
+    """(1 + ρ)/(1 − ρ) for the lag-1 autocorrelation ρ of a residual series, ρ clipped to
+    [0, 1 − 1/size]: the factor by which a smooth residual's variance counts for fewer
+    independent samples; 1 for fewer than 3 samples or a zero residual.
+
+    Args:
+        residual: The residual in time order, shape (N,).
+    """
+    if residual.size < 3 or not np.any(residual):
+        return 1.0
+    rho = float(np.dot(residual[:-1], residual[1:]) / np.dot(residual, residual))
+    rho = min(max(rho, 0.0), 1.0 - 1.0 / residual.size)
+    return (1.0 + rho) / (1.0 - rho)
 
 
 def reference_shift(t: Array, q: Array, t_ref: Array, q_ref: Array) -> tuple[float, float]:
