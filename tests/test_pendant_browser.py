@@ -145,18 +145,25 @@ def test_operator_session_in_chromium(pendant: tuple[Pendant, SimulatedPendantSe
             moved = float(np.linalg.norm(app.scene.tcp_m - start))
             assert moved > 0.05, f"the robot moved {moved * 1e3:.0f} mm under the mouse's push"
 
-            # P2 is marked at rest with the hand still on the tool (the other hand presses the
-            # button: a click event, the mouse stays down on the handle). After a letting go
-            # the paper's law may move the tool again at rest a second or two later (issue 24:
-            # 1.3 mm at 13 mm/s in one session, which put P2 2.8 mm from where the page showed
-            # the robot); held by the hand, it stays where the virtual friction stopped it.
+            # P2 is marked with the hand still on the tool and the enabling device released
+            # (the operator's other hand, then the button):
+            # the robot held by its controller, where the hand took it. Marked while guiding
+            # under the hand's push, P2 raced the law at rest: there the force estimate drifts
+            # up under a steady hand (10 N held read 8 -> 24 N within 2 s) and the tool creeps
+            # on by 0.1-1 mm every 1.5-2 s, or by more once the settling window (settle_s: the
+            # stopping friction after a stop) ends with the hand still pushing more than δ (CI
+            # on 21b3b96: stopped with the spring at about 26 N, the tool went on 5.6 mm
+            # between the page's TCP at the click and the mark). That is the law's behaviour
+            # at rest (issue 24), not the pendant's; P1 is marked while guiding.
+            _at_rest(app, 0.5, 10)
+            # (click events: the mouse stays down on the handle)
+            page.get_by_role("button", name="Release enabling device").dispatch_event("click")
+            _until(lambda: state.get_attribute("data-state") == "IDLE", 10, "STOPPING -> IDLE")
             _at_rest(app, 0.5, 10)
             at_p2 = app.scene.tcp_m.copy()
             page.get_by_role("button", name="P2", exact=True).dispatch_event("click")
             _until(lambda: "P2" in [p.label for p in app.points.points], 5, "P2 marked")
             _let_go(page, app)
-            page.get_by_role("button", name="Release enabling device").click()
-            _until(lambda: state.get_attribute("data-state") == "IDLE", 10, "STOPPING -> IDLE")
             assert live.snapshot().state == State.IDLE
 
             page.get_by_role("button", name="Export").click()
