@@ -741,3 +741,39 @@ def test_the_dry_periods_leave_nothing_of_the_session(
                  "fault"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert a.events == b.events
+
+
+def test_the_rewarm_after_the_starts_answer_leaves_nothing_of_the_session(
+        er20: Robot, nominal_params: ParamsFile, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A real controller's start answers the packet the first period used to answer at once,
+    then runs the loop's period code once more (``loop_start.rewarm``: after the start's waits
+    the first cycles ran 1.5-2x the steady state). The packet is answered before the rewarm
+    runs, and the session is the same without it and with it, bit for bit (a rewarm that left
+    its samples in the estimator or its transitions in the log would show)."""
+    runs: list[tuple[LoopResult, RsiLike]] = []
+    answered_first: list[bool] = []
+    rewarm = loop_start.rewarm
+
+    def noted(loop: ServoLoop, q0: np.ndarray, t0: float) -> None:
+        driver = loop.driver
+        assert isinstance(driver, RsiLike)
+        answered_first.append(driver.taken[-1] in driver.answered)
+        rewarm(loop, q0, t0)
+
+    for variant in (lambda *_: None, noted):
+        monkeypatch.setattr(loop_start, "rewarm", variant)
+        sim = SimDriver(SimRobot(er20, SimConfig(seed=1), q0=guide_start_pose(er20)))
+        driver = RsiLike(sim)
+        parts = build_loop(er20, nominal_params, LoopConfig(), sim.dt)
+        r = run_session(driver, *parts, 0.5,
+                        options=LoopOptions(enable_input=0, watchdog_s=0.05))
+        assert r.end.cause is EndCause.DURATION
+        runs.append((r, driver))
+    assert answered_first == [True]
+    (a, da), (b, db) = runs
+    assert a.log is not None and b.log is not None
+    assert da.taken == db.taken and da.answered == db.answered
+    for name in ("time", "q", "current", "wrench_base", "q_cmd", "twist_cmd_base", "state",
+                 "fault"):
+        assert np.array_equal(getattr(a.log, name), getattr(b.log, name)), name
+    assert a.log.events == b.log.events

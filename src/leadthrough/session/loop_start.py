@@ -9,8 +9,17 @@ the resets) may outlast a cycle. So the start answers at once a packet it waited
 where the robot stands), and one that may have waited is answered only where the controller
 counts an unanswered packet late anyway (a driver's ``answer_late_packets``, RSI); J519 refuses
 a late answer, the UR program holds a cycle (:func:`fresh_packet`). Nothing that takes time is
-left between the last packet read and the first period: the watchdog's thread, whose start
-faults in its whole stack where the memory is locked, starts with the compute.
+left between the last packet read and its answer: the watchdog's thread, whose start faults in
+its whole stack where the memory is locked, starts with the compute.
+
+On a real controller the start then answers that packet itself, at once, and runs the loop's
+period code once more (:func:`rewarm`) while the controller's next cycle comes. Without it the
+start's compute ended up to three cycles before the first period's (two waits for a packet,
+then the first period's own), against less than one between later periods, and the first
+periods ran 1.5-2x slower than the steady state, by steps over four or five periods, though the
+dry periods had already run the same code (a trace of the parts: cold caches, at a guess). In
+short RSI sessions (``benchmarks/long_session.py --minutes 0.3``) the first controller cycle
+was 1.15-2.02x the median (11 runs, median 1.75x); issue 25's goal is 2x.
 """
 
 from __future__ import annotations
@@ -31,7 +40,7 @@ from leadthrough.session import operator_link
 if TYPE_CHECKING:
     from leadthrough.session.servo_loop import ServoLoop
 
-__all__ = ["DRY_CYCLES", "dry_periods", "fresh_packet", "start_loop"]
+__all__ = ["DRY_CYCLES", "dry_periods", "fresh_packet", "rewarm", "start_loop"]
 
 Array = NDArray[np.float64]
 #: Controller cycles' periods of the loop computed on the first sample at the start, before
@@ -98,15 +107,38 @@ def _set_up(loop: ServoLoop, q0: Array, answer_all: bool) -> None:
     if loop.board is not None:   # before the dry periods: they write it too
         loop.board.attach(driver.n)
         operator_link.publish_settings(loop)
-    dry_periods(loop, q0, fb.t)
-    loop.estimator.reset(q0)
-    loop.controller.reset(q0, fb.t)
-    loop.interpolator.reset(q0)
-    loop.interp_status = loop.interpolator.update(cmd)
-    loop.drain()  # the reset's transition: the session's, taken now, not in a period
-    if not driver.simulated:  # a packet that has just come, for the first period to
-        # answer (one that came during the compute: a hold, or unanswered as a lost one)
+    t0 = fb.t
+    dry_periods(loop, q0, t0)
+    _reset(loop, q0, t0)
+    if not driver.simulated:  # a packet that has just come (one that came during the
+        # compute: a hold, or unanswered as a lost one), answered at once with the hold
         fresh_packet(driver, fb, cmd if answer_all else None)
+        driver.write(cmd)      # (the first period's write then has nothing to answer)
+        rewarm(loop, q0, t0)
+
+
+def _reset(loop: ServoLoop, q0: Array, t: float, drain: bool = True) -> None:
+    """Every part reset at ``q0`` [rad], time ``t`` [s], and the hold computed; the reset's
+    transition taken into the session's events now, not in a period (``drain``), or
+    dropped."""
+    loop.estimator.reset(q0)
+    loop.controller.reset(q0, t)
+    loop.interpolator.reset(q0)
+    loop.interp_status = loop.interpolator.update(loop.cmd)
+    if drain:
+        loop.drain()
+    else:
+        loop.seen = loop.controller.event_count
+
+
+def rewarm(loop: ServoLoop, q0: Array, t0: float) -> None:
+    """The loop's period code once more, just before the first period (a real controller:
+    after the start's answer, while its next cycle comes; module doc): :func:`dry_periods`'
+    periods on the sample in ``loop.fb``, without the parts' ``warm_up``, then every part
+    reset as the start left it, at the first sample ``q0`` [rad], ``t0`` [s]. Nothing of it is
+    the session's (``tests/test_loop_faults.py`` compares sessions with and without it)."""
+    _periods(loop, loop.fb.t)
+    _reset(loop, q0, t0, drain=False)   # (the start's reset is already in the session's log)
 
 
 def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
@@ -126,17 +158,24 @@ def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
     interpolator.reset(q0)
     for part in (estimator, controller, interpolator):
         part.warm_up()
+    _periods(loop, t)
+    loop.cmd.q[:] = q0
+    loop.cmd.qd[:] = 0.0
+
+
+def _periods(loop: ServoLoop, t: float) -> None:
+    """:data:`DRY_CYCLES` controller cycles' periods on the sample in ``loop.fb``, from time
+    ``t`` [s] on, the operator's side held still; the sample's time and sequence number put
+    back."""
     fb, every, dt = loop.fb, loop.every, loop.driver.dt
-    sequence = fb.sequence
+    saved, sequence = fb.t, fb.sequence
     with _operator_held(loop):
         for k in range(DRY_CYCLES):   # the controller cycles' periods, the robot standing
             i = k * every
             fb.t, fb.sequence = t + i * dt, sequence + i
             loop.compute(i, fb.t, True)
-    fb.t, fb.sequence = t, sequence
-    loop.cmd.q[:] = q0
-    loop.cmd.qd[:] = 0.0
-    loop.seen = controller.event_count
+    fb.t, fb.sequence = saved, sequence
+    loop.seen = loop.controller.event_count
 
 
 @contextmanager
