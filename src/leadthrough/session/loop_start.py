@@ -19,7 +19,10 @@ then the first period's own), against less than one between later periods, and t
 periods ran 1.5-2x slower than the steady state, by steps over four or five periods, though the
 dry periods had already run the same code (a trace of the parts: cold caches, at a guess). In
 short RSI sessions (``benchmarks/long_session.py --minutes 0.3``) the first controller cycle
-was 1.15-2.02x the median (11 runs, median 1.75x); issue 25's goal is 2x.
+was 1.15-2.02x the median (11 runs, median 1.75x), with it 0.64-1.40x (12 runs, median
+1.05x); issue 25's goal is 2x. The rewarm (eight periods of 50-110 us each in the traced dry
+periods: under 1 ms) runs after the answer, so a slow one delays no answer of the start's; at
+worst the first period's packet has been waiting when its step comes, as after any overrun.
 """
 
 from __future__ import annotations
