@@ -162,8 +162,6 @@ def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
     for part in (estimator, controller, interpolator):
         part.warm_up()
     _periods(loop, t)
-    loop.cmd.q[:] = q0
-    loop.cmd.qd[:] = 0.0
 
 
 def _periods(loop: ServoLoop, t: float) -> None:
