@@ -173,6 +173,18 @@ def match_stalls(windows: list[tuple[float, float]],
     return own, per_cpu
 
 
+def longest_stall(window: tuple[float, float], stalls: dict[int, list[tuple[float, float]]]
+                  ) -> tuple[int, float] | None:
+    """The longest stall (its CPU, its length [s]) that overlaps ``window`` (wall clock [s]),
+    or None: how much of a late answer the machine's stall can explain."""
+    start, end = window
+    hits = [(b - a, cpu) for cpu, st in stalls.items() for a, b in st if a < end and b > start]
+    if not hits:
+        return None
+    length, cpu = max(hits)
+    return cpu, length
+
+
 def _stall_line(windows: list[tuple[float, float]], total: int,
                 stalls: dict[int, list[tuple[float, float]]], failed: list[int],
                 wall0: float) -> str:
@@ -193,11 +205,16 @@ def _stall_line(windows: list[tuple[float, float]], total: int,
     shown = own if len(own) <= 20 else own[:15] + own[-5:]
     which = "" if len(own) <= 20 else ", the first 15 and the last 5"
     first = ", ".join(f"{(s - wall0):.3f} s +{(e - s) * 1e3:.1f} ms" for s, e in shown)
+    machine = [(w, longest_stall(w, stalls)) for w in windows if w not in own][:20]
+    theirs = ", ".join(f"{(w[0] - wall0):.3f} s +{(w[1] - w[0]) * 1e3:.1f} ms: CPU {hit[0]} "
+                       f"stalled {hit[1] * 1e3:.1f} ms" for w, hit in machine if hit)
     return (f"machine stalls (a probe woke > {PROBE_THRESHOLD_MS:g} ms late): {counts};"
             f"{caveats} the client's late or missing answers (not the emulator's lag): {total}, "
             f"of the {len(windows)} matched "
             f"overlapping a stall {len(windows) - len(own)} (per CPU "
-            f"{', '.join(f'{c}: {n}' for c, n in per_cpu.items())}), **not overlapping any: "
+            f"{', '.join(f'{c}: {n}' for c, n in per_cpu.items())}"
+            + (f"; the longest stall each overlaps: {theirs}" if theirs else "")
+            + "), **not overlapping any: "
             f"{len(own)}**" + (f" (from the session's start{which}: {first})" if own else ""))
 
 

@@ -17,7 +17,7 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 
-from long_session import match_stalls  # noqa: E402
+from long_session import longest_stall, match_stalls  # noqa: E402
 from machine_jitter import load_stalls  # noqa: E402
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"),
@@ -87,3 +87,13 @@ def test_late_answers_are_matched_against_the_stalls_of_each_cpu() -> None:
     assert own == [(10.002, 10.006), (15.0, 15.004)]
     assert per_cpu == {0: 1, 1: 2}
     assert match_stalls(windows, {}) == (windows, {})
+
+
+def test_a_late_answer_names_the_longest_stall_it_overlaps() -> None:
+    """The report gives, for a late answer the machine explains, the longest stall of any CPU
+    within its window, so that a 0.1 ms stall is not read as explaining a 4 ms delay."""
+    stalls = {0: [(10.0, 10.0012), (10.003, 10.0079)], 1: [(10.001, 10.0035)]}
+    cpu, length = longest_stall((10.0005, 10.0045), stalls) or (None, 0.0)
+    assert cpu == 0 and length == pytest.approx(0.0049)
+    assert longest_stall((10.0005, 10.0009), stalls) == pytest.approx((0, 0.0012))
+    assert longest_stall((12.0, 12.004), stalls) is None
