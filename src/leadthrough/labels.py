@@ -27,8 +27,8 @@ MAX_LABEL_CHARS = 32
 #: The accepted characters, in words (for error messages and help texts).
 LABEL_CHARSET = "letters A-Z a-z, digits 0-9, '_', '-', '.' and spaces (not at either end)"
 
-_LABEL = re.compile(r"[A-Za-z0-9_.\-](?:[A-Za-z0-9_.\- ]{0,%d}[A-Za-z0-9_.\-])?"
-                    % (MAX_LABEL_CHARS - 2))
+_LABEL = re.compile(r"[A-Za-z0-9_.\-](?:[A-Za-z0-9_.\- ]{0,"
+                    + str(MAX_LABEL_CHARS - 2) + r"}[A-Za-z0-9_.\-])?")
 
 
 class LabelError(LeadthroughError):
