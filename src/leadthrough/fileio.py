@@ -1,7 +1,10 @@
 """Atomic file output: write to a temporary file beside the target, then rename. And the checks
 of an input file before it is parsed.
 
-A crash or a bad input never leaves a half-written file behind.
+A crash or a bad input never leaves a half-written file behind. An output is never written
+through or over a symbolic link (refused: a link planted where an output goes would otherwise
+redirect it, or be replaced by it), and it gets a normal file's mode (``0o666`` less the
+process's umask, e.g. ``0644``), like any file the user's programs create.
 """
 
 from __future__ import annotations
@@ -17,8 +20,9 @@ from typing import Any
 
 from leadthrough.errors import DataError, LeadthroughError
 
-__all__ = ["atomic_write", "atomic_write_text", "read_comment_header", "read_toml", "require_file",
-           "require_folder", "require_text", "toml_number", "toml_table"]
+__all__ = ["atomic_write", "atomic_write_text", "file_mode", "read_comment_header", "read_toml",
+           "refuse_symlink", "require_file", "require_folder", "require_text", "toml_number",
+           "toml_table"]
 
 #: The first bytes of a Parquet file (its magic number).
 PARQUET_MAGIC = b"PAR1"
@@ -35,7 +39,8 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
         The target path.
 
     Raises:
-        DataError: The folder does not exist or is not writable.
+        DataError: The folder does not exist or is not writable, or ``path`` is a symbolic
+            link.
     """
     path = Path(path)
     folder = require_folder(path)
@@ -49,6 +54,8 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     tmp = Path(tmp_name)
     try:
         write(tmp)
+        os.chmod(tmp, file_mode())      # mkstemp's 0600, as a normal file instead
+        refuse_symlink(path)            # (again: one may have appeared while writing)
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
@@ -60,6 +67,34 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     return path
 
 
+def file_mode() -> int:
+    """The mode a new file gets from ``open(2)``: ``0o666`` less this process's umask (read
+    from ``/proc/self/status`` on Linux, which leaves it unchanged; else set and restored)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return 0o666 & ~int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def refuse_symlink(path: str | Path) -> None:
+    """Refuse an output path that is a symbolic link (dangling or not).
+
+    Raises:
+        DataError: It is one, naming its target.
+    """
+    path = Path(path)
+    if path.is_symlink():
+        raise DataError("is a symbolic link: an output is not written through or over a link",
+                        source=path, field="link target", value=os.readlink(path),
+                        expected="a path that is not a symbolic link (give the target's path, "
+                                 "or remove the link)")
+
+
 def require_folder(path: str | Path) -> Path:
     """The folder an output file goes into; check it exists before any work is done.
 
@@ -67,13 +102,15 @@ def require_folder(path: str | Path) -> Path:
         The folder.
 
     Raises:
-        DataError: The folder does not exist or is not writable, or the path is a folder.
+        DataError: The folder does not exist or is not writable, or the path is a folder or
+            a symbolic link.
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise DataError("output folder does not exist", source=path,
                         expected="an existing, writable folder")
+    refuse_symlink(path)
     if path.is_dir():
         raise DataError("is a folder, not a file", source=path, expected="an output file path")
     if not os.access(folder, os.W_OK | os.X_OK):

@@ -1,7 +1,17 @@
 """Command-line interface: ``leadthrough <command> ...``.
 
-Exit codes: 0 OK, 2 bad input (a :class:`~leadthrough.errors.LeadthroughError`, printed as one
-line without a traceback), 1 internal error.
+Exit codes:
+
+* 0: done; for ``guide`` and ``record``, a clean session (no fault latched in it).
+* 1: an internal error; for ``guide`` and ``record``, also the link to the controller (it could
+  not be reached, refused the stream, or was lost mid-session: a
+  :class:`~leadthrough.errors.DriverError`, printed as one line).
+* 2: bad input (a :class:`~leadthrough.errors.LeadthroughError`, printed as one line without a
+  traceback); nothing was run or written.
+* 3: ``guide`` and ``record``: a fault was latched during the session (a non-finite input, an
+  E-stop or other controller state flag, stale feedback, a following error or limit), even one
+  reset later in the session; the session file (``guide``) records it.
+* 130: interrupted (Ctrl-C where it is not a session's normal end).
 """
 
 from __future__ import annotations
@@ -22,10 +32,11 @@ from leadthrough.cli import (
     identify_cmd,
     payload_cmd,
     pendant_cmd,
+    recover_cmd,
     robots_cmd,
     teach_cmd,
 )
-from leadthrough.errors import DataWarning, LeadthroughError
+from leadthrough.errors import DataWarning, DriverError, LeadthroughError
 
 __all__ = ["build_parser", "main"]
 
@@ -46,6 +57,11 @@ _EPILOG = """examples:
   leadthrough teach seam.parquet -o seam.json --csv seam.csv
   leadthrough emulate ur-rtde --robot ur5 --seed 1   an emulated controller on its real protocol
   leadthrough pendant                   the live browser pendant on the simulated robot
+  leadthrough recover s.parquet.partial -o s.parquet   a session cut short (killed), readable
+
+exit codes: 0 done (guide, record: a clean session); 1 internal error, or (guide, record) the
+link to the controller failed; 2 bad input, nothing run; 3 (guide, record) a fault was latched
+in the session, even one reset later; 130 interrupted
 """
 
 
@@ -76,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     payload_cmd.register(sub)
     guide_cmd.register(sub)
     teach_cmd.register(sub)
+    recover_cmd.register(sub)
     pendant_cmd.register(sub)
     demo_cmd.register(sub)
     emulate_cmd.register(sub)
@@ -104,7 +121,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except LeadthroughError as e:
         print(f"leadthrough: error: {e}", file=sys.stderr)
-        return 2
+        # guide and record: the controller's link is not the input's fault (exit 1)
+        return int(getattr(args, "link_error_exit", 2)) if isinstance(e, DriverError) else 2
     except KeyboardInterrupt:
         print("leadthrough: interrupted", file=sys.stderr)
         return 130

@@ -20,7 +20,13 @@ from leadthrough.cli.arg_checks import (
     warm_up_seconds,
 )
 from leadthrough.cli.friction_experiments import excite_friction_experiment
-from leadthrough.cli.record_robot import add_driver_arguments, record_on_robot, refuse_settings
+from leadthrough.cli.record_robot import (
+    EXIT_CODES_HELP,
+    EXIT_LINK,
+    add_driver_arguments,
+    record_on_robot,
+    refuse_settings,
+)
 from leadthrough.data.io import save_recording
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
@@ -89,7 +95,9 @@ def _register_record(sub: Any) -> None:
                                    "after a slow approach to the trajectory's start.",
                        epilog="examples:\n  leadthrough record --robot er20 --trajectory traj.csv "
                               "-o rec.parquet\n  leadthrough record --driver fanuc-j519 --host "
-                              "192.168.1.10 --robot er20 --trajectory traj.csv -o rec.parquet")
+                              "192.168.1.10 --robot er20 --trajectory traj.csv -o rec.parquet"
+                              "\n\n" + EXIT_CODES_HELP + " (the simulator's run has no fault: 0 or "
+                              "2)")
     p.add_argument("--robot", default="er20")
     p.add_argument("--trajectory", type=Path, required=True, help="trajectory CSV")
     p.add_argument("--seed", type=int, default=None,
@@ -111,7 +119,7 @@ def _register_record(sub: Any) -> None:
     add_driver_arguments(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="recording .parquet/.csv")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=run_record)
+    p.set_defaults(func=run_record, link_error_exit=EXIT_LINK)
 
 
 MAX_EXCITATION_S = 3600.0

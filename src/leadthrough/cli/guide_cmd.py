@@ -18,7 +18,13 @@ from leadthrough.cli.arg_checks import (
     with_command_lag,
 )
 from leadthrough.cli.guide_robot import add_robot_arguments, guide_on_robot
-from leadthrough.cli.record_robot import refuse_settings
+from leadthrough.cli.record_robot import (
+    EXIT_CODES_HELP,
+    EXIT_FAULT,
+    EXIT_LINK,
+    EXIT_OK,
+    refuse_settings,
+)
 from leadthrough.control.guiding import CONTROLLERS, GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.errors import DataError
@@ -52,7 +58,8 @@ def register(sub: Any) -> None:
         epilog="examples:\n  leadthrough guide --robot er20 --params params.toml --operator push-x "
                "-o session.parquet --json\n  leadthrough guide --driver ur-rtde --host 10.0.0.2 "
                "--robot ur5 --params params.toml --enable-input 0 --mark-input 1 "
-               "-o session.parquet   (until Ctrl-C)",
+               "-o session.parquet   (until Ctrl-C)\n\n" + EXIT_CODES_HELP + " (Ctrl-C, "
+               "SIGTERM or --duration is the normal end of a session: 0 when nothing faulted)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="er20", help="robot (default: er20)")
     p.add_argument("--params", type=Path, required=True,
@@ -102,7 +109,7 @@ def register(sub: Any) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="session .parquet")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     add_robot_arguments(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, link_error_exit=EXIT_LINK)
 
 
 def _note_missing_presliding(pf: ParamsFile) -> None:
@@ -169,4 +176,9 @@ def run(args: argparse.Namespace) -> int:
               f"drift {drift}; overrun after a release {over}; faults {s.faults or 'none'}; "
               f"cycle {s.cycle_time_us.median:.0f} µs median, {s.cycle_time_us.p99:.0f} µs p99 "
               f"-> {args.output}")
-    return 0
+    if session.summary.faults:
+        print(f"leadthrough: a fault was latched in the session ("
+              f"{', '.join(dict.fromkeys(session.summary.faults))}): exit code {EXIT_FAULT}",
+              file=sys.stderr)
+        return EXIT_FAULT
+    return EXIT_OK

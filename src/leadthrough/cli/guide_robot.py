@@ -16,9 +16,13 @@ until the user stops it.
 4. Ctrl-C (SIGINT) or SIGTERM: a stop request (a commanded stop at the acceleration limit, the
    loop ends at rest), then the driver closes the stream; a second Ctrl-C aborts.
 
-Exit: 0 when the session ended on the user's stop (or ``--duration``), 1 when it ended on a
-lost link or a stop that did not come to rest (the recording is written either way, with the
-cause in its events), 2 for bad input or a controller that could not be used.
+Exit (:data:`~leadthrough.cli.record_robot.EXIT_OK` ...): 0 when the session ended on the
+user's stop (or ``--duration``) and no fault was latched in it; 1 when it ended on a lost link
+or a stop that did not come to rest, or the controller could not be reached or refused the
+stream (a :class:`~leadthrough.errors.DriverError`); 2 for bad input (nothing run); 3 when a
+fault was latched during the session (a non-finite input, a controller state flag such as an
+E-stop, stale feedback, a limit...), even one reset from the reset input later: the session is
+not a clean one. The recording is written either way, with the causes in its events.
 """
 
 from __future__ import annotations
@@ -37,7 +41,13 @@ from typing import Any
 import numpy as np
 
 from leadthrough.cli.arg_checks import check_rt_priority
-from leadthrough.cli.record_robot import add_connection_arguments, refuse_settings
+from leadthrough.cli.record_robot import (
+    EXIT_FAULT,
+    EXIT_LINK,
+    EXIT_OK,
+    add_connection_arguments,
+    refuse_settings,
+)
 from leadthrough.control.guiding_types import GuidingConfig
 from leadthrough.drivers.controllers import connect
 from leadthrough.errors import ControlError
@@ -48,10 +58,11 @@ from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
 from leadthrough.session.realtime import RealtimeRequest, setup_realtime
+from leadthrough.session.record import SessionEvent
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.session_file import SessionFileSink
 
-__all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot"]
+__all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot", "latched_faults"]
 
 #: The guiding controller's cycle the paper uses [s].
 PAPER_CYCLE_S = 0.01
@@ -108,19 +119,20 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
     # the session writer's process first: started after the real-time set-up, it would
     # inherit the loop's CPUs and SCHED_FIFO (it leaves the policy itself, not the CPUs), and
     # its shared chunks are mapped before mlockall; closed on every way out
-    with SessionFileSink(args.output, robot.n) as sink:
+    settings: dict[str, object] = {"driver": args.driver, "host": args.host,
+                                   "port": args.port, "enable_input": args.enable_input,
+                                   "mark_input": args.mark_input,
+                                   "reset_input": args.reset_input}
+    with SessionFileSink(args.output, robot.n, robot=robot.name, settings=settings) as sink:
         for line in setup_realtime(RealtimeRequest(args.rt_priority, bool(args.lock_memory),
                                                    tuple(args.cpus) if args.cpus else None)):
             print(f"leadthrough: {line}", file=sys.stderr, flush=True)
-        driver = connect(args.driver, robot, args.host, args.port)
+        driver = connect(args.driver, robot, args.host, args.port,
+                         getattr(args, "robot_address", None))
         # everything built and compiled before the link opens: a controller streams from the
         # open on, and cycles it is not answered in count against the session (RSI's late count)
         parts = _loop_parts(robot, pf, guiding, driver.dt)
         requests = LoopRequests()
-        settings: dict[str, object] = {"driver": args.driver, "host": args.host,
-                                       "port": args.port, "enable_input": args.enable_input,
-                                       "mark_input": args.mark_input,
-                                       "reset_input": args.reset_input}
         dt = driver.dt
         # Ctrl-C: a stop request while the loop runs, and nothing more once it has ended (the
         # stream's own end and the file are written); a second one aborts
@@ -133,7 +145,8 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
                   f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
             result = run_session(driver, *parts, args.duration, options=options,
                                  requests=requests, settings=settings, sink=sink)
-    return _report(args, result, getattr(driver, "late_answers", 0))
+    return _report(args, result, getattr(driver, "late_answers", 0),
+                   latched_faults(sink.events))
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -187,8 +200,18 @@ def _stop_on_term(requests: LoopRequests) -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _report(args: argparse.Namespace, result: LoopResult, late_answers: int) -> int:
-    """The session's summary (``late_answers``: answers the controller counted late)."""
+def latched_faults(events: list[SessionEvent]) -> list[str]:
+    """The faults latched during a session, in order, each once (the names of
+    :class:`~leadthrough.control.safety_states.Fault` that its transitions carry as
+    ``cause:FAULT``)."""
+    return list(dict.fromkeys(e.cause.split(":", 1)[1] for e in events
+                              if e.kind == "transition" and ":" in e.cause))
+
+
+def _report(args: argparse.Namespace, result: LoopResult, late_answers: int,
+            faults: list[str]) -> int:
+    """The session's summary and exit code (``late_answers``: answers the controller counted
+    late; ``faults``: those latched during the session)."""
     end, us = result.end, result.cycle_us
     p99 = float(np.percentile(us, 99)) if us.size else math.nan
     # the first controller cycle against the steady state (the kept cycles: the last ten
@@ -201,7 +224,7 @@ def _report(args: argparse.Namespace, result: LoopResult, late_answers: int) -> 
         "periods": result.periods,
         "cycle_us_first": first, "cycle_us_median": float(np.median(us)) if us.size
         else math.nan, "cycle_us_p99": p99, "cycle_us_max": float(us.max()) if us.size
-        else math.nan, "output": str(args.output)}
+        else math.nan, "faults": faults, "output": str(args.output)}
     if args.json:
         print(json.dumps(out, indent=2))
     else:
@@ -209,5 +232,11 @@ def _report(args: argparse.Namespace, result: LoopResult, late_answers: int) -> 
               f"state {end.state.name}, fault {end.fault.name}; {result.late_periods} late "
               f"periods, {late_answers} answers late; controller cycle p99 "
               f"{out['cycle_us_p99']:.0f} µs -> {args.output}")
-    ok = end.cause in (EndCause.STOP_REQUESTED, EndCause.DURATION)
-    return 0 if ok else 1
+    if end.cause not in (EndCause.STOP_REQUESTED, EndCause.DURATION):
+        return EXIT_LINK
+    if faults or end.fault.name != "NONE":
+        print(f"leadthrough: a fault was latched in the session "
+              f"({', '.join(faults or [end.fault.name])}): exit code {EXIT_FAULT}",
+              file=sys.stderr, flush=True)
+        return EXIT_FAULT
+    return EXIT_OK

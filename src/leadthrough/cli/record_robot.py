@@ -1,11 +1,19 @@
-"""``leadthrough record --driver D --host H [--port P]``: a trajectory run on a robot controller
-(issue 25), logged in the same recording format as the simulator's (see
-:mod:`leadthrough.session.trajectory_recording`)."""
+"""``leadthrough record --driver D --host H [--port P]``: a trajectory run on a robot controller,
+logged in the same recording format as the simulator's (see
+:mod:`leadthrough.session.trajectory_recording`).
+
+The exit codes of ``record`` and ``guide`` (:data:`EXIT_OK` ...): 0 a clean session, 1 the link to
+the controller failed (cannot connect, refused, lost mid-session) or an internal error, 2 bad
+input (nothing run), 3 a fault stopped the run or was latched in the session (a non-finite
+sample, an E-stop, a following error, ...; a fault reset later in the session counts too),
+130 interrupted (``record``: no recording is written).
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +26,32 @@ from leadthrough.errors import ControlError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot
-from leadthrough.session.trajectory_recording import TrajectoryRunConfig, record_trajectory
+from leadthrough.session.trajectory_recording import (
+    TrajectoryAbortedError,
+    TrajectoryRunConfig,
+    record_trajectory,
+)
 
-__all__ = ["add_connection_arguments", "add_driver_arguments", "check_rsi_reach",
-           "record_on_robot",
-           "refuse_settings"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_CODES_HELP", "EXIT_FAULT", "EXIT_INTERRUPTED", "EXIT_LINK",
+           "EXIT_OK", "add_connection_arguments", "add_driver_arguments", "check_rsi_reach",
+           "record_on_robot", "refuse_settings"]
+
+#: A clean session.
+EXIT_OK = 0
+#: The link to the controller failed (cannot connect, refused, lost), or an internal error.
+EXIT_LINK = 1
+#: Bad input: nothing was run (a LeadthroughError other than the link's).
+EXIT_BAD_INPUT = 2
+#: A fault stopped the run or was latched during the session (even if reset later).
+EXIT_FAULT = 3
+#: Interrupted by the user (Ctrl-C) where that is not the normal end.
+EXIT_INTERRUPTED = 130
+#: The exit codes in words, for the commands' help.
+EXIT_CODES_HELP = (
+    "exit codes: 0 a clean session; 1 the link to the controller failed (cannot connect, "
+    "refused, lost) or an internal error; 2 bad input, nothing run; 3 a fault was latched (a "
+    "non-finite sample, an E-stop, a following error, stale feedback...: the session "
+    "file records it; a fault reset later counts too); 130 interrupted")
 
 _SIM_ONLY = ("seed", "run", "plant", "warm_up", "payload_mass", "payload_com")
 
@@ -79,6 +108,19 @@ def check_rsi_reach(driver: KukaRsiDriver, traj: TrajectorySamples, source: Path
         expected=f"{np.degrees(lo[j]):.1f} .. {np.degrees(hi[j]):.1f} deg")
 
 
+def aborted_exit_code(e: TrajectoryAbortedError) -> int:
+    """The exit code of a run that stopped early: :data:`EXIT_INTERRUPTED` for Ctrl-C (the
+    stop made inside its handling), :data:`EXIT_LINK` for a controller that went silent or
+    never sent a first sample, :data:`EXIT_FAULT` for every other commanded stop (a controller
+    state flag such as an E-stop, a non-finite sample, a following error, commands not
+    taken, cycles without a command)."""
+    if isinstance(e.__context__, KeyboardInterrupt):
+        return EXIT_INTERRUPTED
+    if not e.message.startswith("stopped during") or "no fresh sample" in e.message:
+        return EXIT_LINK
+    return EXIT_FAULT
+
+
 def add_connection_arguments(g: Any) -> None:
     """``--driver``, ``--host`` and ``--port`` (into an argument group or parser)."""
     g.add_argument("--driver", default=None, choices=sorted(CONTROLLERS),
@@ -87,6 +129,10 @@ def add_connection_arguments(g: Any) -> None:
                    help="the controller's address (kuka-rsi: this PC's address to listen on)")
     g.add_argument("--port", type=int, default=None,
                    help="the interface's port (default: its own: 60015, 30004, 49152)")
+    g.add_argument("--robot-address", default=None, metavar="HOST[:PORT]",
+                   help="kuka-rsi: the robot's address (and port): documents from any other "
+                   "sender are dropped (default: the first valid document's sender is taken "
+                   "for the robot; give this on a shared network or computer)")
 
 
 def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamples) -> int:
@@ -95,12 +141,21 @@ def record_on_robot(args: argparse.Namespace, robot: Robot, traj: TrajectorySamp
                     "no simulator settings with --driver")
     config = TrajectoryRunConfig(approach_fraction=DEFAULT_APPROACH if args.approach is None
                                  else args.approach)
-    driver = connect(args.driver, robot, args.host, args.port)
+    driver = connect(args.driver, robot, args.host, args.port,
+                     getattr(args, "robot_address", None))
     bar = Progress(f"recording on {args.driver} at {args.host}", 1, lines=True)
-    with driver:
-        if isinstance(driver, KukaRsiDriver):  # before any motion
-            check_rsi_reach(driver, traj, args.trajectory)
-        done = record_trajectory(driver, robot, traj, config, progress=bar)
+    try:
+        with driver:
+            if isinstance(driver, KukaRsiDriver):  # before any motion
+                check_rsi_reach(driver, traj, args.trajectory)
+            done = record_trajectory(driver, robot, traj, config, progress=bar)
+    except TrajectoryAbortedError as e:
+        code = aborted_exit_code(e)
+        if code == EXIT_LINK:
+            raise
+        bar.close()
+        print(f"leadthrough: error: {e}", file=sys.stderr)
+        return code
     bar.close()
     save_recording(done.recording, args.output)
     rec = done.recording

@@ -76,6 +76,34 @@ def _check_samples(path: Path, data: NDArray[np.float64]) -> None:
                                  "increasing time")
 
 
+def _check_header(path: Path, header: str, columns: int) -> None:
+    """The header line names the columns :func:`save_trajectory` writes, in its order: ``time``,
+    ``qJ``, ``qdJ``, ``qddJ``, each with its unit (``time [s]``) or none (``time``); a renamed,
+    unknown, missing or misplaced column is refused (its data would be read as another's)."""
+    names = [c.strip() for c in header.split(",")]
+    if columns < 4 or (columns - 1) % 3:
+        return          # the count is the samples' check
+    if len(names) != columns:
+        raise DataError("the header names another number of columns than the rows hold",
+                        source=path, field="header", value=len(names),
+                        expected=f"{columns} column names (time + 3·n)")
+    n = (columns - 1) // 3
+    expected = [("time", "[s]")] + [(f"{kind}{j + 1}", unit) for kind, unit in (
+        ("q", "[rad]"), ("qd", "[rad/s]"), ("qdd", "[rad/s²]")) for j in range(n)]
+    known = {name for name, _ in expected}
+    for k, (got, (name, unit)) in enumerate(zip(names, expected, strict=True)):
+        if got in (name, f"{name} {unit}"):
+            continue
+        bare = got.split(" [")[0]
+        problem = ("unknown column" if bare not in known else
+                   f"column {name} with another unit" if bare == name else
+                   f"column {k + 1} is {bare}, out of order")
+        raise DataError(f"{problem} in the header: missing '{name} {unit}'", source=path,
+                        field=f"column {k + 1}", value=got,
+                        expected=f"'{name} {unit}' (the header 'time [s],q1 [rad],..,"
+                                 "qd1 [rad/s],..,qdd1 [rad/s²],..' that excite writes)")
+
+
 def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
     """Read a trajectory CSV.
 
@@ -83,7 +111,9 @@ def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
         The samples and the robot name from the header (None if absent).
 
     Raises:
-        DataError: Missing file or malformed content.
+        DataError: Missing file or malformed content: too few rows, a value that is not
+            finite, time that does not increase, or a header whose columns are not the
+            trajectory's (renamed, unknown, missing or out of order).
     """
     path = Path(path)
     require_file(path, "trajectory", "an existing CSV file")
@@ -98,6 +128,10 @@ def load_trajectory(path: str | Path) -> tuple[TrajectorySamples, str | None]:
                         source=path, expected="rows of numbers, each time + 3·n columns"
                         ) from e
     _check_samples(path, data)
+    with path.open("r", encoding="utf-8", errors="replace") as f:
+        for _ in range(skip):
+            f.readline()
+        _check_header(path, f.readline(), data.shape[1])
     n = (data.shape[1] - 1) // 3
     return TrajectorySamples(time=data[:, 0], q=data[:, 1:1 + n], qd=data[:, 1 + n:1 + 2 * n],
                              qdd=data[:, 1 + 2 * n:]), robot

@@ -53,6 +53,7 @@ from leadthrough.dynamics.model import (
 from leadthrough.dynamics.regressor import LINK_PARAMETER_NAMES
 from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write_text, read_toml, toml_number, toml_table
+from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.robot.description import Robot
 
@@ -65,6 +66,9 @@ Array = NDArray[np.float64]
 #: How far below zero a Stribeck friction coefficient may be (a convex solver's tolerance on
 #: its bound) [N·m or N·m·s].
 FRICTION_TOLERANCE = 1e-6
+#: How far below zero a link's smallest pseudo-inertia eigenvalue may be in a file of the
+#: consistent method, per kg of the link (a solver's tolerance) [kg·m²].
+PSEUDO_INERTIA_TOLERANCE = 1e-9
 
 _FRICTION_KEYS = {
     FrictionModel.STRIBECK: ("f1", "f2", "qd_sm", "f3", "qd_sg", "f4"),
@@ -179,14 +183,21 @@ def save_params(
 def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     """Read a params file and check it belongs to ``robot``.
 
+    Every number is checked: finite; a link mass > 0 kg; a rotor inertia, Coulomb level and
+    viscous slope >= 0 (the Stribeck coefficients > 0 as the paper bounds them); a file of the
+    ``consistent`` method, whose links are physical bodies, with each link's pseudo-inertia
+    positive semi-definite.
+
     Raises:
-        DataError: Missing, malformed, or written for another robot.
+        DataError: Missing, malformed, out of range (naming the file, the field, its value and
+            the range), or written for another robot.
     """
     path = Path(path)
     doc = read_toml(path, "params file")
     meta, model = _read_meta(path, doc, robot)
     joints = _JointTables(path, robot, model, toml_table(path, doc, "joints"),
                           toml_table(path, doc, "links"))
+    joints.check_consistency(str(meta.get("method", "")))
     noise_mean, noise_std = _read_noise(path, toml_table(path, doc, "noise"), robot.n)
     seed = meta.get("sim_seed")
     if seed is not None and not is_sim_seed(seed):
@@ -246,6 +257,7 @@ class _JointTables:
     def __init__(self, path: Path, robot: Robot, model: FrictionModel, joints: dict[str, Any],
                  links: dict[str, Any]) -> None:
         self.path, self.model, n = path, model, robot.n
+        self._joint_names = robot.joint_names
         self.keys = _FRICTION_KEYS[model]
         self.drive = {key: np.zeros(n) for key in (*self.keys, "rotor_inertia")}
         self.offset, self.presliding, self.load = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -308,6 +320,15 @@ class _JointTables:
         for key, values in self.drive.items():
             values[k] = toml_number(path, f"joints.{jn}.{key}", _required(path, f"joints.{jn}", jt,
                                                                        key))
+            # a rotor's inertia, a Coulomb level and a viscous slope are never negative (the
+            # cube-root term of ols-cbrt may be: it corrects the viscous one)
+            signed = key == "rotor_inertia" or (self.model is not FrictionModel.STRIBECK
+                                                and key in ("coulomb", "viscous"))
+            if signed and values[k] < -FRICTION_TOLERANCE:
+                unit = "kg·m²" if key == "rotor_inertia" else (
+                    "N·m" if key == "coulomb" else "N·m·s")
+                raise DataError("out of range", source=path, field=f"joints.{jn}.{key}",
+                                value=values[k], expected=f">= 0 {unit}")
             if self.model is FrictionModel.STRIBECK and key != "rotor_inertia":
                 # the paper's bounds (friction > 0, met by the solvers to their tolerance);
                 # the velocities divide
@@ -322,6 +343,33 @@ class _JointTables:
         for i, p in enumerate(LINK_PARAMETER_NAMES):
             self.phi[10 * k + i] = toml_number(self.path, f"links.{jn}.{p}",
                                            _required(self.path, f"links.{jn}", lt, p))
+        mass = self.phi[10 * k]
+        if not mass > 0:   # a body's mass; zero or less inverts the estimator's gravity
+            raise DataError("out of range", source=self.path, field=f"links.{jn}.m",
+                            value=float(mass), expected="a link mass > 0 kg")
+
+    def check_consistency(self, method: str) -> None:
+        """A file of the ``consistent`` method claims physically consistent links: each link's
+        pseudo-inertia positive semi-definite (its solver keeps a margin; the other methods'
+        standard parameters need not be physical, only their base combinations are
+        identified, and are checked for a positive mass only).
+
+        Raises:
+            DataError: Naming the first link whose pseudo-inertia has a negative eigenvalue.
+        """
+        if method != "consistent":
+            return
+        eig = min_pseudo_inertia_eigenvalues(self.phi)
+        for k, value in enumerate(eig):
+            scale = max(1.0, float(self.phi[10 * k]))
+            if value < -PSEUDO_INERTIA_TOLERANCE * scale:
+                jn = self._joint_names[k]
+                raise DataError("not a physical body: the link's pseudo-inertia has a "
+                                "negative eigenvalue (its inertia and first moments fit no "
+                                "mass distribution)", source=self.path,
+                                field=f"links.{jn}.Ixx..Izz", value=float(value),
+                                expected="a pseudo-inertia eigenvalue >= 0 kg·m² (what "
+                                         "'identify --method consistent' writes)")
 
     def parameters(self) -> DriveModelParameters:
         """The model parameters the tables hold."""

@@ -184,7 +184,7 @@ def run_session(
     steps = None if duration_s is None else round(duration_s / dt)
     loop = ServoLoop(driver, estimator, controller, interpolator, every, options, requests,
                     deadman)
-    rec = SessionRecorder(driver.n, applied_wrench is not None, sink)
+    rec = SessionRecorder(driver.n, applied_wrench is not None, sink, events=loop.events)
     clock = PeriodClock(dt, options.paced, real_time=not driver.simulated)
     times = ComputeTimes()
     interpreter = _InterpreterSettings()   # from the start on: no collection between the

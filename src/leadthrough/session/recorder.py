@@ -9,6 +9,7 @@ memory grows by one chunk at a time, with the session's length.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -183,10 +184,14 @@ class SessionRecorder:
         with_truth: Record the simulator's applied wrench.
         sink: Where full chunks go (default: memory).
         chunk_rows: Rows per chunk of the default memory sink (a given sink sizes its own).
+        events: The session's events list as the loop appends to it: each new one is handed
+            to a sink that has a ``note_events`` method (a session file's sidecar, so that a
+            killed session keeps its marks), checked once a period.
     """
 
     def __init__(self, n: int, with_truth: bool, sink: ChunkSink | None = None,
-                 chunk_rows: int = DEFAULT_CHUNK_ROWS) -> None:
+                 chunk_rows: int = DEFAULT_CHUNK_ROWS,
+                 events: list[SessionEvent] | None = None) -> None:
         self.sink: ChunkSink = sink if sink is not None else MemorySink(n, with_truth,
                                                                           chunk_rows)
         self.chunk = self.sink.empty()
@@ -195,6 +200,10 @@ class SessionRecorder:
                             value=self.chunk.layout[1], expected=f"{n} joints, applied wrench "
                             f"{'kept' if with_truth else 'not kept'}")
         self.rows = 0
+        note = getattr(self.sink, "note_events", None)
+        self._note: Callable[[list[SessionEvent]], None] | None = note
+        self._events = events if note is not None else None
+        self._noted = 0
 
     def store(self, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
               q_cmd: Array, qd_cmd: Array, transform: Array, twist: Array, state: int,
@@ -218,8 +227,16 @@ class SessionRecorder:
             c.applied[i] = applied
         c.rows = i + 1
         self.rows += 1
+        if self._events is not None and len(self._events) != self._noted:
+            self._note_new()
         if c.rows == c.time.size:
             self.chunk = self.sink.take(c)
+
+    def _note_new(self) -> None:
+        assert self._events is not None and self._note is not None
+        new = self._events[self._noted:]
+        self._noted = len(self._events)
+        self._note(new)
 
     def finish(self, robot: str, events: list[SessionEvent], settings: dict[str, object]
                ) -> SessionLog | None:

@@ -21,39 +21,64 @@ loop's side never waits on the writer: it sends without blocking and reads the r
 only when they are there; when none is back (the writer a minute behind), the rows are dropped
 and counted (:attr:`SessionFileSink.dropped_rows`), never waited for.
 
-Until the end the rows are in ``<path>.partial`` (a Parquet file has its index at its end: a
-process killed outright leaves a partial file that is not readable as a session; Ctrl-C, a stop
-request and every fault end the session normally and write the file; a writer whose loop's
-process went away closes the rows it has, which then read with ``pyarrow`` but not as a
-session). If the writer process dies or cannot write, the recording stops there, the loop goes
-on, and :meth:`SessionFileSink.finish` raises.
+Until the end the rows are in ``<path>.partial`` (a Parquet file has its index at its end),
+and the session's metadata (robot, joints, settings) and its events, each as it comes (a mark
+as it is made), in ``<path>.partial.jsonl`` (one JSON object a line: the first the metadata,
+then one event a line; :data:`SIDECAR_SUFFIX`). Ctrl-C, a stop request and every fault end the
+session normally and write the file (the sidecar is then removed). A loop's process killed
+outright (SIGKILL, a power cut of the process) leaves both: its writer process, in a session of
+its own, sees the link end and closes the rows it has into the partial file, and
+``leadthrough recover <path>.partial -o <path>``
+(:func:`~leadthrough.session.session_file.recover_session`) joins them into a session file
+that reads like any other. (A writer process killed too leaves a partial file without its
+index, which no Parquet reader reads: recover says so.) If the writer process dies or cannot
+write, the recording stops there, the loop goes on, and :meth:`SessionFileSink.finish` raises.
+
+Neither the session file nor its partial files are written through or over a symbolic link,
+and a partial file left by an earlier session is not overwritten (recover it, or remove it):
+both are refused before the session starts.
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 import os
 import socket
 import subprocess
 import sys
 import time
 from collections import deque
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import pyarrow as pa
+import pyarrow.parquet as pq
+
 import leadthrough
 from leadthrough.errors import DataError
-from leadthrough.session.record import SessionEvent, session_metadata
+from leadthrough.fileio import atomic_write, refuse_symlink, require_file
+from leadthrough.labels import check_label
+from leadthrough.session.record import (
+    FORMAT_VERSION,
+    SessionEvent,
+    load_session,
+    session_metadata,
+)
 from leadthrough.session.recorder import DEFAULT_CHUNK_ROWS, RecordChunk
 from leadthrough.session.writer_link import (
+    SIDECAR_SUFFIX,
     MessageReader,
     open_chunk_memory,
     recv_message,
     send_message,
 )
 
-__all__ = ["POOL_CHUNKS", "SessionFileSink"]
+__all__ = ["POOL_CHUNKS", "SIDECAR_SUFFIX", "RecoveredSession", "SessionFileSink",
+           "recover_session"]
 
 log = logging.getLogger("leadthrough.session")
 #: Chunks mapped at the start (the writer may fall this many chunks behind: a minute at 1 kHz
@@ -87,14 +112,19 @@ class SessionFileSink:
         with_truth: Chunks carry the simulator's applied wrench.
         chunk_rows: Rows per chunk.
         chunks: Chunks in shared memory (at least 2).
+        robot: The robot's name, for the sidecar (what a recovery needs; None: a recovery
+            must be told it).
+        settings: The session's settings as known at the start, for the sidecar (JSON).
 
     Raises:
-        DataError: Wrong suffix, missing folder, too few chunks, or the writer process did not
-            start.
+        DataError: Wrong suffix, missing folder, a symbolic link at the file's or a partial
+            file's place, a partial file of an earlier session in the way, too few chunks,
+            settings that are not JSON, or the writer process did not start.
     """
 
     def __init__(self, path: str | Path, n: int, with_truth: bool = False,
-                 chunk_rows: int = DEFAULT_CHUNK_ROWS, chunks: int = POOL_CHUNKS) -> None:
+                 chunk_rows: int = DEFAULT_CHUNK_ROWS, chunks: int = POOL_CHUNKS, *,
+                 robot: str | None = None, settings: dict[str, object] | None = None) -> None:
         self.path = Path(path).absolute()
         if self.path.suffix.lower() not in (".parquet", ".pq"):
             raise DataError("unsupported session file type", source=self.path, field="suffix",
@@ -106,6 +136,23 @@ class SessionFileSink:
             raise DataError("too few chunks for a recording", field="chunks", value=chunks,
                             expected="2 or more")
         self.partial = self.path.with_name(self.path.name + ".partial")
+        #: The sidecar of metadata and events (removed once the file is finished).
+        self.sidecar = self.partial.with_name(self.partial.name + SIDECAR_SUFFIX)
+        refuse_symlink(self.path)
+        for left in (self.partial, self.sidecar):
+            if left.is_symlink() or left.exists():
+                raise DataError("a partial file of an earlier session is in the way",
+                                source=left, expected="no file there: recover the session "
+                                f"(leadthrough recover {self.partial} -o <file>) or remove it")
+        try:
+            header = json.dumps({"format": FORMAT_VERSION, "robot": robot, "n": n,
+                                 "settings": settings or {}})
+        except (TypeError, ValueError) as e:
+            raise DataError(f"the session's settings are not JSON ({e})", source=self.path,
+                            field="settings", value=settings,
+                            expected="str, int, float, bool, None, lists, dicts") from e
+        #: The events noted so far (:meth:`note_events`), and at the end all of them.
+        self.events: list[SessionEvent] = []
         self._n, self._truth, self._rows = n, with_truth, chunk_rows
         #: Rows the writer has written to the file so far (as of its last answer).
         self.rows_written = 0
@@ -131,6 +178,14 @@ class SessionFileSink:
                                      f"{RecordChunk.nbytes(chunk_rows, n, with_truth)} bytes"
                             ) from e
         self._reader = MessageReader(self._sock)
+        self._send(("meta", header))
+
+    def note_events(self, events: list[SessionEvent]) -> None:
+        """New events of the session (a mark, a transition), handed to the writer for the
+        sidecar as they come; never waits (one short message)."""
+        self.events.extend(events)
+        if self._failure is None:
+            self._send(("events", [json.dumps(asdict(e)) for e in events]))
 
     @property
     def writer_pid(self) -> int:
@@ -180,6 +235,7 @@ class SessionFileSink:
                 process ended without writing it.
         """
         self._collect()
+        self.events = list(events)
         if self.dropped_rows:
             log.warning("session file %s: %d rows dropped (the writer fell behind)",
                         self.path, self.dropped_rows)
@@ -191,6 +247,9 @@ class SessionFileSink:
             raise DataError(f"the session's settings are not JSON ({e})", source=self.path,
                             field="settings", value=settings,
                             expected="str, int, float, bool, None, lists, dicts") from e
+        if self._failure is None and self.path.is_symlink():   # one appeared meanwhile
+            self._fail(f"{self.path} became a symbolic link during the session: not written "
+                       "over")
         if self._failure is None:
             self._sock.settimeout(_FINISH_SILENCE_S)     # off the loop: may wait
             try:
@@ -341,3 +400,149 @@ def _start_writer(partial: Path, path: Path, n: int, with_truth: bool, chunk_row
                         expected=f"a ready writer within {_START_TIMEOUT_S:g} s")
     ours.settimeout(None)
     return ours, process
+
+
+@dataclass(frozen=True)
+class RecoveredSession:
+    """What :func:`recover_session` wrote.
+
+    Attributes:
+        path: The session file.
+        robot: Its robot.
+        rows: Servo periods recovered.
+        events: Events recovered (marks, transitions, the loop's notes).
+        marks: Marks among them.
+        sidecar: Whether the partial file's sidecar was there (without it: no events).
+        dropped_line: A last sidecar line cut off mid-write, dropped (the process was killed
+            while writing it).
+    """
+
+    path: Path
+    robot: str
+    rows: int
+    events: int
+    marks: int
+    sidecar: bool
+    dropped_line: bool
+
+
+def recover_session(partial: str | Path, path: str | Path, robot: str | None = None
+                    ) -> RecoveredSession:
+    """A session cut short (its process killed), written as a normal session file.
+
+    Reads the rows the writer process closed into ``partial`` (``<session>.parquet.partial``)
+    and the metadata and events of its sidecar (``<partial>.jsonl``), checks them (the
+    columns of a session, the joints, the robot, every mark label), and writes ``path``
+    atomically: it reads with :func:`~leadthrough.session.record.load_session` (checked before
+    it is moved into place) like one finished normally, its settings noting the recovery. The
+    partial file and its sidecar are removed once ``path`` is in place.
+
+    Args:
+        partial: The partial file.
+        path: The session file to write (``.parquet``).
+        robot: The robot's name, needed only when the sidecar is missing (else checked
+            against it).
+
+    Returns:
+        What was recovered.
+
+    Raises:
+        DataError: ``partial`` missing or unreadable as Parquet (the writer process was killed
+            too: the file lacks its index), not a session's rows, a sidecar line that is not
+            one of a session's, a robot that differs from the sidecar's, or no robot to be
+            had; ``path`` not a ``.parquet`` file, a symbolic link, or the partial file.
+        LabelError: A mark label in the sidecar that is not a label.
+    """
+    partial, path = Path(partial), Path(path)
+    require_file(partial, "partial session file",
+                 "the <session>.parquet.partial file a session cut short left")
+    sidecar = partial.with_name(partial.name + SIDECAR_SUFFIX)
+    if path.suffix.lower() not in (".parquet", ".pq"):
+        raise DataError("unsupported session file type", source=path, field="suffix",
+                        value=path.suffix or "(none)", expected=".parquet")
+    for given in (partial, sidecar):
+        if path.resolve() == given.resolve():
+            raise DataError("the output would overwrite the partial session", source=path,
+                            field="-o", value=str(path), expected="another file")
+    try:
+        table = pq.read_table(partial)
+    except (OSError, pa.ArrowException) as e:
+        raise DataError(f"not readable as Parquet ({e}): its rows were never closed (the "
+                        "session writer process was killed too), or it is not a session's",
+                        source=partial, expected="the partial file of a session whose loop's "
+                        "process ended (its writer closes the rows it has)") from e
+    names = table.column_names
+    n = sum(1 for c in names if c.startswith("q_") and c[2:].isdigit())
+    header, events, dropped = (_read_sidecar(sidecar) if sidecar.is_file()
+                               else ({}, [], False))
+    if header:
+        if int(header["n"]) != n:
+            raise DataError("the sidecar's joints do not match the rows", source=sidecar,
+                            field="n", value=header["n"], expected=f"{n} (the rows' q_ columns)")
+        if robot is not None and header.get("robot") not in (None, robot):
+            raise DataError("the sidecar names another robot", source=sidecar, field="robot",
+                            value=header.get("robot"), expected=f"'{robot}' (as given)")
+        robot = robot if header.get("robot") is None else str(header["robot"])
+    if robot is None:
+        raise DataError("no robot to be had: the sidecar with the session's robot is "
+                        + ("missing" if not sidecar.is_file() else "without one"),
+                        source=sidecar, field="robot",
+                        expected="--robot NAME (the robot the session ran on)")
+    settings = {**dict(header.get("settings") or {}), "recovered_from": partial.name,
+                "recovered_rows": table.num_rows, "recovered_events": len(events)}
+    events.sort(key=lambda e: e.t)
+    table = table.replace_schema_metadata(session_metadata(robot, n, events, settings))
+
+    def write(tmp: Path) -> None:
+        pq.write_table(table, tmp)
+        load_session(tmp)        # a session file in every respect, or nothing is written
+
+    atomic_write(path, write)
+    for left in (partial, sidecar):
+        left.unlink(missing_ok=True)
+    return RecoveredSession(path=path, robot=robot, rows=table.num_rows, events=len(events),
+                            marks=sum(e.kind == "mark" for e in events),
+                            sidecar=bool(header), dropped_line=dropped)
+
+
+def _read_sidecar(sidecar: Path) -> tuple[dict[str, Any], list[SessionEvent], bool]:
+    """The header, the events and whether a last line cut off mid-write was dropped.
+
+    Raises:
+        DataError: A line that is not a session's header or event.
+        LabelError: A mark label that is not a label.
+    """
+    raw = sidecar.read_bytes()
+    lines = raw.split(b"\n")
+    dropped = bool(lines[-1])      # no newline after the last: cut off mid-write
+    lines = lines[:-1]
+    if not lines:
+        raise DataError("empty sidecar", source=sidecar,
+                        expected="the session's metadata on its first line")
+    header: dict[str, Any] = {}
+    events: list[SessionEvent] = []
+    for k, line in enumerate(lines, 1):
+        try:
+            obj = json.loads(line.decode("utf-8"))
+            if k == 1:
+                if not (isinstance(obj, dict) and obj.get("format") == FORMAT_VERSION
+                        and isinstance(obj.get("n"), int) and isinstance(
+                            obj.get("settings", {}), dict)
+                        and isinstance(obj.get("robot"), str | None)):
+                    raise ValueError("not a session's metadata")
+                header = obj
+                continue
+            event = SessionEvent(**obj)
+            if not (isinstance(event.t, int | float) and math.isfinite(event.t)
+                    and all(isinstance(x, str) for x in (event.kind, event.label,
+                                                         event.cause))):
+                raise ValueError("not a session's event")
+        except (ValueError, TypeError, UnicodeDecodeError) as e:
+            raise DataError(f"malformed sidecar line ({e})", source=sidecar,
+                            field=f"line {k}", value=line[:80].decode("utf-8", "replace"),
+                            expected="the session's metadata (line 1), then one event a "
+                                     "line {t, kind, label, cause}") from e
+        if event.kind == "mark":
+            check_label(event.label, source=sidecar, field=f"line {k} label")
+        events.append(SessionEvent(float(event.t), event.kind, event.label, event.cause))
+    return header, events, dropped

@@ -25,7 +25,11 @@ import struct
 import tempfile
 from typing import Any
 
-__all__ = ["MessageReader", "open_chunk_memory", "recv_message", "send_message"]
+__all__ = ["SIDECAR_SUFFIX", "MessageReader", "open_chunk_memory", "recv_message",
+           "send_message"]
+
+#: Appended to the partial session file's name for its sidecar of metadata and events.
+SIDECAR_SUFFIX = ".jsonl"
 
 _HEADER = struct.Struct("!Q")
 #: Descriptors one message can carry.
