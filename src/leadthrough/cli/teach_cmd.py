@@ -12,6 +12,7 @@ import pinocchio as pin
 
 from leadthrough.errors import DataError, TeachError, UnknownRobotError
 from leadthrough.fileio import atomic_write_text, require_folder
+from leadthrough.labels import check_label
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.session.record import SessionLog, load_session
 from leadthrough.teach.export import line_to_dict, program_to_dict, write_program_csv
@@ -110,7 +111,7 @@ def _line_labels(text: str) -> tuple[str, str]:
     if len(parts) != 2 or not all(parts) or parts[0] == parts[1]:
         raise TeachError("bad welding line marks", field="--line", value=text,
                          expected="two different mark labels, e.g. P1,P2")
-    return parts[0], parts[1]
+    return check_label(parts[0], field="--line"), check_label(parts[1], field="--line")
 
 
 def _format(args: argparse.Namespace) -> str:
@@ -240,6 +241,12 @@ def _write(args: argparse.Namespace, fmt: str, program: TaughtProgram,
     return written, worst
 
 
+def _printable(text: str) -> str:
+    """Text from the session file as it may go to a terminal: printable ASCII, others as
+    ``?`` (no control sequences), at most 80 characters."""
+    return "".join(c if " " <= c <= "~" else "?" for c in text[:80])
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``leadthrough teach``."""
     line = None if args.no_line else _line_labels(args.line)
@@ -275,5 +282,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"{text}; wrote {outs}")
     if program.transitions:
         print("note: safety transitions between the marks: " + ", ".join(
-            f"{e.label} at {e.t:.3f} s ({e.cause})" for e in program.transitions))
+            f"{_printable(e.label)} at {e.t:.3f} s ({_printable(e.cause)})"
+            for e in program.transitions))
     return 0

@@ -19,12 +19,14 @@ the approach before it and the retreat after it are not part of the program.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.errors import TeachError
+from leadthrough.labels import check_label
 from leadthrough.robot.description import Robot
 from leadthrough.session.record import SessionEvent, SessionLog
 from leadthrough.teach.limits_check import LimitReport, check_limits
@@ -32,7 +34,7 @@ from leadthrough.teach.line_fit import WeldingLine, fit_welding_line
 from leadthrough.teach.path import check_mark_time, check_session_robot, find_mark, tcp_path
 from leadthrough.teach.simplify import rdp_indices
 
-__all__ = ["TaughtProgram", "Waypoints", "teach_session"]
+__all__ = ["TaughtProgram", "Waypoints", "check_events", "teach_session"]
 
 Array = NDArray[np.float64]
 
@@ -92,6 +94,33 @@ class TaughtProgram:
     transitions: tuple[SessionEvent, ...] = ()
 
 
+def check_events(log: SessionLog, source: str | None = None) -> None:
+    """Check the session's events as read from its file: each has a kind, a finite time and
+    text fields, and each mark's label is a name (:func:`leadthrough.labels.check_label`: it
+    ends up in program comments, file names and pages).
+
+    Args:
+        log: The session.
+        source: Session file, for messages.
+
+    Raises:
+        LabelError: A mark label that is not a name, naming ``events[i].label`` and the label.
+        TeachError: An event whose kind, time or text is not of its type, naming
+            ``events[i]`` and the field.
+    """
+    for i, e in enumerate(log.events):
+        for name in ("kind", "label", "cause"):
+            if not isinstance(getattr(e, name), str):
+                raise TeachError("not a text", source=source, field=f"events[{i}].{name}",
+                                 value=getattr(e, name), expected="a string")
+        if isinstance(e.t, bool) or not isinstance(e.t, numbers.Real) \
+                or not math.isfinite(e.t):
+            raise TeachError("not a finite time", source=source, field=f"events[{i}].t",
+                             value=e.t, expected="a finite event time [s]")
+        if e.kind == "mark":
+            check_label(e.label, source=source, field=f"events[{i}].label")
+
+
 def teach_session(log: SessionLog, robot: Robot, *, tolerance_mm: float = 1.0,
                   speed_m_s: float = 0.1, line: tuple[str, str] | None = ("P1", "P2"),
                   window_s: float = 0.05, orientation_speed_rad_s: float = 0.5,
@@ -116,6 +145,9 @@ def teach_session(log: SessionLog, robot: Robot, *, tolerance_mm: float = 1.0,
         TeachError: Another robot's session, fewer than two marks, a missing or repeated line
             mark, a degenerate line, bad settings, or a waypoint outside the joint position or
             speed limits (naming the waypoint, joint, value and limit).
+        LabelError: A mark label (or a line end) that is not a name
+            (:func:`leadthrough.labels.check_label`), naming the session file, the event and
+            the label.
     """
     if not (math.isfinite(tolerance_mm) and tolerance_mm >= 0.0):
         raise TeachError("out of range", field="tolerance_mm", value=tolerance_mm,
@@ -124,6 +156,10 @@ def teach_session(log: SessionLog, robot: Robot, *, tolerance_mm: float = 1.0,
         raise TeachError("out of range", field="window_s", value=window_s,
                          expected="a finite averaging half-window ≥ 0 s")
     check_session_robot(log, robot, source)
+    check_events(log, source)
+    if line is not None:
+        for end in line:
+            check_label(end, source=source, field="line")
     marks = log.marks
     if len(marks) < 2:
         raise TeachError("session has no marks" if not marks else "session has only one mark",

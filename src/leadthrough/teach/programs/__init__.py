@@ -47,7 +47,7 @@ from leadthrough.teach.programs.targets import (
 from leadthrough.teach.programs.urscript import parse_urscript, render_urscript
 
 __all__ = ["LANGUAGES", "Language", "ProgramOptions", "ProgramTarget", "RenderedProgram",
-           "program_name", "program_targets", "render_robot_program", "solve_back",
+           "check_program", "program_name", "program_targets", "render_robot_program", "solve_back",
            "target_configurations", "write_robot_program"]
 
 
@@ -164,9 +164,46 @@ def render_robot_program(program: TaughtProgram, robot: Robot, language: str,
     configs = target_configurations(language, robot, targets, options.joint_space, source)
     files = lang.render(targets, configs, options,
                         _header(program, robot, options, language, len(targets)))
-    worst = check_round_trip(lang.parse(files), robot, np.array([t.q for t in targets]),
-                             language)
+    worst = check_program(language, files, robot, targets, configs, options)
     return RenderedProgram(files, targets, worst)
+
+
+def check_program(language: str, files: dict[str, str], robot: Robot,
+                  targets: list[ProgramTarget], configs: list[Any],
+                  options: ProgramOptions) -> float:
+    """Read a program text back strictly and compare every move with the moves written.
+
+    The language's reader accepts only the statements its writer emits, in their order (a
+    digital output, a wait, an extra move or a comment ended by an embedded newline is an
+    error); then the program must carry the options' name, hold exactly one move per target,
+    in order, of the target's kind (a joint move where the configuration is None, or in
+    URScript's joint space), and solve back to each target's joints within
+    :data:`~leadthrough.teach.programs.parsed.ROUND_TRIP_TOLERANCE_DEG`.
+
+    Args:
+        language: ``urscript``, ``krl``, ``tp`` or ``rapid``.
+        files: The texts by suffix.
+        robot: The robot.
+        targets: The moves written.
+        configs: Their configuration data (None: a joint move).
+        options: The options written (name, joint space).
+
+    Returns:
+        The largest joint difference [deg].
+
+    Raises:
+        TeachError: A statement, order, name or move the writer did not write, naming the
+            file and line, or the move and joint.
+    """
+    parsed = LANGUAGES[language].parse(files)
+    if parsed.name != options.name:
+        raise TeachError(f"the {language} program names another program", field="name",
+                         value=parsed.name, expected=options.name)
+    joint_moves = [c is None for c in configs]
+    if language == "urscript":  # no configuration data: movel unless in joint space
+        joint_moves = [i == 0 or options.joint_space for i in range(len(targets))]
+    return check_round_trip(parsed, robot, np.array([t.q for t in targets]), language,
+                            joint_moves)
 
 
 def write_robot_program(program: TaughtProgram, robot: Robot, language: str,

@@ -28,6 +28,13 @@ from scipy.spatial.transform import Rotation
 
 from leadthrough.errors import TeachError
 from leadthrough.teach.programs.configuration import FanucConfig
+from leadthrough.teach.programs.grammar import (
+    COMMENT_CHARSET,
+    Rule,
+    Statement,
+    comment_text,
+    read_statements,
+)
 from leadthrough.teach.programs.parsed import ParsedMove, ParsedProgram
 from leadthrough.teach.programs.targets import (
     APPROACH_PERCENT,
@@ -36,6 +43,7 @@ from leadthrough.teach.programs.targets import (
     axis_merge,
     axis_split,
     canonical_deg,
+    check_writer_inputs,
     fmt,
     joint_percent,
     tool_from_xyzabc,
@@ -68,17 +76,24 @@ def _pos_block(i: int, t: ProgramTarget, cfg: FanucConfig | None) -> list[str]:
 
 
 def _remarks(lines: list[str]) -> list[str]:
-    """Remark texts: no ``;`` (it ends a TP statement), at most 32 characters each."""
+    """Remark texts: no ``;`` (it ends a TP statement), at most 32 characters each, only
+    characters of a comment (others written as ``?``)."""
     out: list[str] = []
     for line in lines:
-        out += textwrap.wrap(line.replace(";", ","), 32) or [""]
+        out += textwrap.wrap(comment_text(line.replace(";", ","), exclude=";"), 32) or [""]
     return out
 
 
 def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
               options: ProgramOptions, header: list[str]) -> dict[str, str]:
     """The program as ``{".ls": text}``; arguments as
-    :attr:`leadthrough.teach.programs.Language.render`."""
+    :attr:`leadthrough.teach.programs.Language.render`.
+
+    Raises:
+        TeachError: A label, name or number the program cannot hold
+            (:func:`~leadthrough.teach.programs.targets.check_writer_inputs`).
+    """
+    check_writer_inputs(targets, options, "tp")
     tool = [fmt(v, 3) for v in xyzabc(options.tool)]
     units = ("mm", "mm", "mm", "deg", "deg", "deg")
     tool_lines = [f"UT1 {k} = {v} {u}" for k, v, u in zip("XYZABC", tool, units, strict=True)]
@@ -88,8 +103,7 @@ def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
     speed = fmt(1e3 * options.speed_m_s, 0)
     for i, (t, cfg) in enumerate(zip(targets, configs, strict=True), start=1):
         term = "FINE" if t.exact else f"CNT{options.fanuc_cnt}"
-        if t.label:
-            mn.append(f"! {t.label} ;")
+        mn += [f"! {part} ;" for part in t.label.split("/") if part]  # ≤ 32 characters each
         if cfg is None:
             pct = APPROACH_PERCENT if i == 1 else joint_percent(t.speed_ratio)
             mn.append(f"J P[{i}] {pct}% {term} ;")
@@ -110,28 +124,54 @@ def render_tp(targets: list[ProgramTarget], configs: list[FanucConfig | None],
     return {".ls": "\n".join(text) + "\n"}
 
 
-_NUM = r"-?\d+(?:\.\d*)?"
+_N = r"-?\d+\.\d+"  # the fixed-point numbers we write
+_K = r" {0,3}(?P<k>\d+):"
+_ATTR = {"0": "OWNER\t\t= MNEDITOR;", "2": "PROG_SIZE\t= 0;", "4": "VERSION\t\t= 0;",
+         "6": "MEMORY_SIZE\t= 0;", "7": "PROTECT\t\t= READ_WRITE;",
+         "8": "TCD:  STACK_SIZE\t= 0,", "9": "      TASK_PRIORITY\t= 50,",
+         "A": "      TIME_SLICE\t= 0,", "B": "      BUSY_LAMP_OFF\t= 0,",
+         "C": "      ABORT_REQUEST\t= 0,", "D": "      PAUSE_REQUEST\t= 0;",
+         "E": "DEFAULT_GROUP\t= 1,*,*,*,*;", "F": "CONTROL_CODE\t= 00000000 00000000;"}
+_ATTR_CODES = "0123456789ABCDEF"  # the /ATTR lines in order (1, 3, 5: COMMENT, FILE_NAME,
+#                                   LINE_COUNT)
+_RULES = [
+    Rule.of("p", r"/PROG  (?P<name>[A-Za-z][A-Za-z0-9_]*)", "/PROG"),
+    Rule.of("a", r"/ATTR", "/ATTR"),
+    *(Rule.of(c, re.escape(text), "/ATTR line") for c, text in _ATTR.items()),
+    Rule.of("1", r'COMMENT\t\t= "(?P<comment>[A-Za-z0-9 _]{0,16})";', "COMMENT"),
+    Rule.of("3", r"FILE_NAME\t= (?P<name>[A-Za-z][A-Za-z0-9_]*);", "FILE_NAME"),
+    Rule.of("5", r"LINE_COUNT\t= (?P<count>\d+);", "LINE_COUNT"),
+    Rule.of("m", r"/MN", "/MN"),
+    Rule.of("r", rf"{_K}  ! (?P<text>[{COMMENT_CHARSET.replace(';', '')}]{{0,32}}) ;", "remark"),
+    Rule.of("f", rf"{_K}  UFRAME_NUM=0 ;", "UFRAME_NUM"),
+    Rule.of("g", rf"{_K}  UTOOL_NUM=1 ;", "UTOOL_NUM"),
+    Rule.of("J", rf"{_K}J P\[(?P<i>\d+)\] \d{{1,3}}% (?:FINE|CNT\d{{1,3}}) ;", "joint move"),
+    Rule.of("L", rf"{_K}L P\[(?P<i>\d+)\] \d+mm/sec (?:FINE|CNT\d{{1,3}}) ;", "linear move"),
+    Rule.of("s", r"/POS", "/POS"), Rule.of("P", r"P\[(?P<i>\d+)\]\{", "position"),
+    Rule.of("G", r"   GP1:", "GP1"), Rule.of("u", r"\tUF : 0, UT : 1,", "frames"),
+    Rule.of("U", r"\tUF : 0, UT : 1,\t\tCONFIG : '(?P<f>[FN]) (?P<u>[UD]) (?P<t>[TB]), "
+                 r"(?P<t1>-?\d), (?P<t4>-?\d), (?P<t6>-?\d)',", "frames and configuration"),
+    Rule.of("j", rf"\tJ1= +(?P<J1>{_N}) deg,\tJ2= +(?P<J2>{_N}) deg,\tJ3= +(?P<J3>{_N}) deg,",
+            "J1-J3"),
+    Rule.of("k", rf"\tJ4= +(?P<J4>{_N}) deg,\tJ5= +(?P<J5>{_N}) deg,\tJ6= +(?P<J6>{_N}) deg",
+            "J4-J6"),
+    Rule.of("K", rf"\tJ4= +(?P<J4>{_N}) deg,\tJ5= +(?P<J5>{_N}) deg,\tJ6= +(?P<J6>{_N}) deg,",
+            "J4-J6"),
+    Rule.of("e", rf"\tE1= +(?P<E1>{_N}) deg", "E1"),
+    Rule.of("x", rf"\tX = +(?P<X>{_N})  mm,\tY = +(?P<Y>{_N})  mm,\tZ = +(?P<Z>{_N})  mm,",
+            "X, Y, Z"),
+    Rule.of("w", rf"\tW = +(?P<W>{_N}) deg,\tP = +(?P<P>{_N}) deg,\tR = +(?P<R>{_N}) deg",
+            "W, P, R"),
+    Rule.of("z", r"\};", "end of position"), Rule.of("Z", r"/END", "/END"),
+]
+#: /PROG, /ATTR, /MN: remarks, frames, a joint move first, moves; /POS: positions; /END
+_ORDER = [("pa" + _ATTR_CODES + "m", False), ("r", True), ("fg", False), ("r*J", False),
+          ("r*[JL]", True), ("s", False), ("PG(?:ujk|ujKe|Uxw)z", True), ("Z", False)]
+_TOOL_REMARK = re.compile(rf"UT1 (?P<key>[XYZABC]) = (?P<v>{_N}) (?:mm|deg)")
 
 
-def _named(block: str, names: tuple[str, ...]) -> list[float]:
-    out = []
-    for n in names:
-        m = re.search(rf"\b{n}\s*=\s*({_NUM})", block)
-        if m is None:
-            raise TeachError("position value missing", field="/POS", value=n,
-                             expected=f"{n} = number")
-        out.append(float(m.group(1)))
-    return out
-
-
-def _config(block: str) -> FanucConfig:
-    m = re.search(r"CONFIG\s*:\s*'([FN])\s+([UD])\s+([TB])\s*,\s*(-?\d+)\s*,\s*(-?\d+)\s*,"
-                  r"\s*(-?\d+)\s*'", block)
-    if m is None:
-        raise TeachError("malformed configuration string", field="/POS CONFIG", value=block,
-                         expected="'F|N U|D T|B, t1, t4, t6'")
-    return FanucConfig(m.group(1) == "F", m.group(2) == "U", m.group(3) == "T",
-                       (int(m.group(4)), int(m.group(5)), int(m.group(6))))
+def _values(s: Statement) -> dict[str, float]:
+    return {k: float(v) for k, v in s.match.groupdict().items() if k.isupper()}
 
 
 def _tp_pose(v: list[float]) -> pin.SE3:
@@ -139,30 +179,82 @@ def _tp_pose(v: list[float]) -> pin.SE3:
     return pin.SE3(rot, 1e-3 * np.asarray(v[:3]))
 
 
+def _check_mn(statements: list[Statement]) -> pin.SE3:
+    """Line numbers 1 … n, LINE_COUNT, names; the tool of the UT1 remarks."""
+    by = {s.code: s for s in statements if s.code in "p135"}
+    name = by["p"].match.group("name")
+    mn = [s for s in statements if s.code in "rfgJL"]
+    checks = [("FILE_NAME", by["3"].match.group("name"), name),
+              ("COMMENT", by["1"].match.group("comment"), f"leadthrough {name}"[:16]),
+              ("LINE_COUNT", int(by["5"].match.group("count")), len(mn))]
+    checks += [(f"line {s.line}", int(s.match.group("k")), k)
+               for k, s in enumerate(mn, start=1)]
+    for field, value, expected in checks:
+        if value != expected:
+            raise TeachError("a value the program writer does not write", source=".ls",
+                             field=field, value=value, expected=str(expected))
+    header = mn[:mn.index(next(s for s in mn if s.code == "f"))]
+    tool = {m.group("key"): float(m.group("v")) for m in
+            (_TOOL_REMARK.fullmatch(s.match.group("text")) for s in header[-6:]) if m}
+    if list(tool) != list("XYZABC"):
+        raise TeachError("the tool remarks are missing", source=".ls", field="/MN",
+                         expected="UT1 X, Y, Z, A, B, C as the last six remarks before "
+                                  "UFRAME_NUM")
+    return tool_from_xyzabc([tool[k] for k in "XYZABC"])
+
+
+def _blocks(statements: list[Statement]) -> list[tuple[dict[str, float], re.Match[str] | None]]:
+    """Each position P[1], P[2], … in order: (values, CONFIG line or None for the joint
+    representation)."""
+    out: list[tuple[dict[str, float], re.Match[str] | None]] = []
+    values: dict[str, float] = {}
+    config: re.Match[str] | None = None
+    for s in statements[statements.index(next(s for s in statements if s.code == "s")):]:
+        if s.code == "P":
+            if s.match.group("i") != str(len(out) + 1):
+                raise TeachError("a position out of the order the program writer declares",
+                                 source=".ls", field=f"line {s.line}", value=s.match.group(0),
+                                 expected=f"P[{len(out) + 1}]")
+            values, config = {}, None
+        elif s.code == "U":
+            config = s.match
+        elif s.code == "z":
+            out.append((values, config))
+        values.update(_values(s))
+    return out
+
+
 def parse_tp(files: dict[str, str]) -> ParsedProgram:
-    """The moves and tool of a TP program in the subset :func:`render_tp` writes.
+    """The moves, tool and name of a TP program, read strictly: every line must be a
+    statement :func:`render_tp` writes, in its order, with the line numbers, LINE_COUNT and
+    names it writes; the moves go to P[1], P[2], … in order, each once, a ``J`` to a joint
+    position, an ``L`` to a position with configuration.
 
     Raises:
-        TeachError: A move to an undeclared position, or a malformed position.
+        TeachError: A line, statement order, value or position the writer does not emit
+            (naming the line).
     """
-    text = files[".ls"]
-    blocks = {int(m.group(1)): m.group(2)
-              for m in re.finditer(r"P\[(\d+)\]\s*\{(.*?)\};", text, flags=re.DOTALL)}
-    tool = pin.SE3.Identity()
-    found = [re.search(rf"! UT1 {k} = ({_NUM}) (?:mm|deg) ;", text) for k in "XYZABC"]
-    if all(found):
-        tool = tool_from_xyzabc([float(m.group(1)) for m in found if m])
-    moves = []
-    for m in re.finditer(r"^\s*\d+:\s*([JL])\s+P\[(\d+)\]", text, flags=re.MULTILINE):
-        block = blocks.get(int(m.group(2)))
-        if block is None:
-            raise TeachError("move to an undeclared position", field="/MN",
-                             value=f"P[{m.group(2)}]", expected="a P[i] in /POS")
-        if "CONFIG" in block:
-            moves.append(ParsedMove(pose=_tp_pose(_named(block, ("X", "Y", "Z", "W", "P", "R"))),
-                                    config=_config(block)))
+    statements = read_statements(files[".ls"], _RULES, _ORDER, ".ls")
+    tool = _check_mn(statements)
+    blocks = _blocks(statements)
+    moves: list[ParsedMove] = []
+    for s in (s for s in statements if s.code in "JL"):
+        i = len(moves) + 1
+        if s.match.group("i") != str(i) or i > len(blocks) \
+                or (blocks[i - 1][1] is None) != (s.code == "J"):
+            raise TeachError("a move to another position than the program writer's",
+                             source=".ls", field=f"line {s.line}", value=s.match.group(0),
+                             expected=f"P[{i}], declared in /POS in the move's representation")
+        v, m = blocks[i - 1]
+        if m is None:
+            extra = [v["E1"]] if "E1" in v else []
+            moves.append(ParsedMove(q_deg=axis_merge([v[f"J{j}"] for j in range(1, 7)], extra)))
         else:
-            names = tuple(f"J{i}" for i in range(1, 7))
-            extra = _named(block, ("E1",)) if re.search(r"\bE1\s*=", block) else []
-            moves.append(ParsedMove(q_deg=axis_merge(_named(block, names), extra)))
-    return ParsedProgram(tuple(moves), tool)
+            cfg = FanucConfig(m.group("f") == "F", m.group("u") == "U", m.group("t") == "T",
+                              (int(m.group("t1")), int(m.group("t4")), int(m.group("t6"))))
+            moves.append(ParsedMove(pose=_tp_pose([v[k] for k in "XYZWPR"]), config=cfg))
+    if len(moves) != len(blocks):
+        raise TeachError("a position no move goes to", source=".ls", field="/POS",
+                         value=f"P[{len(moves) + 1}]", expected="one move to each position")
+    return ParsedProgram(tuple(moves), tool, statements[0].match.group("name"))
+

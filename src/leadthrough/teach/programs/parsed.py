@@ -8,6 +8,7 @@ joints to :data:`ROUND_TRIP_TOLERANCE_DEG`) and by the tests.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,10 +46,12 @@ class ParsedMove:
 
 @dataclass(frozen=True)
 class ParsedProgram:
-    """The moves of a program file and its tool (TCP relative to the robot's TCP frame)."""
+    """The moves of a program file, its tool (TCP relative to the robot's TCP frame) and its
+    program name (as the file declares it)."""
 
     moves: tuple[ParsedMove, ...]
     tool: pin.SE3 = field(default_factory=pin.SE3.Identity)
+    name: str = ""
 
 
 def _solve_configured(robot: Robot, flange: pin.SE3,
@@ -107,27 +110,48 @@ def solve_back(parsed: ParsedProgram, robot: Robot) -> Array:
 
 
 def check_round_trip(parsed: ParsedProgram, robot: Robot, q_taught: Array,
-                     language: str) -> float:
-    """Solve the parsed program back and compare with the taught joints.
+                     language: str, joint_moves: Sequence[bool] | None = None) -> float:
+    """Compare every move read back with the move written: count, kind and joints, in order.
 
     Args:
         parsed: The program as written, read back.
         robot: The robot.
-        q_taught: Joints of each move [rad], shape (K, n).
+        q_taught: Joints of each move written [rad], shape (K, n).
         language: For messages.
+        joint_moves: Whether each move written is a joint move (else a pose), K values, or
+            None not to compare the kinds.
 
     Returns:
         The largest joint difference [deg].
 
     Raises:
-        TeachError: A difference above :data:`ROUND_TRIP_TOLERANCE_DEG`, naming the move and
-            joint.
+        TeachError: Another number of moves than written (a move added or missing), a move of
+            another kind, or a joint difference above :data:`ROUND_TRIP_TOLERANCE_DEG`, naming
+            the move and joint.
     """
+    q_taught = np.atleast_2d(np.asarray(q_taught, dtype=float))
+    if len(parsed.moves) != q_taught.shape[0]:
+        raise TeachError(f"the {language} program holds {len(parsed.moves)} moves, "
+                         f"{q_taught.shape[0]} were written", field="moves",
+                         value=len(parsed.moves),
+                         expected=f"exactly the {q_taught.shape[0]} moves written, in order")
+    if joint_moves is not None:
+        for i, (move, joint) in enumerate(zip(parsed.moves, joint_moves, strict=True)):
+            if (move.q_deg is not None) != joint:
+                raise TeachError(f"the {language} program's move {i} is a "
+                                 f"{'joint' if move.q_deg is not None else 'linear'} move, "
+                                 f"a {'joint' if joint else 'linear'} move was written",
+                                 field=f"moves[{i}]", expected="the moves written, in order")
     q = solve_back(parsed, robot)
+    if q.shape != q_taught.shape:
+        raise TeachError(f"the {language} program's moves have {q.shape[-1]} joints",
+                         field="moves", value=q.shape[-1],
+                         expected=f"{q_taught.shape[1]} joints per move")
     err = np.degrees(np.abs(q - q_taught))
     worst = float(err.max()) if err.size else 0.0
-    if worst > ROUND_TRIP_TOLERANCE_DEG:
-        i, j = np.unravel_index(int(np.argmax(err)), err.shape)
+    if not worst <= ROUND_TRIP_TOLERANCE_DEG:
+        i, j = (int(v) for v in np.unravel_index(int(np.argmax(np.nan_to_num(err, nan=np.inf))),
+                                                 err.shape))
         raise TeachError(f"the {language} program does not give back the taught joints: move "
                          f"{i}, joint {j + 1} differs by {worst:.4f}°", field=f"moves[{i}]",
                          value=round(worst, 4),

@@ -25,6 +25,13 @@ import pinocchio as pin
 
 from leadthrough.errors import TeachError
 from leadthrough.teach.programs.configuration import AbbConfig
+from leadthrough.teach.programs.grammar import (
+    COMMENT_CHARSET,
+    Rule,
+    Statement,
+    comment_text,
+    read_statements,
+)
 from leadthrough.teach.programs.parsed import ParsedMove, ParsedProgram
 from leadthrough.teach.programs.targets import (
     ProgramOptions,
@@ -32,6 +39,7 @@ from leadthrough.teach.programs.targets import (
     axis_merge,
     axis_split,
     canonical_sign,
+    check_writer_inputs,
     fmt,
 )
 
@@ -65,7 +73,13 @@ def _tool(options: ProgramOptions) -> tuple[str, list[str]]:
 def render_rapid(targets: list[ProgramTarget], configs: list[AbbConfig | None],
                  options: ProgramOptions, header: list[str]) -> dict[str, str]:
     """The module as ``{".mod": text}``; arguments as
-    :attr:`leadthrough.teach.programs.Language.render`."""
+    :attr:`leadthrough.teach.programs.Language.render`.
+
+    Raises:
+        TeachError: A label, name or number the module cannot hold
+            (:func:`~leadthrough.teach.programs.targets.check_writer_inputs`).
+    """
+    check_writer_inputs(targets, options, "rapid")
     tool, decl = _tool(options)
     r = options.zone_mm
     v_ori = fmt(np.degrees(options.orientation_speed_rad_s), 3)
@@ -85,17 +99,48 @@ def render_rapid(targets: list[ProgramTarget], configs: list[AbbConfig | None],
             decl.append(f"CONST robtarget p{i}:=[{_pose(t.pose)},"
                         f"[{cfg.cf1},{cfg.cf4},{cfg.cf6},{cfg.cfx}],{_EXT}];")
             moves.append(f"MoveL p{i},v_lt,{zone},{tool}\\WObj:=wobj0;")
-    lines = [f"MODULE {options.name}", *[f"  ! {h}" for h in header],
+    lines = [f"MODULE {options.name}", *[f"  ! {comment_text(h)}" for h in header],
              *[f"  {d}" for d in decl], "  PROC main()", *[f"    {m}" for m in moves],
              "  ENDPROC", "ENDMODULE"]
     return {".mod": "\n".join(lines) + "\n"}
 
 
-_NUM = r"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?"
+_N = r"-?\d+\.\d+"  # the fixed-point numbers we write
+
+
+def _seq(item: str, n: int) -> str:
+    return ",".join([item] * n)
+
+
+_POSE = rf"\[(?P<pos>{_seq(_N, 3)})\],\[(?P<quat>{_seq(_N, 4)})\]"
+_TOOL = r"(?P<tool>tool0|tool_lt)"
+_RULES = [
+    Rule.of("M", r"MODULE (?P<name>[A-Za-z][A-Za-z0-9_]*)", "MODULE"),
+    Rule.of("h", rf"  ! [{COMMENT_CHARSET}]*", "comment"),
+    Rule.of("t", rf"  PERS tooldata tool_lt:=\[TRUE,\[{_POSE}\],"
+                 r"\[0\.001,\[0,0,0\.001\],\[1,0,0,0\],0,0,0\]\];", "tooldata"),
+    Rule.of("s", rf"  CONST speeddata v_lt:=\[{_seq(_N, 2)},5000,1000\];", "speeddata"),
+    Rule.of("z", rf"  CONST zonedata z_lt:=\[FALSE,{_seq(_N, 6)}\];", "zonedata"),
+    Rule.of("j", rf"  CONST jointtarget (?P<target>j\d+):=\[\[(?P<q>{_seq(_N, 6)})\],"
+                 rf"\[(?P<ext>{_N}|9E9),9E9,9E9,9E9,9E9,9E9\]\];", "jointtarget"),
+    Rule.of("r", rf"  CONST robtarget (?P<target>p\d+):=\[{_POSE},"
+                 rf"\[(?P<cf>-?\d+,-?\d+,-?\d+,[0-7])\],\[{_seq('9E9', 6)}\]\];", "robtarget"),
+    Rule.of("P", r"  PROC main\(\)", "PROC"), Rule.of("J", r"    ConfJ \\On;", "ConfJ"),
+    Rule.of("K", r"    ConfL \\On;", "ConfL"),
+    Rule.of("c", rf"    ! [{COMMENT_CHARSET}]*", "comment"),
+    Rule.of("A", rf"    MoveAbsJ (?P<target>j\d+),(?:v100|v_lt),(?:fine|z_lt),{_TOOL};",
+            "MoveAbsJ"),
+    Rule.of("L", rf"    MoveL (?P<target>p\d+),v_lt,(?:fine|z_lt),{_TOOL}\\WObj:=wobj0;",
+            "MoveL"),
+    Rule.of("E", r"  ENDPROC", "ENDPROC"), Rule.of("N", r"ENDMODULE", "ENDMODULE"),
+]
+#: MODULE, comments, (tool,) speed, zone, targets, PROC, a MoveAbsJ first, moves, the ends
+_ORDER = [("M", False), ("h", True), ("(?:th)?sz", False), ("[jr]", True), ("PJK", False),
+          ("c?A", False), ("c?[AL]", True), ("EN", False)]
 
 
 def _nums(text: str) -> list[float]:
-    return [float(v) for v in re.findall(_NUM, text)]
+    return [float(v) for v in text.split(",")]
 
 
 def _se3(pos: list[float], quat: list[float]) -> pin.SE3:
@@ -104,32 +149,56 @@ def _se3(pos: list[float], quat: list[float]) -> pin.SE3:
     return pin.SE3(q.matrix(), 1e-3 * np.asarray(pos))
 
 
+def _targets(statements: list[Statement]) -> dict[str, re.Match[str]]:
+    """The declared targets j1/p1, j2/p2, … in order, each number once."""
+    out: dict[str, re.Match[str]] = {}
+    for s in statements:
+        if s.code in "jr":
+            target = s.match.group("target")
+            if target[1:] != str(len(out) + 1):
+                raise TeachError("a target out of the order the program writer declares",
+                                 source=".mod", field=f"line {s.line}", value=target,
+                                 expected=f"j{len(out) + 1} or p{len(out) + 1}")
+            out[target] = s.match
+    return out
+
+
 def parse_rapid(files: dict[str, str]) -> ParsedProgram:
-    """The moves and tool of a RAPID module in the subset :func:`render_rapid` writes.
+    """The moves, tool and name of a RAPID module, read strictly: every line must be a
+    statement :func:`render_rapid` writes, in its order; the moves go to the targets in order,
+    each once, with the tool the module declares.
 
     Raises:
-        TeachError: A move to an undeclared target, or a malformed target.
+        TeachError: A line, statement order or target the writer does not emit (naming the
+            line).
     """
-    text = files[".mod"]
-    robt = {m.group(1): _nums(m.group(2)) for m in re.finditer(
-        r"robtarget\s+(\w+)\s*:=\s*\[(.*?)\]\s*;", text)}
-    joint = {m.group(1): _nums(m.group(2)) for m in re.finditer(
-        r"jointtarget\s+(\w+)\s*:=\s*\[(.*?)\]\s*;", text)}
+    statements = read_statements(files[".mod"], _RULES, _ORDER, ".mod")
+    targets = _targets(statements)
     tool = pin.SE3.Identity()
-    m_tool = re.search(r"tooldata\s+tool_lt\s*:=\s*\[TRUE,\[\[(.*?)\],\[(.*?)\]\]", text)
-    if m_tool:
-        tool = _se3(_nums(m_tool.group(1)), _nums(m_tool.group(2)))
-    moves = []
-    for m in re.finditer(r"^\s*(MoveL|MoveAbsJ)\s+(\w+)", text, flags=re.MULTILINE):
-        name = m.group(2)
-        if m.group(1) == "MoveAbsJ" and name in joint:
-            ext = [v for v in joint[name][6:7] if abs(v) < 9e8]
-            moves.append(ParsedMove(q_deg=axis_merge(joint[name][:6], ext)))
-        elif m.group(1) == "MoveL" and name in robt and len(robt[name]) >= 11:
-            v = robt[name]
-            cfg = AbbConfig(*(int(c) for c in v[7:11]))
-            moves.append(ParsedMove(pose=_se3(v[:3], v[3:7]), config=cfg))
+    tool_name = "tool0"
+    for s in statements:
+        if s.code == "t":
+            tool = _se3(_nums(s.match.group("pos")), _nums(s.match.group("quat")))
+            tool_name = "tool_lt"
+    moves: list[ParsedMove] = []
+    for s in (s for s in statements if s.code in "AL"):
+        target = s.match.group("target")
+        if target != f"{'j' if s.code == 'A' else 'p'}{len(moves) + 1}" \
+                or target not in targets or s.match.group("tool") != tool_name:
+            raise TeachError("a move to another target or with another tool than the program "
+                             "writer's", source=".mod", field=f"line {s.line}",
+                             value=s.match.group(0).strip(),
+                             expected=f"target number {len(moves) + 1}, declared in the "
+                                      f"module, with {tool_name}")
+        m = targets[target]
+        if s.code == "A":
+            ext = [] if m.group("ext") == "9E9" else [float(m.group("ext"))]
+            moves.append(ParsedMove(q_deg=axis_merge(_nums(m.group("q")), ext)))
         else:
-            raise TeachError("move to an undeclared or malformed target", field=m.group(1),
-                             value=name, expected="a target declared in the module")
-    return ParsedProgram(tuple(moves), tool)
+            cfg = AbbConfig(*(int(c) for c in m.group("cf").split(",")))
+            moves.append(ParsedMove(pose=_se3(_nums(m.group("pos")), _nums(m.group("quat"))),
+                                    config=cfg))
+    if len(moves) != len(targets):
+        raise TeachError("a target no move goes to", source=".mod", field="CONST",
+                         value=f"target {len(moves) + 1}", expected="one move to each target")
+    return ParsedProgram(tuple(moves), tool, statements[0].match.group("name"))

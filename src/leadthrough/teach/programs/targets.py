@@ -36,10 +36,17 @@ from leadthrough.robot.inverse_kinematics import newton_pose, pose_of
 from leadthrough.teach.limits_check import limit_report
 from leadthrough.teach.line_fit import WeldingLine
 from leadthrough.teach.program import TaughtProgram
+from leadthrough.teach.programs.grammar import (
+    NAME_RULES,
+    check_program_name,
+    check_target_label,
+    finite,
+)
 
 __all__ = ["APPROACH_JOINT_SPEED", "APPROACH_PERCENT", "ProgramOptions", "ProgramTarget",
-           "axis_merge", "axis_split", "canonical_deg", "canonical_sign", "degrees", "fmt",
-           "joint_percent", "program_name", "program_targets", "tool_from_xyzabc", "xyzabc"]
+           "axis_merge", "axis_split", "canonical_deg", "canonical_sign", "check_writer_inputs",
+           "degrees", "fmt", "joint_percent", "program_name", "program_targets",
+           "tool_from_xyzabc", "xyzabc"]
 
 Array = NDArray[np.float64]
 
@@ -92,8 +99,13 @@ class ProgramTarget:
 
 
 def fmt(x: float, decimals: int) -> str:
-    """A fixed-point number without a negative zero."""
-    text = f"{x:.{decimals}f}"
+    """A fixed-point number without a negative zero.
+
+    Raises:
+        TeachError: ``x`` is not finite (``nan`` or ``inf`` in a program would be read as a
+            name).
+    """
+    text = f"{finite(x, 'number'):.{decimals}f}"
     return text[1:] if text.startswith("-") and float(text) == 0.0 else text
 
 
@@ -121,21 +133,13 @@ def tool_from_xyzabc(values: tuple[float, ...] | list[float]) -> pin.SE3:
     return pin.SE3(rot, 1e-3 * np.asarray(values[:3], dtype=float))
 
 
-_NAME_RULES = {
-    "krl": (r"[A-Za-z_][A-Za-z0-9_]{0,23}", "a letter or _, then letters, digits, _ (≤ 24)"),
-    "tp": (r"[A-Za-z][A-Za-z0-9_]{0,35}", "a letter, then letters, digits, _ (≤ 36)"),
-    "rapid": (r"[A-Za-z][A-Za-z0-9_]{0,31}", "a letter, then letters, digits, _ (≤ 32)"),
-    "urscript": (r"[A-Za-z_][A-Za-z0-9_]{0,62}", "a letter or _, then letters, digits, _"),
-}
-
-
 def program_name(stem: str, language: str) -> str:
     """The program name for a file stem (the controllers name a program after its file).
 
     Raises:
         TeachError: The stem is not a valid name in ``language``.
     """
-    pattern, rule = _NAME_RULES[language]
+    pattern, rule = NAME_RULES[language]
     if not re.fullmatch(pattern, stem):
         raise TeachError("output file name is not a valid program name", field="-o",
                          value=stem, expected=f"{language} program name: {rule}")
@@ -280,3 +284,37 @@ def axis_split(q: Array, language: str) -> tuple[list[float], list[float]]:
 def axis_merge(main: list[float], extra: list[float]) -> tuple[float, ...]:
     """Inverse of :func:`axis_split`: joint angles [deg] in the robot's joint order."""
     return tuple(main) if not extra else (main[0], main[1], extra[0], *main[2:])
+
+
+def check_writer_inputs(targets: list[ProgramTarget], options: ProgramOptions,
+                        language: str) -> None:
+    """What a program writer embeds, checked before it writes a line: the program name, every
+    target's label (mark labels only), finite joints, poses, speeds and zone, the FANUC CNT.
+
+    Raises:
+        TeachError: Naming the offending field and value.
+    """
+    check_program_name(options.name, language)
+    if not targets:
+        raise TeachError("a program without targets", field="targets", value=0,
+                         expected="at least one target")
+    for i, t in enumerate(targets):
+        check_target_label(t.label, i)
+        values = [*np.ravel(t.q), *np.ravel(t.pose.homogeneous), t.joint_speed_rad_s,
+                  t.speed_ratio]
+        if not all(math.isfinite(float(v)) for v in values):
+            raise TeachError(f"target {i}: a non-finite joint, pose or speed",
+                             field=f"targets[{i}]", expected="finite numbers")
+    for name in ("speed_m_s", "orientation_speed_rad_s"):
+        value = finite(getattr(options, name), name)
+        if value <= 0.0:
+            raise TeachError("out of range", field=name, value=value, expected="> 0")
+    if finite(options.zone_mm, "zone_mm") < 0.0:
+        raise TeachError("out of range", field="zone_mm", value=options.zone_mm,
+                         expected="≥ 0 mm")
+    if not np.all(np.isfinite(options.tool.homogeneous)):
+        raise TeachError("a non-finite tool", field="tool", expected="finite numbers")
+    cnt = options.fanuc_cnt
+    if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 100:
+        raise TeachError("out of range", field="fanuc_cnt", value=cnt,
+                         expected="an integer 0 … 100")

@@ -14,19 +14,24 @@ it, e.g. ``UniversalRobots/Universal_Robots_ROS_Driver``
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from leadthrough.errors import TeachError
+from leadthrough.teach.programs.grammar import (
+    COMMENT_CHARSET,
+    Rule,
+    comment_text,
+    read_statements,
+)
 from leadthrough.teach.programs.parsed import ParsedMove, ParsedProgram
 from leadthrough.teach.programs.targets import (
     APPROACH_JOINT_SPEED,
     ProgramOptions,
     ProgramTarget,
     canonical_sign,
+    check_writer_inputs,
     fmt,
 )
 
@@ -50,11 +55,17 @@ def _joints(q: np.ndarray) -> str:
 def render_urscript(targets: list[ProgramTarget], options: ProgramOptions,
                     header: list[str]) -> dict[str, str]:
     """The script as ``{".script": text}``; arguments as
-    :attr:`leadthrough.teach.programs.Language.render`."""
+    :attr:`leadthrough.teach.programs.Language.render`.
+
+    Raises:
+        TeachError: Not six joints, or a label, name or number the script cannot hold
+            (:func:`~leadthrough.teach.programs.targets.check_writer_inputs`).
+    """
+    check_writer_inputs(targets, options, "urscript")
     if targets[0].q.size != 6:
         raise TeachError("a UR controller drives six joints", field="robot",
                          value=f"{targets[0].q.size} joints", expected="6 joints for URScript")
-    lines = [f"# {h}" for h in header]
+    lines = [f"# {comment_text(h)}" for h in header]
     lines.append(f"def {options.name}():")
     lines.append(f"  set_tcp({_pose(options.tool)})")
     if targets[0].label:
@@ -75,8 +86,19 @@ def render_urscript(targets: list[ProgramTarget], options: ProgramOptions,
     return {".script": "\n".join(lines) + "\n"}
 
 
-_NUM = r"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?"
-_LIST = rf"\[\s*({_NUM}(?:\s*,\s*{_NUM})*)\s*\]"
+_N = r"-?\d+\.\d+"  # the fixed-point numbers we write
+_SIX = rf"(?P<v>{_N}(?:, {_N}){{5}})"
+_RULES = [
+    Rule.of("h", rf"# [{COMMENT_CHARSET}]*", "header comment"),
+    Rule.of("d", r"def (?P<name>[A-Za-z_][A-Za-z0-9_]*)\(\):", "program definition"),
+    Rule.of("t", rf"  set_tcp\(p\[{_SIX}\]\)", "set_tcp"),
+    Rule.of("c", rf"  # [{COMMENT_CHARSET}]*", "comment"),
+    Rule.of("j", rf"  movej\(\[{_SIX}\], a={_N}, v={_N}(?:, r={_N})?\)", "movej"),
+    Rule.of("l", rf"  movel\(p\[{_SIX}\], a={_N}, v={_N}, r={_N}\)", "movel"),
+    Rule.of("e", r"end", "end"),
+]
+#: header comments, def and set_tcp, a movej first, movej or movel, end
+_ORDER = [("h", True), ("dt", False), ("c?j", False), ("c?[jl]", True), ("e", False)]
 
 
 def _floats(text: str) -> list[float]:
@@ -88,23 +110,23 @@ def _se3(values: list[float]) -> pin.SE3:
 
 
 def parse_urscript(files: dict[str, str]) -> ParsedProgram:
-    """The moves and TCP of a URScript program in the subset :func:`render_urscript` writes.
+    """The moves, TCP and name of a URScript program, read strictly: every line must be a
+    statement :func:`render_urscript` writes, in its order.
 
     Raises:
-        TeachError: A pose or joint list that is not 6 numbers.
+        TeachError: A line or statement order the writer does not emit (naming the line).
     """
-    text = files[".script"]
+    statements = read_statements(files[".script"], _RULES, _ORDER, ".script")
     moves: list[ParsedMove] = []
     tool = pin.SE3.Identity()
-    for m in re.finditer(rf"\b(set_tcp|movel|movej)\(\s*(p?){_LIST}", text):
-        values = _floats(m.group(3))
-        if len(values) != 6:
-            raise TeachError("pose or joint list without 6 values", field=m.group(1),
-                             value=m.group(0), expected="6 numbers")
-        if m.group(1) == "set_tcp":
-            tool = _se3(values)
-        elif m.group(2):
-            moves.append(ParsedMove(pose=_se3(values)))
-        else:
-            moves.append(ParsedMove(q_deg=tuple(np.degrees(values))))
-    return ParsedProgram(tuple(moves), tool)
+    name = ""
+    for s in statements:
+        if s.code == "d":
+            name = s.match.group("name")
+        elif s.code == "t":
+            tool = _se3(_floats(s.match.group("v")))
+        elif s.code == "l":
+            moves.append(ParsedMove(pose=_se3(_floats(s.match.group("v")))))
+        elif s.code == "j":
+            moves.append(ParsedMove(q_deg=tuple(np.degrees(_floats(s.match.group("v"))))))
+    return ParsedProgram(tuple(moves), tool, name)
