@@ -18,6 +18,7 @@ from leadthrough.drivers.fanuc_j519 import FanucJ519Driver
 from leadthrough.drivers.fanuc_j519.packets import DEFAULT_PORT as J519_PORT
 from leadthrough.drivers.kuka_rsi import KukaRsiDriver
 from leadthrough.drivers.kuka_rsi.client import DEFAULT_PORT as RSI_PORT
+from leadthrough.drivers.kuka_rsi.client import parse_address
 from leadthrough.drivers.streaming import StreamingDriver
 from leadthrough.drivers.ur_rtde import UrRtdeDriver
 from leadthrough.drivers.ur_rtde.protocol import DEFAULT_PORT as RTDE_PORT
@@ -46,7 +47,7 @@ DEFAULT_PORTS: dict[str, int] = {"fanuc-j519": J519_PORT, "ur-rtde": RTDE_PORT,
 
 
 def connect(name: str, robot: Robot, host: str | None,
-            port: int | None = None) -> StreamingDriver:
+            port: int | None = None, robot_address: str | None = None) -> StreamingDriver:
     """The driver of controller interface ``name`` (not opened: ``with driver:`` opens it).
 
     Args:
@@ -54,10 +55,14 @@ def connect(name: str, robot: Robot, host: str | None,
         robot: The robot file of the arm.
         host: The controller's address (RSI: the address to listen on).
         port: The port (None: the interface's own, :data:`DEFAULT_PORTS`).
+        robot_address: ``kuka-rsi`` only: the robot's ``HOST[:PORT]``, the one sender whose
+            documents are taken (None: the first valid document's sender).
 
     Raises:
-        ControlError: Unknown interface, no host, or a port outside 1–65535 (0–65535 for
-            ``kuka-rsi``, where 0 takes a free port).
+        ControlError: Unknown interface, no host, a port outside 1–65535 (0–65535 for
+            ``kuka-rsi``, where 0 takes a free port), or a robot address for another
+            interface than ``kuka-rsi``.
+        DriverError: A robot address that is not ``HOST[:PORT]``.
     """
     factory = CONTROLLERS.get(name)
     if factory is None:
@@ -71,4 +76,10 @@ def connect(name: str, robot: Robot, host: str | None,
     if not lowest <= port <= 65535:
         raise ControlError("out of range", field="--port", value=port,
                            expected=f"{lowest}-65535")
+    if robot_address is not None:
+        if name != "kuka-rsi":
+            raise ControlError("only for kuka-rsi", field="--robot-address",
+                               value=robot_address, expected="no --robot-address with "
+                               f"--driver {name} (it connects to --host)")
+        return KukaRsiDriver(robot, host, port, robot_address=parse_address(robot_address))
     return factory(robot, host, port)

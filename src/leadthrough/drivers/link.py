@@ -5,23 +5,43 @@ In the hot path a transport never raises for what the network does: a timeout is
 closed or broken socket sets :attr:`LinkStatus.error` (a :class:`LinkError` value) and the next
 ``receive`` returns ``None`` at once. Exceptions are kept for misuse (sending before ``open``)
 and for handshakes, which run before the loop starts.
+
+A packet the codec refuses is counted by its :class:`~leadthrough.drivers.wire.BadPacket` code
+(:attr:`LinkStats.bad`) and dropped; it never raises out of ``receive``. A codec failing in a way
+it does not name (a defect, never expected) is counted as ``UNEXPECTED`` and logged once, so that
+not even a defect of a decoder turns a packet into an exception in the loop. Each ``receive``
+takes at most :data:`MAX_DATAGRAMS` datagrams from the socket and spends at most
+:data:`PARSE_BUDGET_S` decoding them: a flood costs the loop a bounded time per cycle, the rest
+is counted (``BUDGET``) and dropped.
 """
 
 from __future__ import annotations
 
+import logging
 import select
 import socket
+import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TypeVar
 
+from leadthrough.drivers.wire import BadPacket, packet_code
 from leadthrough.errors import DataError
 
-__all__ = ["LinkError", "LinkErrorKind", "LinkStats", "LinkStatus", "SequenceTracker",
-           "Transport", "decode_datagrams", "drain_datagrams"]
+__all__ = ["MAX_DATAGRAMS", "PARSE_BUDGET_S", "LinkError", "LinkErrorKind", "LinkStats",
+           "LinkStatus", "SequenceTracker", "Transport", "decode_datagrams", "decode_packet",
+           "drain_datagrams"]
 
 P = TypeVar("P")
+log = logging.getLogger("leadthrough.drivers")
+
+#: Datagrams one ``receive`` takes from the socket at most (the rest wait for the next).
+MAX_DATAGRAMS = 256
+#: Decoding time one ``receive`` spends at most [s]: past it the datagrams left are dropped
+#: unparsed (``BadPacket.BUDGET``). A valid packet decodes in tens of µs; a cycle is 2-12 ms.
+PARSE_BUDGET_S = 0.5e-3
 
 
 class LinkErrorKind(StrEnum):
@@ -59,6 +79,11 @@ class LinkStats:
         gaps: Sequence jumps seen (each a run of lost packets).
         missed: Sequence numbers missing in total (lost packets).
         last_gap: Size of the latest jump (0: none yet).
+        bad: Packets refused, by :class:`~leadthrough.drivers.wire.BadPacket` code (foreign
+            senders, sequence errors and spent budgets included; codec refusals are also in
+            ``malformed``).
+        decode_s: Time spent decoding packets in total [s].
+        decode_max_s: The longest decoding of one packet [s].
     """
 
     received: int = 0
@@ -69,6 +94,13 @@ class LinkStats:
     gaps: int = 0
     missed: int = 0
     last_gap: int = 0
+    bad: Counter[BadPacket] = field(default_factory=Counter)
+    decode_s: float = 0.0
+    decode_max_s: float = 0.0
+
+    def refuse(self, code: BadPacket) -> None:
+        """Count one packet refused for ``code``."""
+        self.bad[code] += 1
 
 
 @dataclass
@@ -141,7 +173,8 @@ class SequenceTracker:
 
 
 def drain_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
-                    size: int = 4096) -> list[tuple[bytes, tuple[str, int]]]:
+                    size: int = 4096, limit: int = MAX_DATAGRAMS,
+                    ) -> list[tuple[bytes, tuple[str, int]]]:
     """Wait up to ``timeout`` for a datagram, then take every datagram already queued.
 
     The caller decodes them all (so that sequence numbers of superseded packets are not
@@ -151,7 +184,8 @@ def drain_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
         sock: A UDP socket (its blocking mode is left as found).
         timeout: Longest wait for the first datagram [s] (0: poll).
         status: Counters (``timeouts``) and the latched error.
-        size: Receive buffer size [bytes].
+        size: Receive buffer size [bytes] (a longer datagram is cut to it).
+        limit: Datagrams taken at most (the rest stay queued for the next call).
 
     Returns:
         The datagrams with their senders, oldest first; empty on a timeout or a socket error
@@ -163,11 +197,12 @@ def drain_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
         if not ready:
             status.stats.timeouts += 1
             return out
-        while True:
+        while len(out) < limit:
             try:
                 out.append(sock.recvfrom(size, socket.MSG_DONTWAIT))
             except BlockingIOError:
                 return out
+        return out
     except ConnectionRefusedError:
         status.fail(LinkErrorKind.CLOSED, "the peer's port is closed (ICMP port unreachable)")
         return out
@@ -176,23 +211,70 @@ def drain_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
         return out
 
 
+_logged_defects: set[str] = set()
+
+
+def decode_packet(data: bytes, decode: Callable[[bytes], P], stats: LinkStats) -> P | None:
+    """Decode one packet; a refusal is counted by its code (``bad``, ``malformed``) and gives
+    None, never an exception (a codec's own defect is counted as ``UNEXPECTED``, logged once
+    per kind of exception). The time spent is added to ``decode_s``.
+
+    Args:
+        data: The packet.
+        decode: The codec; raises :class:`~leadthrough.errors.DataError` on bad input.
+        stats: Counters.
+
+    Returns:
+        The decoded packet, or None if refused.
+    """
+    t0 = time.perf_counter()
+    try:
+        return decode(data)
+    except DataError as e:
+        stats.refuse(packet_code(e))
+        stats.malformed += 1
+        return None
+    except Exception as e:  # a defect of the codec: counted, never raised into the loop
+        stats.refuse(BadPacket.UNEXPECTED)
+        stats.malformed += 1
+        name = f"{getattr(decode, '__qualname__', decode)}: {type(e).__name__}"
+        if name not in _logged_defects:
+            _logged_defects.add(name)
+            log.error("decoder defect (packet dropped, counted): %s: %s", name, e)
+        return None
+    finally:
+        spent = time.perf_counter() - t0
+        stats.decode_s += spent
+        stats.decode_max_s = max(stats.decode_max_s, spent)
+
+
 def decode_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
-                     decode: Callable[[bytes], P]) -> list[tuple[P, tuple[str, int]]]:
-    """:func:`drain_datagrams`, then decode each; malformed ones are counted and dropped.
+                     decode: Callable[[bytes], P], size: int = 4096,
+                     budget_s: float = PARSE_BUDGET_S,
+                     ) -> list[tuple[P, tuple[str, int]]]:
+    """:func:`drain_datagrams`, then decode each (:func:`decode_packet`): refused ones are
+    counted by code and dropped; once ``budget_s`` of decoding is spent the rest are dropped
+    unparsed (``BUDGET``).
 
     Args:
         sock: A UDP socket.
         timeout: Longest wait for the first datagram [s].
-        status: Counters (``timeouts``, ``malformed``) and the latched error.
+        status: Counters (``timeouts``, ``malformed``, ``bad``) and the latched error.
         decode: The codec; raises :class:`~leadthrough.errors.DataError` on bad input.
+        size: Receive buffer size [bytes].
+        budget_s: Decoding time this call may spend [s].
 
     Returns:
         The decoded packets with their senders, oldest first.
     """
     out = []
-    for data, addr in drain_datagrams(sock, timeout, status):
-        try:
-            out.append((decode(data), addr))
-        except DataError:
-            status.stats.malformed += 1
+    stats = status.stats
+    spent0 = stats.decode_s
+    for data, addr in drain_datagrams(sock, timeout, status, size):
+        if stats.decode_s - spent0 > budget_s:
+            stats.refuse(BadPacket.BUDGET)
+            continue
+        packet = decode_packet(data, decode, stats)
+        if packet is not None:
+            out.append((packet, addr))
     return out

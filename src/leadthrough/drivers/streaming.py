@@ -99,6 +99,7 @@ class StreamingDriver(ABC, Generic[S]):
         self._newest: S | None = None   # the packet the next write answers
         self._answered: int | None = None  # sequence number of the last packet answered
         self._answer_due = False
+        self._aborted = False   # set by abort() from the watchdog's thread
 
     # --------------------------------------------------------------------------- protocol
     @property
@@ -146,7 +147,13 @@ class StreamingDriver(ABC, Generic[S]):
             DriverError: Not open, or the link broke (its cause in the message).
         """
         self._require_open()
+        self._aborted = False
         sample = self._receive(self.timeout)
+        if self._aborted:
+            self._aborted = False
+            raise DriverError(f"the {self.controller} exchange was aborted by the loop's "
+                              "watchdog", field="step", value="aborted",
+                              expected="an exchange within the watchdog's abort time")
         if sample is None:
             self._raise_if_broken()
             return
@@ -195,6 +202,14 @@ class StreamingDriver(ABC, Generic[S]):
             self.limiter.skip(sequence - self._answered - 1, self.extrapolates)
         self._answered = sequence
         self._send(self.limiter.limit(q))
+
+    def abort(self) -> None:
+        """Make the :meth:`step` in progress raise :class:`~leadthrough.errors.DriverError`
+        when its receive returns (within ``timeout`` and the parse budget): called by the
+        loop's watchdog, from its thread, for an exchange blocked past its abort time. The
+        stream is not closed: the loop's end then calls :meth:`close`, which sends the
+        protocol's stop (a commanded stop, not the controller's watchdog)."""
+        self._aborted = True
 
     # ------------------------------------------------------------------------ connection
     def open(self) -> None:

@@ -77,6 +77,10 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         margin: Fraction of the limits kept.
         tolerance: When late answers are ``COMMAND_REJECTED`` (default: 5 in a row or 20
             within 250 cycles; ``LateAnswerTolerance(1, 1, 1)``: every one).
+        robot_address: The robot's (host, port or None): documents from anyone else are
+            dropped and counted. None: the first valid document fixes the sender for the
+            session, so a process that sends one before the robot does is taken for it
+            (:mod:`~leadthrough.drivers.kuka_rsi.client`); :attr:`peer` says who was taken.
     """
 
     controller = "KUKA RSI"
@@ -90,7 +94,8 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
                  cycle: float = 0.004, context: RsiContext | None = None,
                  config: EthernetConfig | None = None, timeout: float | None = None,
                  connect_timeout: float = 30.0, margin: float = 0.95,
-                 tolerance: LateAnswerTolerance | None = None) -> None:
+                 tolerance: LateAnswerTolerance | None = None,
+                 robot_address: tuple[str, int | None] | None = None) -> None:
         if robot.n != 6:
             raise DriverError("the RSI configuration streams 6 axes (A1-A6)",
                               source=robot.name, field="robot.n", value=robot.n, expected="6")
@@ -99,7 +104,8 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         self.config = config if config is not None else EthernetConfig.shipped()
         self.client = RsiClient(host, port, sentype=self.config.sentype,
                                 precision=self.context.precision,
-                                cycle_ms=round(cycle * 1000))
+                                cycle_ms=round(cycle * 1000), robot_address=robot_address,
+                                max_gap=self.context.timeout)
         ctx = self.context
         bound = np.array(ctx.max_correction) * margin
         self._ak_lo = np.maximum(np.array(ctx.lower), -bound)
@@ -116,6 +122,11 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     def address(self) -> tuple[str, int]:
         """The bound (address, port), the real port when 0 was asked."""
         return self.client.address
+
+    @property
+    def peer(self) -> tuple[str, int] | None:
+        """The robot's (address, port) the documents are taken from (None: none yet)."""
+        return self.client.peer
 
     @property
     def last_message(self) -> RobotMessage | None:
@@ -149,8 +160,11 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
         self._delay = None
 
     def _disconnect(self) -> None:
-        if self.opened and self.client.error is None and self.limiter is not None:
-            self._answer_stop()
+        if self.opened and self.limiter is not None:
+            if self.client.error is None:
+                self._answer_stop()
+            else:  # a broken IPOC stream: still the Stop answer (a socket error: none)
+                self.client.answer_stop(self._correction(self.limiter.position))
         self.client.close()
 
     def _answer_stop(self) -> None:

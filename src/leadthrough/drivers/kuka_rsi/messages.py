@@ -34,6 +34,17 @@ offsets from the axis positions at ``RSI_ON``, i.e. target = start + AK; ``ASPos
 setpoint the robot is following. Numbers are written with the ETHERNET object's ``Precision``
 decimals (4 in our context).
 
+Parsing: a document is parsed by expat with handlers that refuse at once what RSI never
+sends: a ``DOCTYPE`` (so no entity is ever declared: a billion-laughs document costs
+microseconds, not the tens of milliseconds of expanding it), processing instructions, elements
+nested below the root's children, a child element twice (a duplicated ``<AIPos>`` is not
+silently the first one), more than :data:`MAX_ELEMENTS` elements, attribute values or texts over
+:data:`MAX_TEXT` characters, non-ASCII bytes and documents over :data:`MAX_DOCUMENT_BYTES`. Numbers
+are ASCII decimals (or the ``nan`` / ``inf`` tokens, kept for the receiver to judge); ``IPOC`` has
+at most :data:`IPOC_DIGITS` digits and fits a uint64, ``Delay D`` an int32, ``DiL`` the shipped
+configuration's 16 inputs. A refusal is a :class:`~leadthrough.drivers.wire.PacketError` with its
+:class:`~leadthrough.drivers.wire.BadPacket` code.
+
 Sources:
     * ros-industrial ``kuka_experimental`` / ``kuka_rsi_hw_interface`` (BSD): the
       ``ros_rsi_ethernet.xml`` SEND/RECEIVE lists, the ``<Rob TYPE="KUKA">`` and
@@ -58,65 +69,211 @@ Sources:
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
+import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeVar
+from xml.parsers import expat
 
+from leadthrough.drivers.wire import BadPacket, PacketError
 from leadthrough.errors import DataError
 
-__all__ = ["AXES", "CARTESIAN", "RobotMessage", "SensorMessage"]
+__all__ = ["AXES", "CARTESIAN", "DIL_BITS", "IPOC_DIGITS", "MAX_DOCUMENT_BYTES",
+           "RobotMessage", "SensorMessage"]
 
 AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 CARTESIAN = ("X", "Y", "Z", "A", "B", "C")
 T = TypeVar("T")
 
+#: A document longer than this is refused unparsed [bytes] (ours are about 600; FZI's full
+#: ``<Rob>`` document with every optional element about 1 200).
+MAX_DOCUMENT_BYTES = 4096
+#: Elements in one document at most (the root included).
+MAX_ELEMENTS = 48
+#: Characters of one attribute value or element text at most.
+MAX_TEXT = 40
+#: Digits of an IPOC at most (a uint64 has 20).
+IPOC_DIGITS = 20
+#: IPOC at most (uint64).
+MAX_IPOC = (1 << 64) - 1
+#: Width of ``DiL`` [bits]: the shipped configuration's DIGIN word, ``$IN[1..16]``.
+DIL_BITS = 16
+#: ``Delay D`` at most: a KRL LONG (int32).
+MAX_DELAY = (1 << 31) - 1
 
-def _parse(data: bytes | str, root_tag: str, source: str) -> ET.Element:
+# a decimal number as a KRL REAL is written (ASCII digits, optional exponent), or the tokens
+# a non-finite value prints as (kept: the receiver judges them)
+_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d{1,3})?|nan|[+-]?inf",
+                     re.ASCII)
+_WHITESPACE = " \t\r\n"
+
+
+@dataclass
+class _Element:
+    tag: str
+    attrs: dict[str, str]
+    text: list[str] = field(default_factory=list)
+
+
+@dataclass
+class _Document:
+    """A parsed RSI document: the root's attributes and its child elements by tag (RSI
+    documents are flat: one level of elements under the root, each at most once)."""
+
+    tag: str
+    attrs: dict[str, str]
+    children: dict[str, _Element]
+
+    def get(self, key: str, default: str = "") -> str:
+        return self.attrs.get(key, default)
+
+
+def _refuse(code: BadPacket, message: str, source: str, field: str, value: object = None,
+            expected: str | None = None) -> PacketError:
+    return PacketError(message, code=code, source=source, field=field, value=value,
+                       expected=expected)
+
+
+def _parse(data: bytes | str, root_tag: str, source: str) -> _Document:
+    """Parse an RSI document with expat, refusing at once what RSI never sends: a DOCTYPE
+    (and so every entity declaration: no billion laughs, no external entity), processing
+    instructions, elements nested below the root's children, a child element twice, more
+    than :data:`MAX_ELEMENTS` elements, texts or attribute values over :data:`MAX_TEXT`
+    characters, non-ASCII bytes, and documents over :data:`MAX_DOCUMENT_BYTES`.
+
+    Raises:
+        PacketError: Naming the code, the field and what was expected.
+    """
+    raw = data.encode("utf-8", "replace") if isinstance(data, str) else bytes(data)
+    if len(raw) > MAX_DOCUMENT_BYTES:
+        raise _refuse(BadPacket.SIZE, "document too long", source, "length", len(raw),
+                      f"<= {MAX_DOCUMENT_BYTES} bytes")
+    if not raw.isascii():
+        raise _refuse(BadPacket.SYNTAX, "not ASCII", source, "document", raw[:40],
+                      "an ASCII document (RSI writes tags and numbers in ASCII)")
+    root: list[_Document] = []
+    stack: list[_Element | None] = []
+    count = [0]
+
+    def start(tag: str, attrs: dict[str, str]) -> None:
+        count[0] += 1
+        if count[0] > MAX_ELEMENTS:
+            raise _refuse(BadPacket.STRUCTURE, "too many elements", source, "document",
+                          count[0], f"<= {MAX_ELEMENTS} elements")
+        for k, v in attrs.items():
+            if len(v) > MAX_TEXT:
+                raise _refuse(BadPacket.FIELD, "attribute value too long", source,
+                              f"{tag}.{k}", v[:MAX_TEXT], f"<= {MAX_TEXT} characters")
+        depth = len(stack)
+        if depth == 0:  # a wrong root is refused once the document is known well-formed
+            root.append(_Document(tag, dict(attrs), {}))
+            stack.append(None)
+        elif depth == 1:
+            children = root[0].children
+            if tag in children:
+                raise _refuse(BadPacket.STRUCTURE, "element given twice", source, tag, None,
+                              f"at most one <{tag}>")
+            children[tag] = el = _Element(tag, dict(attrs))
+            stack.append(el)
+        else:
+            raise _refuse(BadPacket.STRUCTURE, "nested element", source, tag, None,
+                          f"elements only directly under <{root_tag}>")
+
+    def end(tag: str) -> None:
+        stack.pop()
+
+    def text(chars: str) -> None:
+        el = stack[-1] if stack else None
+        if el is None:
+            if chars.strip(_WHITESPACE):
+                raise _refuse(BadPacket.STRUCTURE, "text outside an element", source,
+                              root_tag, chars[:MAX_TEXT], "elements only")
+            return
+        el.text.append(chars)
+        if sum(len(t) for t in el.text) > MAX_TEXT:
+            raise _refuse(BadPacket.FIELD, "text too long", source, el.tag,
+                          chars[:MAX_TEXT], f"<= {MAX_TEXT} characters")
+
+    def doctype(*_: object) -> None:
+        raise _refuse(BadPacket.FORBIDDEN, "DOCTYPE refused", source, "DOCTYPE", None,
+                      "no DTD (RSI documents have none; entities are refused)")
+
+    def entity(*_: object) -> None:
+        raise _refuse(BadPacket.FORBIDDEN, "entity declaration refused", source, "ENTITY",
+                      None, "no entities")
+
+    def instruction(target: str, _data: str) -> None:
+        raise _refuse(BadPacket.FORBIDDEN, "processing instruction refused", source, target,
+                      None, "no processing instructions")
+
+    parser = expat.ParserCreate()
+    parser.StartDoctypeDeclHandler = doctype
+    parser.EntityDeclHandler = entity
+    parser.UnparsedEntityDeclHandler = entity
+    parser.ExternalEntityRefHandler = entity  # type: ignore[assignment]
+    parser.ProcessingInstructionHandler = instruction
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = text
     try:
-        root = ET.fromstring(data)
-    except ET.ParseError as e:
-        raise DataError(f"not well-formed XML: {e}", source=source, field="document",
-                        value=bytes(data[:60]) if isinstance(data, bytes) else data[:60],
-                        expected=f"a <{root_tag}> document") from e
-    if root.tag != root_tag:
-        raise DataError("wrong root element", source=source, field="root", value=root.tag,
-                        expected=f"<{root_tag}>")
-    return root
+        parser.Parse(raw, True)
+    except expat.ExpatError as e:
+        raise _refuse(BadPacket.SYNTAX, f"not well-formed XML: {e}", source, "document",
+                      raw[:60], f"a <{root_tag}> document") from None
+    except RecursionError:  # not reachable with the depth limit; kept typed all the same
+        raise _refuse(BadPacket.STRUCTURE, "too deep", source, "document", None,
+                      "a flat document") from None
+    if not root:
+        raise _refuse(BadPacket.SYNTAX, "no root element", source, "document", raw[:60],
+                      f"a <{root_tag}> document")
+    if root[0].tag != root_tag:
+        raise _refuse(BadPacket.STRUCTURE, "wrong root element", source, "root", root[0].tag,
+                      f"<{root_tag}>")
+    return root[0]
 
 
 def _need(value: T | None, source: str, field: str, expected: str) -> T:
     if value is None:
-        raise DataError("missing element", source=source, field=field, expected=expected)
+        raise _refuse(BadPacket.STRUCTURE, "missing element", source, field, None, expected)
     return value
 
 
-def _vector(root: ET.Element, tag: str, keys: Sequence[str],
+def _vector(root: _Document, tag: str, keys: Sequence[str],
             source: str) -> tuple[float, ...] | None:
-    el = root.find(tag)
+    el = root.children.get(tag)
     if el is None:
         return None
+    extra = el.attrs.keys() - set(keys)
+    if extra:
+        raise _refuse(BadPacket.STRUCTURE, "unknown attribute", source,
+                      f"{tag}.{sorted(extra)[0]}", None, "attributes " + " ".join(keys))
     out = []
     for k in keys:
-        text = el.get(k)
-        try:
-            out.append(float(text))  # type: ignore[arg-type]
-        except (TypeError, ValueError) as e:
-            raise DataError("missing or not a number", source=source, field=f"{tag}.{k}",
-                            value=text, expected="a decimal number") from e
+        text = el.attrs.get(k)
+        if text is None or not _NUMBER.fullmatch(text.strip(_WHITESPACE)):
+            raise _refuse(BadPacket.FIELD, "missing or not a number", source, f"{tag}.{k}",
+                          text, "a decimal number")
+        out.append(float(text))
     return tuple(out)
 
 
-def _integer(root: ET.Element, tag: str, source: str, attr: str | None = None) -> int | None:
-    el = root.find(tag)
-    text = None if el is None else (el.text if attr is None else el.get(attr))
+def _integer(root: _Document, tag: str, source: str, maximum: int, digits: int,
+             attr: str | None = None) -> int | None:
+    el = root.children.get(tag)
+    if el is None:
+        return None
+    text = "".join(el.text) if attr is None else el.attrs.get(attr)
     if text is None:
         return None
-    try:
-        return int(text.strip())
-    except ValueError as e:
-        raise DataError("not an integer", source=source, field=tag, value=text,
-                        expected="a decimal integer") from e
+    body = text.strip(_WHITESPACE)
+    if not (0 < len(body) <= digits and body.isascii() and body.isdigit()):
+        raise _refuse(BadPacket.FIELD, "not an integer in range", source, tag,
+                      text[:MAX_TEXT], f"a decimal integer 0..{maximum}")
+    value = int(body)
+    if value > maximum:
+        raise _refuse(BadPacket.FIELD, "not an integer in range", source, tag,
+                      text[:MAX_TEXT], f"a decimal integer 0..{maximum}")
+    return value
 
 
 def _attrs(keys: Sequence[str], values: Sequence[float], precision: int) -> str:
@@ -188,23 +345,29 @@ class RobotMessage:
     def decode(cls, data: bytes | str) -> RobotMessage:
         """Parse a ``<Rob>`` document (elements in any order, whitespace allowed).
 
-        Numbers are kept as sent, NaN included: the receiver judges them.
+        Numbers are kept as sent, NaN included: the receiver judges them. The grammar is
+        strict (module doc, "Parsing").
 
         Raises:
-            DataError: Not XML, not ``<Rob>``, or ``AIPos`` / ``IPOC`` missing or malformed.
+            PacketError: A :class:`~leadthrough.errors.DataError` with its
+                :class:`~leadthrough.drivers.wire.BadPacket` code: not XML, a DTD, not
+                ``<Rob>``, an element twice, ``AIPos`` / ``IPOC`` missing, a field outside its
+                grammar (``IPOC`` over :data:`IPOC_DIGITS` digits, ``DiL`` over
+                :data:`DIL_BITS` bits, ``Delay`` over int32).
         """
         src = "RSI <Rob> message"
         root = _parse(data, "Rob", src)
         return cls(
-            ipoc=_need(_integer(root, "IPOC", src), src, "IPOC", "<IPOC>integer</IPOC>"),
+            ipoc=_need(_integer(root, "IPOC", src, MAX_IPOC, IPOC_DIGITS), src, "IPOC",
+                       "<IPOC>integer</IPOC>"),
             axis_actual=_need(_vector(root, "AIPos", AXES, src), src, "AIPos",
                               "<AIPos A1=.. A6=../>"),
             axis_setpoint=_vector(root, "ASPos", AXES, src),
             cart_actual=_vector(root, "RIst", CARTESIAN, src),
             cart_setpoint=_vector(root, "RSol", CARTESIAN, src),
-            delay=_integer(root, "Delay", src, attr="D"),
+            delay=_integer(root, "Delay", src, MAX_DELAY, 10, attr="D"),
             gear_torque=_vector(root, "GearTorque", AXES, src),
-            digital_inputs=_integer(root, "DiL", src),
+            digital_inputs=_integer(root, "DiL", src, (1 << DIL_BITS) - 1, 5),
             robot_type=root.get("TYPE", root.get("Type", "")))
 
 
@@ -249,11 +412,13 @@ class SensorMessage:
         """Parse a ``<Sen>`` document; non-finite corrections are kept (the robot judges).
 
         Raises:
-            DataError: Not XML, not ``<Sen>``, or ``AK`` / ``IPOC`` missing or malformed.
+            PacketError: Not XML, not ``<Sen>``, or ``AK`` / ``IPOC`` missing or malformed
+                (the grammar of :meth:`RobotMessage.decode`; ``Stop`` 0 or 1).
         """
         src = "RSI <Sen> message"
         root = _parse(data, "Sen", src)
         return cls(
-            ipoc=_need(_integer(root, "IPOC", src), src, "IPOC", "<IPOC>integer</IPOC>"),
+            ipoc=_need(_integer(root, "IPOC", src, MAX_IPOC, IPOC_DIGITS), src, "IPOC",
+                       "<IPOC>integer</IPOC>"),
             correction=_need(_vector(root, "AK", AXES, src), src, "AK", "<AK A1=.. A6=../>"),
-            sentype=root.get("Type", ""), stop=bool(_integer(root, "Stop", src)))
+            sentype=root.get("Type", ""), stop=bool(_integer(root, "Stop", src, 1, 1)))

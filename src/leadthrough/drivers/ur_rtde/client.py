@@ -8,19 +8,35 @@ registers that the URScript program (:mod:`leadthrough.drivers.ur_rtde.script`) 
 closed connection is :attr:`RtdeClient.error`; a protective stop shows in the state's
 ``safety_mode`` / ``safety_status_bits``; missed data packages show as jumps of the controller
 ``timestamp`` (``stats.missed``).
+
+No bad message raises out of :meth:`RtdeClient.receive`: a data package the recipe refuses, or
+whose ``timestamp`` is not finite or steps back, a text message that does not parse, and a
+message of a type the protocol does not define are each counted by their
+:class:`~leadthrough.drivers.wire.BadPacket` code (``stats.bad``) and dropped. Only a corrupt
+header (a size below 3: the TCP stream can no longer be split) breaks the link (``PROTOCOL``).
+Text messages are kept in a ring of the newest :data:`MAX_TEXT_MESSAGES`
+(:attr:`RtdeClient.messages`; ``messages_dropped`` counts the older ones).
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import select
 import socket
 import time
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from leadthrough.drivers.link import LinkErrorKind, LinkStats, LinkStatus, Transport
+from leadthrough.drivers.link import (
+    LinkErrorKind,
+    LinkStats,
+    LinkStatus,
+    Transport,
+    decode_packet,
+)
 from leadthrough.drivers.ur_rtde.protocol import (
     DEFAULT_PORT,
     PROTOCOL_VERSION,
@@ -36,10 +52,14 @@ from leadthrough.drivers.ur_rtde.protocol import (
     encode_version_request,
     frame,
 )
-from leadthrough.drivers.wire import check_finite
+from leadthrough.drivers.wire import BadPacket, PacketError, check_finite
 from leadthrough.errors import DataError, DriverError
 
-__all__ = ["DEFAULT_OUTPUTS", "RtdeClient", "RtdeState", "ServoCommand"]
+__all__ = ["DEFAULT_OUTPUTS", "MAX_TEXT_MESSAGES", "RtdeClient", "RtdeState", "ServoCommand"]
+
+#: Text messages kept (the newest).
+MAX_TEXT_MESSAGES = 64
+_KNOWN_TYPES = frozenset(int(t) for t in MessageType)
 
 DEFAULT_OUTPUTS: tuple[str, ...] = (
     "timestamp", "actual_q", "actual_current", "actual_digital_input_bits", "robot_mode",
@@ -107,7 +127,10 @@ class RtdeClient(Transport):
         self.inputs = (*(f"input_double_register_{r + i}" for i in range(6)),
                        f"input_int_register_{r}", f"input_int_register_{r + 1}")
         self.controller_version: ControllerVersion | None = None
-        self.messages: list[TextMessage] = []
+        #: The newest text messages of the controller (at most :data:`MAX_TEXT_MESSAGES`).
+        self.messages: deque[TextMessage] = deque(maxlen=MAX_TEXT_MESSAGES)
+        #: Text messages pushed out of :attr:`messages` by newer ones.
+        self.messages_dropped = 0
         self._sock: socket.socket | None = None
         self._reader = FrameReader()
         self._out: Recipe | None = None
@@ -178,7 +201,7 @@ class RtdeClient(Transport):
                 if msg[0] == mtype:
                     return msg[1]
                 if msg[0] == MessageType.TEXT_MESSAGE:
-                    self.messages.append(TextMessage.decode(msg[1]))
+                    self._text(msg[1])
                 continue
             left = deadline - time.monotonic()
             if left <= 0 or not self._fill(left):
@@ -247,6 +270,22 @@ class RtdeClient(Transport):
             self._link.stats.timeouts += 1
         return newest
 
+    def feed(self, data: bytes) -> RtdeState | None:
+        """Take ``data`` as bytes received from the controller (after the handshake) and
+        decode every complete message: the newest data package, or None. Never raises for
+        what the bytes hold (module doc); a corrupt header latches :attr:`error`."""
+        if self._out is None or self._link.error is not None:
+            return None
+        self._reader.feed(data)
+        return self._drain(self._out)
+
+    def _text(self, payload: bytes) -> None:
+        text = decode_packet(payload, TextMessage.decode, self._link.stats)
+        if text is not None:
+            if len(self.messages) == self.messages.maxlen:
+                self.messages_dropped += 1
+            self.messages.append(text)
+
     def _drain(self, recipe: Recipe) -> RtdeState | None:
         """Decode every complete message buffered; return the newest data package."""
         stats, newest = self._link.stats, None
@@ -258,26 +297,41 @@ class RtdeClient(Transport):
                 return newest
             if msg is None:
                 return newest
-            if msg[0] == MessageType.TEXT_MESSAGE:
-                self.messages.append(TextMessage.decode(msg[1]))
+            mtype, payload = msg
+            if mtype == MessageType.TEXT_MESSAGE:
+                self._text(payload)
                 continue
-            if msg[0] != MessageType.DATA_PACKAGE:
+            if mtype != MessageType.DATA_PACKAGE:
+                if mtype not in _KNOWN_TYPES:
+                    stats.refuse(BadPacket.UNKNOWN_TYPE)
                 continue
-            try:
-                values = recipe.decode(msg[1])
-            except DataError:
-                stats.malformed += 1
+            state = decode_packet(payload, lambda p: self._state(recipe, p), stats)
+            if state is None:
                 continue
-            self._count(float(values["timestamp"]), stats)
+            self._count(state.timestamp, stats)
             if newest is not None:
                 stats.skipped += 1
-            newest = RtdeState(values["timestamp"], values["actual_q"],
-                               values["actual_current"], values)
+            newest = state
+
+    def _state(self, recipe: Recipe, payload: bytes) -> RtdeState:
+        """A data package as a state; a timestamp not finite, or before the last one, is
+        refused (PacketError)."""
+        values = recipe.decode(payload)
+        t = float(values["timestamp"])
+        if not math.isfinite(t):
+            raise PacketError("not finite", code=BadPacket.NONFINITE,
+                              source="RTDE data package", field="timestamp", value=t,
+                              expected="a finite controller time [s]")
+        if self._last_t is not None and t <= self._last_t:
+            raise PacketError("not after the last one", code=BadPacket.SEQUENCE,
+                              source="RTDE data package", field="timestamp", value=t,
+                              expected=f"> {self._last_t} s")
+        return RtdeState(t, values["actual_q"], values["actual_current"], values)
 
     def _count(self, t: float, stats: LinkStats) -> None:
         period = 1.0 / (self.frequency or 500.0)
         if self._last_t is not None:
-            missing = round((t - self._last_t) / period) - 1
+            missing = min(round((t - self._last_t) / period), 1 << 62) - 1
             if missing > 0:
                 stats.gaps += 1
                 stats.missed += missing

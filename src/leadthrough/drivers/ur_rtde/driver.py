@@ -44,6 +44,7 @@ import time
 import numpy as np
 
 from leadthrough.drivers.cycle_limits import CycleLimits
+from leadthrough.drivers.link import LinkErrorKind
 from leadthrough.drivers.protocol import ControllerState, DriverFeedback
 from leadthrough.drivers.streaming import Array, StreamingDriver
 from leadthrough.drivers.ur_rtde.client import DEFAULT_OUTPUTS, RtdeClient, RtdeState, ServoCommand
@@ -191,7 +192,8 @@ class UrRtdeDriver(StreamingDriver[RtdeState]):
         return CycleLimits(self.robot.velocity_limit.copy())
 
     def _disconnect(self) -> None:
-        if self.opened and self.client.error is None:
+        err = self.client.error   # a refused stream still takes the stop; a broken socket not
+        if self.opened and (err is None or err.kind is LinkErrorKind.PROTOCOL):
             self.client.send(ServoCommand(tuple(self.limiter.position) if self.limiter
                                           else (0.0,) * 6, self._counter + 1, Mode.STOP))
         self.client.close()
