@@ -25,11 +25,19 @@ from leadthrough.drivers.controllers import CONTROLLERS
 from leadthrough.drivers.protocol import Driver
 from leadthrough.errors import ControlError, DataError, MissingPackageError
 from leadthrough.identification.params_file import load_params
+from leadthrough.pendant.access import (
+    DEFAULT_MAX_CLIENTS,
+    MAX_CLIENTS_LIMIT,
+    MAX_MESSAGE_BYTES,
+    is_loopback,
+    read_token_file,
+)
 from leadthrough.pendant.backend import LiveSession
 from leadthrough.pendant.loop_process import DriverRecipe
 from leadthrough.robot.description import Robot, load_robot
 
-__all__ = ["DRIVERS", "check_address", "check_arguments", "check_export_folder", "register"]
+__all__ = ["DRIVERS", "check_access", "check_address", "check_arguments", "check_export_folder",
+           "register", "remote_warning"]
 
 #: Drivers of real controllers the pendant's live loop may run, by name: ``(robot, host) ->
 #: Driver``. None yet: the pendant's loop (:class:`~leadthrough.session.loop.ServoPeriods`)
@@ -62,17 +70,28 @@ goes into the simulated robot, the estimator sees it only through the motor curr
 robot follows. The guiding loop runs in its own process; the page never holds it up. A real
 robot is guided with `leadthrough guide --driver` (this version's pendant drives the simulator).
 
-The page is served on 127.0.0.1 only; --bind 0.0.0.0 serves it to the network (a tablet):
-anyone who reaches the port can then operate the pendant.
+Access: the page's URL carries a secret token, new on every run (or the one in
+--token-file), printed on the terminal: open that URL. Every request without the token, or
+whose Host or Origin is not the served address (another site's page in the browser, a
+DNS-rebinding name), is refused (403) and logged. At most --max-clients pages are connected
+at once (default {clients}; another is refused, 503), and a message from a page larger than
+{kb} kB closes that page's connection only.
+
+The page is served on 127.0.0.1 only (this machine). Serving it to the network (a tablet:
+--bind 0.0.0.0 or an address of this machine) needs --allow-remote: anyone on the network who
+has the URL can then move the robot, and the page travels unencrypted (http), so anyone who
+can read the network's traffic can read the token.
 """
 
 
 def register(sub: Any) -> None:
     """Add the subcommand."""
     p = sub.add_parser("pendant", help="live browser pendant (simulator or robot)",
-                       description=_DESCRIPTION,
+                       description=_DESCRIPTION.format(clients=DEFAULT_MAX_CLIENTS,
+                                                       kb=MAX_MESSAGE_BYTES // 1024),
                        epilog="examples:\n  leadthrough pendant\n"
-                              "  leadthrough pendant --bind 0.0.0.0 --port 8080 -o taught\n"
+                              "  leadthrough pendant --bind 0.0.0.0 --allow-remote --port 8080 "
+                              "-o taught\n"
                               "  leadthrough pendant --params params_guiding.toml",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     where = p.add_mutually_exclusive_group()
@@ -93,7 +112,18 @@ def register(sub: Any) -> None:
                         "otherwise, as by `guide`: their friction is 15-24 %% low at guiding "
                         "speeds, which reads as a 20-50 N force against the motion)")
     p.add_argument("--bind", default="127.0.0.1",
-                   help="address of this machine to serve the page on (default 127.0.0.1)")
+                   help="address of this machine to serve the page on (default 127.0.0.1; "
+                        "any other needs --allow-remote)")
+    p.add_argument("--allow-remote", action="store_true",
+                   help="allow a --bind other than this machine's loopback address: anyone on "
+                        "the network with the URL can then move the robot, over unencrypted "
+                        "http")
+    p.add_argument("--token-file", type=Path, default=None, metavar="F",
+                   help="the URL's token from file F (one line of 32-128 characters A-Z a-z "
+                        "0-9 _ -; default: a new random token on every run)")
+    p.add_argument("--max-clients", type=int, default=DEFAULT_MAX_CLIENTS, metavar="N",
+                   help=f"pages connected at once, 1-{MAX_CLIENTS_LIMIT} (default "
+                        f"{DEFAULT_MAX_CLIENTS}); another is refused")
     p.add_argument("--port", type=int, default=None,
                    help=f"port, 1-65535, refused if in use; 0: any free port (default: "
                         f"{DEFAULT_PORT}, or the next free one if taken)")
@@ -143,6 +173,36 @@ def check_arguments(args: argparse.Namespace) -> None:
         _refuse("--seed", args.seed, "out of range", "an integer >= 0")
     check_rt_priority(args.rt_priority)
     check_export_folder(args.output)
+    if not 1 <= args.max_clients <= MAX_CLIENTS_LIMIT:
+        _refuse("--max-clients", args.max_clients, "out of range",
+                f"an integer 1-{MAX_CLIENTS_LIMIT}")
+    check_access(args.bind, args.allow_remote)
+    args.token = None if args.token_file is None else read_token_file(args.token_file)
+
+
+def check_access(bind: str, allow_remote: bool) -> None:
+    """``--bind``: an address of this machine (:func:`~leadthrough.cli.arg_checks.
+    check_bindable`), and a loopback one unless ``--allow-remote``.
+
+    Raises:
+        DataError: Naming ``--bind``, the value and why (exit code 2).
+    """
+    check_bindable(bind, "--bind")
+    if not allow_remote and not is_loopback(bind):
+        _refuse("--bind", bind, "serves the page to the network, where anyone who has its URL "
+                "can move the robot", "127.0.0.1 (this machine only), or add --allow-remote "
+                "to serve it to the network (unencrypted http)")
+
+
+def remote_warning(bind: str, port: int) -> str | None:
+    """What the command says on start when the page is served beyond this machine (None on
+    loopback)."""
+    if is_loopback(bind):
+        return None
+    return (f"WARNING: the pendant is served to the network on {bind}:{port}: anyone on the "
+            "network who has the URL can move the robot, and the page travels unencrypted "
+            "(http), so anyone who can read the network's traffic can read the token. Stop it "
+            "(Ctrl-C) unless this network is trusted.")
 
 
 def check_export_folder(out: Path) -> None:
@@ -232,7 +292,8 @@ def _serve(pendant_class: Any, live: LiveSession, hand: Any, note: str,
     if given."""
     port = DEFAULT_PORT if args.port is None else args.port
     pendant = pendant_class(live, args.output, hand=hand, bind=args.bind, port=port,
-                            params_note=note)
+                            params_note=note, token=getattr(args, "token", None),
+                            allow_remote=args.allow_remote, max_clients=args.max_clients)
     if args.port not in (None, 0) and pendant.server.get_port() != args.port:
         pendant.stop()    # taken between the check and the start: viser moved on
         raise DataError(f"port in use on {args.bind}", field="--port", value=args.port,
@@ -259,6 +320,9 @@ def run(args: argparse.Namespace) -> int:
         pendant = _serve(Pendant, live, hand, note, args)
         pendant.start()
         print(f"pendant: {pendant.url}  (exports to {args.output}; Ctrl-C stops)", flush=True)
+        warning = remote_warning(args.bind, pendant.server.get_port())
+        if warning is not None:
+            print(warning, flush=True)
         done = threading.Event()
         signal.signal(signal.SIGINT, lambda *_: done.set())
         signal.signal(signal.SIGTERM, lambda *_: done.set())

@@ -32,6 +32,7 @@ import viser
 
 from leadthrough.control.safety import State
 from leadthrough.errors import LeadthroughError
+from leadthrough.pendant.access import DEFAULT_MAX_CLIENTS, Gate, new_token, serve_gated
 from leadthrough.pendant.backend import (
     Adjust,
     ClearFault,
@@ -66,15 +67,27 @@ class Pendant:
         port: Port to serve on (the next free one if taken).
         spring: The mouse's push (simulator).
         params_note: Where the loop's parameters come from, shown on the page.
+        token: The secret in the page's URL (:mod:`~leadthrough.pendant.access`); None: a
+            new random one.
+        allow_remote: Whether ``bind`` may be other than this machine's loopback address.
+        max_clients: Pages connected at once.
+
+    Raises:
+        DataError: A bad token, or a remote ``bind`` without ``allow_remote``.
     """
 
     def __init__(self, live: LiveSession, out: Path, *, hand: Hand | None = None,
                  bind: str = "127.0.0.1", port: int = 8080,
-                 spring: PushSpring | None = None, params_note: str = "") -> None:
+                 spring: PushSpring | None = None, params_note: str = "",
+                 token: str | None = None, allow_remote: bool = False,
+                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
         self.live, self.robot, self.out, self.hand = live, live.robot, Path(out), hand
         self.spring = spring if spring is not None else PushSpring()
         self.params_note = params_note
-        self.server = viser.ViserServer(host=bind, port=port, verbose=False)
+        self.gate = Gate(new_token() if token is None else token, bind,
+                         allow_remote=allow_remote, max_clients=max_clients)
+        self.server: viser.ViserServer = serve_gated(self.gate, host=bind, port=port,
+                                                     verbose=False)
         self.server.gui.configure_theme(control_width="large", show_logo=False,
                                         show_share_button=False, brand_color=(236, 112, 20))
         self.server.initial_camera.position = (1.95, -0.6, 1.3)
@@ -96,10 +109,8 @@ class Pendant:
 
     @property
     def url(self) -> str:
-        """Where the page is served."""
-        host = self.server.get_host()
-        return f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:" \
-               f"{self.server.get_port()}"
+        """Where the page is served, with its token (on all addresses: on 127.0.0.1)."""
+        return self.gate.url(self.server.get_host(), self.server.get_port())
 
     def start(self) -> None:
         """Start refreshing the page."""
