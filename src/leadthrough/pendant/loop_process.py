@@ -14,7 +14,11 @@ shares nothing with the pendant but memory it writes without waiting
 * **requests in**: the pendant sends :mod:`~leadthrough.pendant.messages` requests through a
   pipe; at the start of each controller cycle, before the controller runs, this process takes
   what has arrived (``poll`` does not wait), so that a request takes effect at a cycle boundary
-  and in the order sent. Refusals and results come back as notices in the snapshot.
+  and in the order sent. Refusals and results come back as notices in the snapshot. A
+  malformed request is refused and counted, never raised; a snapshot whose slow part outgrows
+  its record leaves out the oldest transitions (then marks) with a notice
+  (:func:`~leadthrough.pendant.messages.fit_slow`); a lapsed lease on the enabling input is
+  released here, every controller cycle.
 
 If the pipe closes or the parent process is gone (checked every controller cycle), the loop
 releases the enabling input, which the controller turns into a commanded stop, runs until the
@@ -40,7 +44,7 @@ from leadthrough.errors import ControlError, LeadthroughError
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.pendant.live_recording import LiveRecording
 from leadthrough.pendant.loop_requests import RequestHandler
-from leadthrough.pendant.messages import SlowState, numbers_size, snapshot_numbers
+from leadthrough.pendant.messages import SlowState, fit_slow, numbers_size, snapshot_numbers
 from leadthrough.pendant.shared_state import PeriodRing, SeqlockRecord, SharedBlock
 from leadthrough.pendant.transitions import describe
 from leadthrough.robot.description import Robot
@@ -185,6 +189,8 @@ class _Runner:
         self._no_push = np.zeros(3)
         self._event_count = -1
         self._cause = ""
+        self.blob_bytes = names.blob_bytes
+        self._left_out: str | None = None
         self._ppid = os.getppid()
         self.t_start = 0.0
 
@@ -272,6 +278,11 @@ class _Runner:
         blob = None
         if handler.changed or error is not None:
             handler.changed = False
-            blob = SlowState(self._cause, ctl.config, handler.marks, tuple(handler.notices),
-                             tuple(ctl.events), error).encode()
+            blob, left_out = fit_slow(
+                SlowState(self._cause, ctl.config, handler.marks, tuple(handler.notices),
+                          tuple(ctl.events), error, handler.refused, handler.lapsed),
+                self.blob_bytes)
+            if left_out is not None and left_out != self._left_out:
+                self._left_out = left_out
+                handler.notice("warning", left_out)      # in the next cycle's snapshot
         self.record.write(self._numbers, blob)

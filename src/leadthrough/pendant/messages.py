@@ -11,29 +11,55 @@ rewritten only when one of them changes.
 
 from __future__ import annotations
 
+import math
 import pickle
-from dataclasses import dataclass, field
-from typing import NamedTuple
+from dataclasses import dataclass, field, replace
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.safety import Event, Fault, State
+from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus
+from leadthrough.labels import LabelError, check_label
 
-__all__ = ["Adjust", "ClearFault", "LoopSnapshot", "MarkPoint", "MarkedPoint", "Notice",
-           "PeriodTimes", "Request", "SetEnable", "SimulatorRequest", "SlowState", "Stop",
-           "decode_snapshot", "numbers_size", "snapshot_numbers"]
+__all__ = ["LEASE_S", "MAX_SETTING", "Adjust", "ClearFault", "LoopSnapshot", "MarkPoint",
+           "MarkedPoint", "Notice", "PeriodTimes", "Request", "RequestError", "SetEnable",
+           "SimulatorRequest", "SlowState", "Stop", "check_finite", "check_request",
+           "check_vector",
+           "decode_snapshot", "fit_slow", "numbers_size", "snapshot_numbers"]
 
 Array = NDArray[np.float64]
+
+#: How long one heartbeat of the page's hold-to-run enabling device keeps it held [s]: the
+#: loop releases the input itself once a lease has lapsed (:class:`SetEnable`).
+LEASE_S = 0.2
+#: The largest virtual mass or friction a request may carry (the controller clamps to its
+#: operator limits further) [kg, kg·m², N, N·m].
+MAX_SETTING = 1e6
+
+
+class RequestError(ControlError):
+    """A request to the loop is malformed (wrong type, a number not finite or out of range,
+    a label outside the label charset): refused, nothing applied."""
 
 
 @dataclass(frozen=True)
 class SetEnable:
-    """The enabling input (deadman): held or released."""
+    """The enabling input (deadman): held or released.
+
+    Attributes:
+        held: Held (True) or released.
+        until: When the hold lapses (``time.monotonic()`` of the pendant's machine [s]; a
+            lease, renewed by each heartbeat of a hold-to-run device): the loop releases the
+            input at its first controller cycle after it, whatever the pendant does. None:
+            held until released (a caller of the loop's own interface).
+    """
 
     held: bool
+    until: float | None = None
 
 
 @dataclass(frozen=True)
@@ -65,6 +91,10 @@ class SimulatorRequest:
     on a robot. Its kinds are defined with the simulator's parts
     (:mod:`~leadthrough.pendant.push`, :mod:`~leadthrough.pendant.simulated`)."""
 
+    def check(self) -> None:
+        """Raise :class:`RequestError` if a field is malformed (a kind with fields checks
+        them)."""
+
 
 @dataclass(frozen=True)
 class Stop:
@@ -73,6 +103,86 @@ class Stop:
 
 #: What the interface may ask of the loop.
 Request = SetEnable | ClearFault | MarkPoint | Adjust | SimulatorRequest
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float | np.floating | np.integer) and not isinstance(
+        value, bool | np.bool_)
+
+
+def check_finite(value: Any, field: str, *, low: float = -math.inf, high: float = math.inf,
+                 low_open: bool = False) -> float:
+    """``value`` as a float if it is a real number, finite and within [low, high] (``low``
+    excluded if ``low_open``), else a :class:`RequestError` naming ``field``."""
+    ok = _is_number(value) and math.isfinite(float(value))
+    if ok:
+        v = float(value)
+        ok = (v > low if low_open else v >= low) and v <= high
+    if not ok:
+        shown = value if not isinstance(value, str) or len(value) <= 40 else value[:40] + "..."
+        raise RequestError("not a finite number in range", source="pendant", field=field,
+                           value=shown, expected=f"a number in {'(' if low_open else '['}"
+                                                 f"{low:g}, {high:g}]")
+    return float(value)
+
+
+def check_vector(value: Any, field: str, size: int, *, bound: float) -> tuple[float, ...]:
+    """``value`` as ``size`` finite floats within ±``bound``, else a :class:`RequestError`."""
+    if not isinstance(value, tuple | list | np.ndarray) or len(value) != size:
+        raise RequestError(f"not {size} numbers", source="pendant", field=field,
+                           value=type(value).__name__, expected=f"{size} finite numbers")
+    return tuple(check_finite(v, f"{field}[{k}]", low=-bound, high=bound)
+                 for k, v in enumerate(value))
+
+
+def check_request(request: Any) -> None:
+    """Check a request before it is sent and again where the loop applies it: types, finite
+    numbers, ranges, labels (:func:`leadthrough.labels.check_label`).
+
+    Raises:
+        RequestError: naming the field, the value and what is accepted; nothing is applied.
+    """
+    if isinstance(request, SetEnable):
+        if not isinstance(request.held, bool | np.bool_):
+            raise RequestError("held must be true or false", source="pendant", field="held",
+                               value=type(request.held).__name__, expected="a bool")
+        if request.until is not None:
+            check_finite(request.until, "until")
+    elif isinstance(request, MarkPoint):
+        try:
+            check_label(request.label, source="pendant", field="label")
+        except LabelError as e:   # the same words, as a refused request
+            raise RequestError(e.message, source=e.source, field=e.field, value=e.value,
+                               expected=e.expected) from e
+    elif isinstance(request, Adjust):
+        _check_adjust(request)
+    elif isinstance(request, SimulatorRequest):
+        request.check()
+    elif not isinstance(request, ClearFault | Stop):
+        raise RequestError("unknown request", source="pendant", field="request",
+                           value=type(request).__name__, expected="a pendant request")
+
+
+def _check_adjust(req: Adjust) -> None:
+    if req.frame is not None and req.frame not in ("base", "tool"):
+        shown = req.frame if not isinstance(req.frame, str) else req.frame[:40]
+        raise RequestError("unknown frame", source="pendant", field="frame", value=shown,
+                           expected="'base' or 'tool'")
+    if req.axes_enabled is not None and (
+            not isinstance(req.axes_enabled, tuple) or len(req.axes_enabled) != 6
+            or not all(isinstance(a, bool) for a in req.axes_enabled)):
+        raise RequestError("axes must be six true/false values", source="pendant",
+                           field="axes_enabled", value=type(req.axes_enabled).__name__,
+                           expected="a tuple of 6 bools")
+    for name, pair, low_open in (("mass", req.mass, True), ("friction", req.friction, False)):
+        if pair is None:
+            continue
+        if not isinstance(pair, tuple) or len(pair) != 2:
+            raise RequestError("not a pair of numbers", source="pendant", field=name,
+                               value=type(pair).__name__,
+                               expected="(translational, rotational)")
+        for k, v in enumerate(pair):
+            check_finite(v, f"{name}[{k}]", low=0.0, high=MAX_SETTING, low_open=low_open)
 
 
 class PeriodTimes(NamedTuple):
@@ -143,6 +253,8 @@ class LoopSnapshot:
         error: Why the loop stopped, if it did.
         push_base: The simulated hand's force on the tool [N], shape (3,) (zeros on a
             robot).
+        refused: Requests the loop refused so far (malformed, or their effect failed).
+        lapsed: Holds of the enabling input the loop dropped on a lapsed lease.
     """
 
     time: float
@@ -160,6 +272,8 @@ class LoopSnapshot:
     notices: tuple[Notice, ...]
     error: str | None = None
     push_base: Array = field(default_factory=lambda: np.zeros(3))
+    refused: int = 0
+    lapsed: int = 0
 
     @property
     def speed(self) -> float:
@@ -179,6 +293,8 @@ class SlowState:
         notices: The latest notices.
         events: The controller's transition log (for the export).
         error: Why the loop stopped, if it did.
+        refused: Requests refused so far.
+        lapsed: Holds dropped on a lapsed lease so far.
     """
 
     cause: str = ""
@@ -187,6 +303,8 @@ class SlowState:
     notices: tuple[Notice, ...] = ()
     events: tuple[Event, ...] = ()
     error: str | None = None
+    refused: int = 0
+    lapsed: int = 0
 
     def encode(self) -> bytes:
         """Its pickle."""
@@ -200,6 +318,45 @@ class SlowState:
         if not isinstance(slow, SlowState):
             raise TypeError(f"not a snapshot's slow part: {type(slow).__name__}")
         return slow
+
+
+def fit_slow(slow: SlowState, capacity: int) -> tuple[bytes, str | None]:
+    """The pickle of ``slow`` in at most ``capacity`` bytes, and what was left out for it
+    (None: nothing). Over capacity, the oldest transitions of the log are dropped first, then
+    notices are shortened, then the oldest marks dropped: the loop keeps running whatever the
+    snapshot has to carry.
+
+    Raises:
+        RequestError: ``capacity`` cannot hold even the settings and the error.
+    """
+    blob = slow.encode()
+    if len(blob) <= capacity:
+        return blob, None
+    dropped: list[str] = []
+    events = slow.events
+    while len(blob) > capacity and events:
+        events = events[len(events) // 2 + 1:] if len(events) > 1 else ()
+        blob = replace(slow, events=events).encode()
+    if len(events) != len(slow.events):
+        dropped.append(f"{len(slow.events) - len(events)} oldest transitions")
+    slow = replace(slow, events=events)
+    if len(blob) > capacity and slow.notices:
+        slow = replace(slow, notices=tuple(replace(n, text=n.text[:200])
+                                           for n in slow.notices[-5:]),
+                       cause=slow.cause[:200],
+                       error=None if slow.error is None else slow.error[:200])
+        blob = slow.encode()
+        dropped.append("notices shortened")
+    marks = slow.marks
+    while len(blob) > capacity and marks:
+        marks = marks[len(marks) // 2 + 1:] if len(marks) > 1 else ()
+        blob = replace(slow, marks=marks).encode()
+    if len(marks) != len(slow.marks):
+        dropped.append(f"{len(slow.marks) - len(marks)} oldest marks")
+    if len(blob) > capacity:
+        raise RequestError("the snapshot's record is too small for its settings",
+                           field="blob_bytes", value=capacity, expected=f">= {len(blob)}")
+    return blob, "the snapshot's record is full: " + ", ".join(dropped) + " left out of it"
 
 
 def numbers_size(n: int) -> int:
@@ -233,4 +390,4 @@ def decode_snapshot(numbers: Array, slow: SlowState) -> LoopSnapshot:
         state=State(state), fault=Fault(fault), cause=slow.cause,
         estimator=EstimatorStatus(estimator), enabled=bool(enabled), settings=slow.settings,
         marks=slow.marks, notices=slow.notices, error=slow.error,
-        push_base=numbers[33 + n:36 + n].copy())
+        push_base=numbers[33 + n:36 + n].copy(), refused=slow.refused, lapsed=slow.lapsed)

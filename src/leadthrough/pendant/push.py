@@ -30,11 +30,27 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leadthrough.errors import ControlError, check_fields
-from leadthrough.pendant.messages import Request, SimulatorRequest
+from leadthrough.pendant.messages import (
+    Request,
+    RequestError,
+    SimulatorRequest,
+    check_finite,
+    check_request,
+    check_vector,
+)
 
-__all__ = ["Hand", "Hold", "Push", "PushSpring", "Release", "RemoteHand", "apply_to_hand"]
+__all__ = ["MAX_HAND_FORCE_N", "MAX_REACH_M", "MAX_SPRING", "Hand", "Hold", "Push",
+           "PushSpring", "Release", "RemoteHand", "apply_to_hand"]
 
 Array = NDArray[np.float64]
+
+#: The largest force a hand request may carry (a push, a spring's cap) [N]: the controller's
+#: collision threshold (``SafetyConfig.max_force``).
+MAX_HAND_FORCE_N = 150.0
+#: The farthest a handle may be from the robot's base, per axis [m].
+MAX_REACH_M = 10.0
+#: The stiffest spring [N/m] and the strongest damper [N·s/m] a hold may carry.
+MAX_SPRING = 1e5
 
 
 class Hand(Protocol):
@@ -105,6 +121,13 @@ class Push(SimulatorRequest):
 
     force_base: tuple[float, float, float]
 
+    def check(self) -> None:
+        """Three finite numbers, their magnitude at most :data:`MAX_HAND_FORCE_N`."""
+        f = check_vector(self.force_base, "force_base", 3, bound=MAX_HAND_FORCE_N)
+        if math.hypot(*f) > MAX_HAND_FORCE_N:
+            raise RequestError("push too strong", source="pendant", field="force_base",
+                               value=f, expected=f"at most {MAX_HAND_FORCE_N:g} N")
+
 
 @dataclass(frozen=True)
 class Hold(SimulatorRequest):
@@ -114,6 +137,15 @@ class Hold(SimulatorRequest):
     stiffness: float
     damping: float
     max_force: float
+
+    def check(self) -> None:
+        """A finite handle within :data:`MAX_REACH_M`, a spring and damper within
+        :data:`MAX_SPRING`, a cap in (0, :data:`MAX_HAND_FORCE_N`]."""
+        check_vector(self.handle_base, "handle_base", 3, bound=MAX_REACH_M)
+        check_finite(self.stiffness, "stiffness", low=0.0, high=MAX_SPRING)
+        check_finite(self.damping, "damping", low=0.0, high=MAX_SPRING)
+        check_finite(self.max_force, "max_force", low=0.0, high=MAX_HAND_FORCE_N,
+                     low_open=True)
 
 
 @dataclass(frozen=True)
@@ -154,14 +186,25 @@ class RemoteHand:
         self.link = link
 
     def push(self, force_base: ArrayLike) -> None:
-        """A constant force [N], shape (3,), at the TCP from the next cycle on."""
-        self.link.send(Push(_vec3(force_base)))
+        """A constant force [N], shape (3,), at the TCP from the next cycle on.
+
+        Raises:
+            RequestError: Not 3 finite numbers within :data:`MAX_HAND_FORCE_N` (nothing sent).
+        """
+        self._send(Push(_vec3(force_base, "force_base")))
 
     def hold(self, handle_base: ArrayLike, stiffness: float, damping: float,
              max_force: float) -> None:
-        """Grip the tool through a spring on a handle (see :meth:`Hand.hold`)."""
-        self.link.send(Hold(_vec3(handle_base), float(stiffness), float(damping),
-                            float(max_force)))
+        """Grip the tool through a spring on a handle (see :meth:`Hand.hold`).
+
+        Raises:
+            RequestError: A handle or spring out of range or not finite (nothing sent).
+        """
+        self._send(Hold(_vec3(handle_base, "handle_base"), stiffness, damping, max_force))
+
+    def _send(self, request: Request) -> None:
+        check_request(request)
+        self.link.send(request)
 
     def release(self) -> None:
         """No force from the next cycle on."""
@@ -175,6 +218,10 @@ class RemoteHand:
         return np.zeros(3) if push is None else np.asarray(push, dtype=float)
 
 
-def _vec3(v: ArrayLike) -> tuple[float, float, float]:
-    a = np.asarray(v, dtype=float).reshape(3)
+def _vec3(v: ArrayLike, field: str) -> tuple[float, float, float]:
+    try:
+        a = np.asarray(v, dtype=float).reshape(3)
+    except (TypeError, ValueError) as e:
+        raise RequestError("not 3 numbers", source="pendant", field=field,
+                           value=type(v).__name__, expected="3 finite numbers") from e
     return float(a[0]), float(a[1]), float(a[2])
