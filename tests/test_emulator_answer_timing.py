@@ -230,8 +230,8 @@ def test_rtde_frames_merged_in_one_tcp_read_are_stamped_as_bounds_but_the_last()
         reader = FrameReader()
         reader.feed(client.recv(4096))
         reply = reader.next()
-        assert reply is not None and reply[1][0] == 2           # recipe id 2
-        recipe = Recipe(2, ("input_int_register_24",), ("INT32",))
+        assert reply is not None and reply[1][0] == 1  # the connection's first input recipe
+        recipe = Recipe(1, ("input_int_register_24",), ("INT32",))
 
         def package(counter: int) -> bytes:
             return frame(MessageType.DATA_PACKAGE, recipe.encode(

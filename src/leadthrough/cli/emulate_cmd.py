@@ -48,6 +48,11 @@ ports: J519 60015 and RTDE 30004 (+ secondary interface 30002, where the servo U
 program is sent) are listened on; the KUKA robot sends its RSI documents to --host:--port.
 inputs: J519 DI[1] / UR DI0 / KUKA $IN[1] = enabling device, DI[2] / DI1 / $IN[2] = mark,
 DI[3] / DI2 / $IN[3] = fault reset.
+UR RTDE, as a real controller does for any client: input recipes numbered per connection
+from 1, the guide's standard inputs (registers, speed slider, digital / analog outputs), input
+packages taken before START, input registers readable as outputs; ur_rtde's RTDEIOInterface
+works against it. No dashboard server (29999) and no URScript interpreter: ur_rtde's
+RTDEControlInterface is not served. J519 status time stamps: milliseconds, 2 ms steps.
 """
 
 

@@ -107,6 +107,10 @@ class EmulatedController(ABC):
 
     kind: ClassVar[str] = ""
     default_cycle_ms: ClassVar[int] = 8
+    #: The simulator step [1 ms] within each cycle period at which the cycle runs: 1 (the
+    #: first step's end, at 1, 9, 17, ... ms for 8 ms) or 0 (the period's end, on the
+    #: controller clock's ticks: 8, 16, 24, ... ms).
+    cycle_phase: ClassVar[int] = 1
 
     def __init__(self, robot: Robot, seed: int, options: EmulatorOptions, port: int) -> None:
         self.robot, self.options, self.requested_port = robot, options, port
@@ -289,7 +293,7 @@ class EmulatedController(ABC):
         self.poll(t)
         self.arm.step()
         self._ticks += 1
-        if self._ticks % self.arm.steps == 1 or self.arm.steps == 1:
+        if self._ticks % self.arm.steps == self.cycle_phase % self.arm.steps:
             self.on_cycle(self.t)
         self._flush()
 

@@ -21,6 +21,13 @@ joint targets of the next cycle. Its behaviour:
   deg/s², deg/s³) for no payload and full payload, ``max_cartesian_speed`` 2000 mm/s;
 * read I/O: with ``read_io_type`` 1 (DI) the status reports DI[index..index+15] masked;
   DI[1] is the enabling device and DI[2] the mark button;
+* time stamp: the status packet's ``time_stamp`` is the controller clock in milliseconds
+  (the unit the driver reads, :mod:`leadthrough.drivers.fanuc_j519.packets`) at a 2 ms
+  resolution: the cycles run on the clock's ticks (every 8 or 4 ms of simulated time, from
+  the period's end), so every stamp is even, is the instant of the status's data, and
+  successive statuses differ by the cycle. Assumption, as the unit: the 2 ms step is the
+  resolution stated for the field, which FANUC's manual (B-84904EN, not public) could not be
+  checked for here;
 * faults of :class:`~leadthrough.sim.emulators.scenario.FaultPlan`: dropped or late status
   packets, NaN joint angles, E-stop / protective stop (controlled stop, then status bits 0
   and 2 cleared), a closed port (the client's next send / receive gets ICMP port
@@ -54,11 +61,19 @@ from leadthrough.sim.emulators.arm import ArmPhase, MotionLimits, StopKind
 from leadthrough.sim.emulators.controller import UdpController
 from leadthrough.sim.emulators.scenario import EmulatorOptions
 
-__all__ = ["FanucJ519Emulator"]
+__all__ = ["TIMESTAMP_RESOLUTION_MS", "FanucJ519Emulator", "status_timestamp"]
 
 JERK_PER_ACCEL = 50.0  # jerk limit = 50/s × acceleration limit
+TIMESTAMP_RESOLUTION_MS = 2  # the status time stamp's step [ms] (module doc)
 WATCHDOG_CYCLES = 4
 DI_INPUTS = {1: "enable", 2: "mark", 3: "reset"}  # DI number -> input name
+
+
+def status_timestamp(t: float) -> int:
+    """The status packet's ``time_stamp`` at simulation time ``t`` [s]: milliseconds on the
+    controller's 2 ms clock (the last tick at or before ``t``), modulo 2**32."""
+    ms = round(t * 1000)
+    return (ms - ms % TIMESTAMP_RESOLUTION_MS) & 0xFFFFFFFF
 
 
 class FanucJ519Emulator(UdpController):
@@ -66,6 +81,7 @@ class FanucJ519Emulator(UdpController):
 
     kind = "fanuc-j519"
     default_cycle_ms = 8
+    cycle_phase = 0  # cycles on the 2 ms clock's ticks (the time stamp, module doc)
 
     def __init__(self, robot: Robot, seed: int, options: EmulatorOptions,
                  port: int = DEFAULT_PORT) -> None:
@@ -180,7 +196,7 @@ class FanucJ519Emulator(UdpController):
         return StatusPacket(
             sequence=self.sequence, status=int(bits), joints=joints,
             current=tuple(fb.current.tolist()), position=(*pose, 0.0, 0.0, 0.0),
-            timestamp=round(t * 1000) & 0xFFFFFFFF, read_io_type=io_type,
+            timestamp=status_timestamp(t), read_io_type=io_type,
             read_io_index=io_index, read_io_mask=io_mask,
             read_io_value=self._read_io(io_type, io_index, io_mask))
 

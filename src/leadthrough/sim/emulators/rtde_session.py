@@ -1,11 +1,39 @@
 """One client connection of the emulated RTDE server: the handshake and recipes.
 
 A :class:`RtdeSession` answers REQUEST_PROTOCOL_VERSION (version 2 only), GET_URCONTROL_VERSION,
-the output and input setups (NOT_FOUND for variables the emulator does not produce or know,
-IN_USE for input variables another connection writes), START and PAUSE, and decodes the input
-DATA_PACKAGEs into register writes. Data packages of the output recipe are built by the
+the output and input setups, START and PAUSE, and decodes the input DATA_PACKAGEs into writes
+of the controller's input variables. Data packages of the output recipe are built by the
 controller (:mod:`leadthrough.sim.emulators.ur_rtde`) from its state. Protocol:
 :mod:`leadthrough.drivers.ur_rtde.protocol` (sources cited there).
+
+It follows a real controller where independent clients depend on it:
+
+* **Input recipe ids** are numbered per connection, 1, 2, 3, ... in the order of the
+  successful CONTROL_PACKAGE_SETUP_INPUTS requests, apart from the output recipe (id 1 of its
+  own). Universal Robots' RTDE guide: "each input recipe that has been successfully
+  configured will get a unique recipe id". SDU Robotics' ``ur_rtde`` (PyPI ``ur-rtde`` 1.6.5)
+  hard-codes the ids a real controller gives: ``RTDEIOInterface`` sends 16 input setups
+  (``rtde_io_interface.cpp`` ``setupRecipes``) and then writes register 18 with recipe 7,
+  double register 18 with recipe 12 and the speed slider with recipe 4;
+  ``RTDEControlInterface`` sends its output setup first, then 23 input setups it addresses as
+  recipes 1-23 (``RTDE::RobotCommand::Recipe::RECIPE_1 = 1``). A refused setup answers id 0 and
+  takes no id (assumption: the guide gives ids to successful setups only; ``ur_rtde``'s
+  numbering holds only when every setup succeeds, which it does here). At most 255 input
+  recipes per connection (the id is a uint8); a further setup is refused with id 0.
+* **The same variable in several recipes of one connection** is accepted: every recipe of
+  ``ur_rtde`` repeats its command register (``input_int_register_23`` for the I/O interface,
+  ``input_int_register_0`` for the control interface), which works on real controllers.
+  **IN_USE** answers a variable another connection writes (the RTDE guide; ``ur_rtde``'s
+  ``rtde.cpp`` raises "One of the RTDE input registers are already in use!" on it), and the
+  variable is free again when that connection closes. **NOT_FOUND** answers a name that is not
+  an input of the guide's list (:data:`CONTROLLER_INPUTS`); a setup with a NOT_FOUND or IN_USE
+  type gets id 0.
+* **Input packages before START** are applied: ``ur_rtde``'s ``RTDEIOInterface`` never sends
+  CONTROL_PACKAGE_START (observed on the wire with 1.6.5: protocol version, 16 input setups,
+  then data packages; PAUSE on disconnect), and its setters are the library's documented way to
+  set a real robot's registers, outputs and speed slider. (UR's own Python client refuses to
+  send before START on its side, ``rtde.py`` ``send``: a client rule, not the controller's.)
+  START still needs an output recipe (there is nothing to send without one).
 """
 
 from __future__ import annotations
@@ -15,7 +43,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from leadthrough.drivers.ur_rtde.protocol import (
-    INPUT_TYPES,
     PROTOCOL_VERSION,
     ControllerVersion,
     FrameReader,
@@ -32,7 +59,30 @@ from leadthrough.drivers.ur_rtde.protocol import (
 from leadthrough.errors import DataError
 from leadthrough.sim.emulators.answer_timing import recv_stamped
 
-__all__ = ["RtdeSession"]
+__all__ = ["CONTROLLER_INPUTS", "MAX_INPUT_RECIPES", "RtdeSession"]
+
+MAX_INPUT_RECIPES = 255
+"""Input recipes one connection may set up (the recipe id is a uint8, 0 means refused)."""
+
+CONTROLLER_INPUTS: dict[str, str] = {
+    "speed_slider_mask": "UINT32", "speed_slider_fraction": "DOUBLE",
+    "standard_digital_output_mask": "UINT8", "standard_digital_output": "UINT8",
+    "configurable_digital_output_mask": "UINT8", "configurable_digital_output": "UINT8",
+    "tool_digital_output_mask": "UINT8", "tool_digital_output": "UINT8",
+    "standard_analog_output_mask": "UINT8", "standard_analog_output_type": "UINT8",
+    "standard_analog_output_0": "DOUBLE", "standard_analog_output_1": "DOUBLE",
+    "input_bit_registers0_to_31": "UINT32", "input_bit_registers32_to_63": "UINT32",
+    **{f"input_bit_register_{i}": "BOOL" for i in range(64, 128)},
+    **{f"input_int_register_{i}": "INT32" for i in range(48)},
+    **{f"input_double_register_{i}": "DOUBLE" for i in range(48)},
+    "external_force_torque": "VECTOR6D",
+}
+"""The input variables of Universal Robots' RTDE guide (e-Series 5.x list), {name: type}:
+speed slider, standard / configurable / tool digital outputs (mask and value), standard
+analog outputs (mask, type 0 current / 1 voltage, values as fractions), the boolean input
+registers 0-63 as two words and 64-127 one by one, the integer and double registers 0-47
+and the external force-torque input. The guide's register ranges: integer and double 0-23
+for fieldbus / PLC use, 24-47 for external RTDE clients; boolean 64-127 for RTDE clients."""
 
 
 class RtdeSession:
@@ -58,6 +108,7 @@ class RtdeSession:
         self.output: Recipe | None = None
         self.divider = 1
         self.inputs: dict[int, Recipe] = {}
+        self.next_input_id = 1
         self.started = False
         self.open = True
         self.requested_outputs: list[str] = []
@@ -145,7 +196,7 @@ class RtdeSession:
             recipe = self.inputs.get(payload[0])
             if recipe is None:
                 self._text(f"unknown input recipe id {payload[0]}")
-            elif self.started:
+            else:  # before START too, as a real controller (module doc)
                 self.write(recipe.decode(payload), rx, exact)
         elif mtype != MessageType.TEXT_MESSAGE:
             self._text(f"unknown message type {mtype}")
@@ -171,11 +222,16 @@ class RtdeSession:
         for n in names:
             owner = self.owners.get(n)
             types.append("IN_USE" if owner is not None and owner is not self
-                         else INPUT_TYPES.get(n, "NOT_FOUND"))
+                         else CONTROLLER_INPUTS.get(n, "NOT_FOUND"))
         if "IN_USE" in types or "NOT_FOUND" in types:
             self._reply(MessageType.CONTROL_PACKAGE_SETUP_INPUTS, encode_setup_reply(0, types))
             return
-        recipe_id = len(self.inputs) + 2  # 1 is the output recipe
+        if self.next_input_id > MAX_INPUT_RECIPES:
+            self._text(f"more than {MAX_INPUT_RECIPES} input recipes on one connection")
+            self._reply(MessageType.CONTROL_PACKAGE_SETUP_INPUTS, encode_setup_reply(0, types))
+            return
+        recipe_id = self.next_input_id  # per connection, in order (module doc)
+        self.next_input_id += 1
         self.inputs[recipe_id] = Recipe(recipe_id, tuple(names), tuple(types))
         for n in names:
             self.owners[n] = self

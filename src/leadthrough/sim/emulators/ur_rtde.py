@@ -23,6 +23,37 @@ the program halts. E-stop: ``safety_mode`` 7 (robot emergency stop), bits 6, 7 a
 ``robot_mode`` POWER_OFF once stopped. Digital inputs: standard DI0 = enabling device, DI1 =
 mark button (``actual_digital_input_bits``). Output variables the emulator does not produce
 (TCP pose, forces, temperatures, ...) are answered NOT_FOUND.
+
+Input variables (recipes, ids, IN_USE / NOT_FOUND, packages before START:
+:mod:`~leadthrough.sim.emulators.rtde_session`) act as on a real controller, as far as the
+RTDE outputs show them (UR's RTDE guide, output list):
+
+* the general-purpose input registers are readable as outputs of the same name
+  (``input_int_register_X``, ``input_double_register_X``, ``input_bit_register_X`` for
+  64-127, ``input_bit_registers0_to_31`` / ``32_to_63``), holding the last value written;
+* ``speed_slider_mask`` 1 sets the speed slider to ``speed_slider_fraction`` (clipped to
+  0..1), reported as ``target_speed_fraction``; the servo program's motion is not scaled by it
+  (``speed_scaling`` stays 1);
+* ``standard_digital_output`` / ``configurable_digital_output`` / ``tool_digital_output`` set
+  the outputs their mask selects, reported in ``actual_digital_output_bits`` (bits 0-7
+  standard, 8-15 configurable, 16-17 tool, the guide's layout);
+* ``standard_analog_output_0`` / ``_1`` set the analog output their mask selects, reported as
+  ``standard_analog_output0`` / ``1`` (the value as sent, a fraction of the range; the type,
+  current or voltage, is kept but not reported);
+* ``external_force_torque`` is accepted and kept, and changes nothing.
+
+``RTDEControlInterface`` of SDU Robotics' ``ur_rtde`` is not served. It needs, before its
+RTDE session (whose output recipe and 23 input recipes the emulator does accept, with the ids it
+assumes): the dashboard server on TCP 29999 (``PolyscopeVersion``, ``get serial number``,
+``is in remote control``, ``stop``), which the emulator does not run, so the constructor fails
+there; then it uploads its own ``rtde_control.script`` on TCP 30003 (the emulator's secondary
+interface listens on 30002 only and runs only leadthrough's servo program), waits up to 5 s for
+``robot_status_bits`` bit 1 (program running), and drives every call through that script's
+command protocol (a command code in ``input_int_register_0``, arguments in the double
+registers, the script's state in ``output_int_register_0``: ready / done with the command).
+Serving it would take a dashboard server, a listener on 30003 and a model of that script's
+command protocol (its moves, servo and speed modes, force mode, kinematics queries) in place of
+the interpreter the controller has; the emulator has none of the three.
 """
 
 from __future__ import annotations
@@ -52,10 +83,24 @@ _PRODUCED_FIXED = ("timestamp", "target_q", "target_qd", "actual_q", "actual_qd"
                    "robot_status_bits", "safety_status_bits", "speed_scaling",
                    "target_speed_fraction")
 PRODUCED_OUTPUTS: dict[str, str] = {
-    n: t for n, t in OUTPUT_TYPES.items()
-    if n in _PRODUCED_FIXED or n.startswith(("output_int_register", "output_double_register",
-                                             "output_bit_register"))}
-"""Output variables the emulator fills, {name: type}."""
+    **{n: t for n, t in OUTPUT_TYPES.items()
+       if n in _PRODUCED_FIXED or n.startswith(("output_int_register", "output_double_register",
+                                                "output_bit_register"))},
+    **{f"input_int_register_{i}": "INT32" for i in range(48)},
+    **{f"input_double_register_{i}": "DOUBLE" for i in range(48)},
+    **{f"input_bit_register_{i}": "BOOL" for i in range(64, 128)},
+    "input_bit_registers0_to_31": "UINT32", "input_bit_registers32_to_63": "UINT32",
+    "standard_analog_output0": "DOUBLE", "standard_analog_output1": "DOUBLE",
+}
+"""Output variables the emulator fills, {name: type} (the RTDE guide's names and types)."""
+
+# digital outputs in actual_digital_output_bits: (mask name, value name, first bit, width)
+_DIGITAL_OUTPUTS = (("standard_digital_output_mask", "standard_digital_output", 0, 8),
+                    ("configurable_digital_output_mask", "configurable_digital_output", 8, 8),
+                    ("tool_digital_output_mask", "tool_digital_output", 16, 2))
+_IO_INPUTS = frozenset({"speed_slider_mask", "speed_slider_fraction", "standard_analog_output_mask",
+                        "standard_analog_output_0", "standard_analog_output_1",
+                        *(n for d in _DIGITAL_OUTPUTS for n in d[:2])})
 
 ROBOT_RUNNING, ROBOT_POWER_OFF = 7, 3
 SAFETY_NORMAL, SAFETY_PROTECTIVE, SAFETY_ROBOT_ESTOP = 1, 3, 7
@@ -66,11 +111,14 @@ _SAFETY = {StopKind.ESTOP: SAFETY_ROBOT_ESTOP, StopKind.PROTECTIVE: SAFETY_PROTE
 
 
 class _Outputs(dict[str, Any]):
-    """Output values; the general-purpose output registers are looked up on demand."""
+    """Output values; the general-purpose registers are looked up on demand (the input
+    registers hold what the clients last wrote, 0 / 0.0 / False before)."""
 
-    def __init__(self, values: dict[str, Any], out_int: list[int]) -> None:
+    def __init__(self, values: dict[str, Any], out_int: list[int],
+                 registers: dict[str, Any]) -> None:
         super().__init__(values)
         self.out_int = out_int
+        self.registers = registers
 
     def __missing__(self, key: str) -> Any:
         if key.startswith("output_int_register_"):
@@ -79,6 +127,9 @@ class _Outputs(dict[str, Any]):
             return 0.0
         if key.startswith("output_bit_register_"):
             return False
+        if key.startswith("input_"):
+            default = {"BOOL": False, "DOUBLE": 0.0}.get(PRODUCED_OUTPUTS.get(key, ""), 0)
+            return self.registers.get(key, default)
         raise KeyError(key)
 
 
@@ -103,6 +154,9 @@ class UrRtdeEmulator(EmulatedController):
         self.offset = script.register_offset
         self.registers: dict[str, Any] = {}
         self.out_int = [0] * 48
+        self.speed_slider = 1.0          # fraction (RTDE speed_slider_fraction)
+        self.digital_outputs = 0         # actual_digital_output_bits
+        self.analog_outputs = [0.0, 0.0]  # standard analog outputs 0, 1 (fractions)
         self.program = ScriptState.NOT_RUNNING
         self.programs_received = 0
         self._counter: int | None = None
@@ -193,6 +247,29 @@ class UrRtdeEmulator(EmulatedController):
                 and values[counter] != self.registers.get(counter)):
             self.timing.answer(rx, exact=exact)
         self.registers.update(values)
+        self._apply_io(values)
+
+    def _apply_io(self, values: dict[str, Any]) -> None:
+        """The speed slider, digital and analog outputs a package sets (module doc)."""
+        if _IO_INPUTS.isdisjoint(values):
+            return  # registers only (the servo program's packages)
+        reg = self.registers
+        if "speed_slider_mask" in values or "speed_slider_fraction" in values:
+            fraction = reg.get("speed_slider_fraction", self.speed_slider)
+            if reg.get("speed_slider_mask", 0) & 1 and math.isfinite(fraction):
+                self.speed_slider = min(max(float(fraction), 0.0), 1.0)
+        for mask_name, value_name, first, width in _DIGITAL_OUTPUTS:
+            if mask_name in values or value_name in values:
+                mask = (int(reg.get(mask_name, 0)) & ((1 << width) - 1)) << first
+                value = int(reg.get(value_name, 0)) << first
+                self.digital_outputs = (self.digital_outputs & ~mask) | (value & mask)
+        if not {"standard_analog_output_mask", "standard_analog_output_0",
+                "standard_analog_output_1"}.isdisjoint(values):
+            mask = int(reg.get("standard_analog_output_mask", 0))
+            for i in (0, 1):
+                value = reg.get(f"standard_analog_output_{i}", self.analog_outputs[i])
+                if mask >> i & 1 and math.isfinite(value):
+                    self.analog_outputs[i] = float(value)
 
     def _start_program(self, program: ReceivedProgram) -> None:
         """Run a received servo program (restarts it; refused while the arm is stopping or
@@ -283,11 +360,14 @@ class UrRtdeEmulator(EmulatedController):
             "target_q": tuple(arm.target), "target_qd": tuple(arm.target_velocity),
             "actual_qd": tuple(qd),
             "actual_digital_input_bits": input_bits(inputs),
-            "actual_digital_output_bits": 0,
+            "actual_digital_output_bits": self.digital_outputs,
             "robot_mode": ROBOT_RUNNING if powered else ROBOT_POWER_OFF,
             "joint_mode": (JOINT_RUNNING,) * 6, "safety_mode": safety, "safety_status": safety,
             "runtime_state": RUNTIME_PLAYING if playing else RUNTIME_STOPPED,
             "robot_status_bits": int(powered) | int(playing) << 1,
-            "safety_status_bits": bits, "speed_scaling": 1.0, "target_speed_fraction": 1.0,
+            "safety_status_bits": bits, "speed_scaling": 1.0,
+            "target_speed_fraction": self.speed_slider,
+            "standard_analog_output0": self.analog_outputs[0],
+            "standard_analog_output1": self.analog_outputs[1],
         }
-        return _Outputs(out, self.out_int)
+        return _Outputs(out, self.out_int, self.registers)
