@@ -367,7 +367,7 @@ def test_simulator_settings_with_a_driver_and_a_dead_controller_are_clear_errors
     assert seeded.returncode == 2 and "--seed" in seeded.stderr
     dead = subprocess.run([*base, "--driver", "fanuc-j519", "--host", "127.0.0.1", "--port", "9"],
                           capture_output=True, text=True, check=False)
-    assert dead.returncode == 2 and "127.0.0.1:9" in dead.stderr
+    assert dead.returncode == 1 and "127.0.0.1:9" in dead.stderr   # the link: exit 1
     assert "Traceback" not in dead.stderr and not (tmp_path / "r.parquet").exists()
     no_host = subprocess.run([*base, "--driver", "ur-rtde"], capture_output=True, text=True,
                              check=False)
@@ -394,7 +394,7 @@ def test_ctrl_c_mid_run_is_a_commanded_stop_and_no_recording(tmp_path: Path) -> 
         _, stderr = rec.communicate(timeout=30)
     finally:
         report = stop_process(emu)
-    assert rec.returncode == 2 and "interrupted by the user" in stderr, stderr
+    assert rec.returncode == 130 and "interrupted by the user" in stderr, stderr
     assert "Traceback" not in stderr and not out.exists()
     # the stop went out as commands within the limits, then the stream's own end
     assert "violations: ()" in report and "refused: 0" in report
