@@ -17,12 +17,14 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
+from leadthrough.cli import build_parser
+from leadthrough.drivers.controllers import connect
 from leadthrough.drivers.kuka_rsi.client import SEQUENCE_RUN, parse_address
 from leadthrough.drivers.kuka_rsi.driver import KukaRsiDriver
 from leadthrough.drivers.kuka_rsi.messages import RobotMessage, SensorMessage
 from leadthrough.drivers.link import LinkErrorKind
 from leadthrough.drivers.protocol import WrappedDriver
-from leadthrough.drivers.ur_rtde.client import DEFAULT_OUTPUTS, MAX_TEXT_MESSAGES, RtdeClient
+from leadthrough.drivers.ur_rtde.client import MAX_TEXT_MESSAGES, RtdeClient
 from leadthrough.drivers.ur_rtde.protocol import (
     OUTPUT_TYPES,
     ControllerVersion,
@@ -34,9 +36,9 @@ from leadthrough.drivers.ur_rtde.protocol import (
     frame,
 )
 from leadthrough.drivers.wire import BadPacket
-from leadthrough.errors import DriverError
+from leadthrough.errors import ControlError, DriverError
 from leadthrough.identification.params_file import ParamsFile
-from leadthrough.robot import Robot
+from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import EndCause, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
@@ -306,7 +308,8 @@ def test_an_ipoc_jump_is_a_bad_packet_and_a_run_of_them_ends_in_a_stop(er20: Rob
         real.stop()
     assert "link lost" in str(err.value) and driver.link_error is not None
     assert driver.link_error.kind is LinkErrorKind.PROTOCOL
-    assert driver.stats.bad[BadPacket.SEQUENCE] >= 3 * 5 + SEQUENCE_RUN
+    assert driver.stats.bad[BadPacket.SEQUENCE] >= 5 + SEQUENCE_RUN
+    assert driver.stats.bad[BadPacket.STALE] >= 10 and driver.out_of_order >= 10
     assert taken >= jump_at - 10
     stops = [a for a in real.answers if a.stop]
     assert len(stops) == 1 and stops[0].ipoc > 2_000_000_000
@@ -461,7 +464,7 @@ def test_rtde_nan_timestamps_and_unknown_types_are_counted_not_raised() -> None:
 
     client, times = _rtde_attack(script)
     bad = client.stats.bad
-    assert bad[BadPacket.NONFINITE] == 40 and bad[BadPacket.SEQUENCE] == 20
+    assert bad[BadPacket.NONFINITE] == 40 and bad[BadPacket.STALE] == 20
     assert bad[BadPacket.UNKNOWN_TYPE] == 20 and bad[BadPacket.UNEXPECTED] == 0
     assert client.stats.received == 200 and np.all(np.diff(times) > 0)
     assert client.error is not None and client.error.kind is LinkErrorKind.CLOSED
@@ -479,3 +482,15 @@ def test_rtde_text_messages_are_kept_in_a_bounded_ring() -> None:
     assert len(client.messages) == MAX_TEXT_MESSAGES
     assert client.messages[-1].message == "m999" and client.messages_dropped == 1000 - 64
     assert client.stats.bad[BadPacket.SIZE] == 1
+
+
+def test_the_robot_address_reaches_the_rsi_driver_only(er20: Robot) -> None:
+    driver = connect("kuka-rsi", er20, "127.0.0.1", 0, robot_address="127.0.0.1:49153")
+    assert isinstance(driver, KukaRsiDriver)
+    assert driver.client.robot_address == ("127.0.0.1", 49153)
+    with pytest.raises(ControlError, match="only for kuka-rsi"):
+        connect("ur-rtde", load_robot("ur5"), "127.0.0.1", robot_address="127.0.0.1")
+    args = build_parser().parse_args(
+        ["record", "--trajectory", "t.csv", "-o", "r.parquet", "--driver", "kuka-rsi", "--host", "0.0.0.0",
+         "--robot-address", "10.0.0.2"])
+    assert args.robot_address == "10.0.0.2"

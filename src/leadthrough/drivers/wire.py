@@ -34,7 +34,10 @@ class BadPacket(StrEnum):
     NONFINITE = "nonfinite"        # NaN or infinity where the protocol has a finite number
     VALUE = "value"                # an enumerated field (type, version, recipe id) not allowed
     UNKNOWN_TYPE = "unknown_type"  # a message type the protocol does not define
-    SEQUENCE = "sequence"          # a time stamp or counter that jumped or stepped back
+    SEQUENCE = "sequence"          # a time stamp or counter that jumped (too far, or by a
+    #                                fraction of a cycle)
+    STALE = "stale"                # a time stamp not newer than the last one taken (a packet
+    #                                delivered late behind a newer one, or repeated)
     FOREIGN = "foreign"            # from another sender than the controller's address
     BUDGET = "budget"              # dropped unparsed: the cycle's parse budget was spent
     UNEXPECTED = "unexpected"      # the codec failed in a way it does not name (a defect)

@@ -45,8 +45,10 @@ Faults stop the same way as a stop and latch until ``reset_fault``:
   ready, a command refused);
 * a driver exception (``Fault.DRIVER_ERROR``) or an exchange longer than the watchdog's timeout
   (``Fault.DRIVER_TIMEOUT``). The link is then suspect: the loop keeps commanding the stop, and
-  a second failure means the link is gone: the loop ends at once without commanding (the
-  controller's own watchdog stops the robot).
+  a second failure means the link is gone: the loop ends at once without further servo
+  targets, and :func:`stop_driver` sends the protocol's stop (the driver's ``close()``: RSI's
+  ``Stop`` answer, the UR program's stop mode, J519's stop packet), which a broken socket alone
+  prevents (then the controller's own watchdog stops the robot).
 
 The loop never raises once running: everything ends in a latched, logged state
 (:class:`LoopEnd`, the recording's events).

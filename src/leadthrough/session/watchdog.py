@@ -6,8 +6,12 @@ returns cannot be: the loop's thread is stuck inside it. :class:`DriverWatchdog`
 looks at the exchange in progress every quarter of the timeout; past the timeout it logs the
 stall at once, and past ``abort_s`` (the link is taken as gone: a controller whose cycle is
 milliseconds has long stopped the robot by itself) it calls the driver's ``abort()`` if it has
-one (see :mod:`leadthrough.drivers.protocol`), which makes the blocked call return by raising;
-the loop then ends without commanding further (the controller's own watchdog stops the robot).
+one (see :mod:`leadthrough.drivers.protocol`; every streaming driver has one:
+:meth:`~leadthrough.drivers.streaming.StreamingDriver.abort`), which makes the blocked call
+return by raising; the loop then ends without further servo targets, and its end closes the
+driver (:func:`~leadthrough.session.loop.stop_driver`), which sends the protocol's stop (RSI's
+``Stop`` answer, the UR program's stop mode, J519's stop packet) unless the socket itself is
+broken: a commanded stop, not the controller's own watchdog.
 An exchange that returns between the two is a ``Fault.DRIVER_TIMEOUT`` and the loop commands
 its stop.
 

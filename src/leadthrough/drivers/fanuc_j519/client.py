@@ -7,6 +7,11 @@ built by :meth:`~StreamMotionClient.make_command` carries the last status' seque
 the I/O read request). Lost status packets show as gaps in the sequence (``stats.missed``); a
 closed controller port as :attr:`~StreamMotionClient.error`. The wire format is in
 :mod:`leadthrough.drivers.fanuc_j519.packets`.
+
+The socket is connected to the controller's address and port, so the kernel drops datagrams
+from any other sender before they reach the client; a packet the codec refuses is counted by
+its :class:`~leadthrough.drivers.wire.BadPacket` code (``stats.bad``) and dropped, never raised
+(:func:`~leadthrough.drivers.link.decode_datagrams`).
 """
 
 from __future__ import annotations

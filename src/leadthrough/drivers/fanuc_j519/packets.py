@@ -64,8 +64,14 @@ from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 
 from leadthrough.drivers.fanuc_j519.limits import ANSWER_SIZE, QUERY_SIZE, LimitAnswer, LimitQuery
-from leadthrough.drivers.wire import check_finite, check_length, check_uint, check_value
-from leadthrough.errors import DataError
+from leadthrough.drivers.wire import (
+    BadPacket,
+    PacketError,
+    check_finite,
+    check_length,
+    check_uint,
+    check_value,
+)
 
 __all__ = [
     "DEFAULT_PORT",
@@ -124,8 +130,8 @@ _COMMAND = struct.Struct(">IIIBBHHBBHHHH9f")
 def _axes(values: tuple[float, ...] | list[float], source: str, name: str) -> tuple[float, ...]:
     """Pad to 9 axes (unused axes are 0) after checking the count and finiteness."""
     if not 1 <= len(values) <= MAX_AXES:
-        raise DataError("wrong number of axes", source=source, field=name, value=len(values),
-                        expected=f"1..{MAX_AXES} values")
+        raise PacketError("wrong number of axes", code=BadPacket.STRUCTURE, source=source,
+                          field=name, value=len(values), expected=f"1..{MAX_AXES} values")
     check_finite(source, name, values, len(values))
     return tuple(float(v) for v in values) + (0.0,) * (MAX_AXES - len(values))
 
@@ -306,9 +312,10 @@ def decode_robot_packet(data: bytes) -> StatusPacket | LimitAnswer:
         return StatusPacket.decode(data)
     if len(data) == ANSWER_SIZE:
         return LimitAnswer.decode(data)
-    raise DataError("wrong packet size", source="J519 packet from the robot", field="length",
-                    value=len(data), expected=f"{_STATUS.size} (status) or {ANSWER_SIZE} "
-                    "(limit answer) bytes")
+    raise PacketError("wrong packet size", code=BadPacket.SIZE,
+                      source="J519 packet from the robot", field="length",
+                      value=len(data), expected=f"{_STATUS.size} (status) or {ANSWER_SIZE} "
+                      "(limit answer) bytes")
 
 
 def decode_client_packet(data: bytes) -> StartPacket | StopPacket | CommandPacket | LimitQuery:
@@ -327,6 +334,7 @@ def decode_client_packet(data: bytes) -> StartPacket | StopPacket | CommandPacke
         return CommandPacket.decode(data)
     if len(data) == QUERY_SIZE:
         return LimitQuery.decode(data)
-    raise DataError("wrong packet size", source=src, field="length", value=len(data),
-                    expected=f"{_HEAD.size} (start/stop), {_COMMAND.size} (command) or "
-                    f"{QUERY_SIZE} (limit query) bytes")
+    raise PacketError("wrong packet size", code=BadPacket.SIZE, source=src, field="length",
+                      value=len(data),
+                      expected=f"{_HEAD.size} (start/stop), {_COMMAND.size} (command) or "
+                      f"{QUERY_SIZE} (limit query) bytes")

@@ -24,8 +24,9 @@ are never answered.
 
 The IPOC must advance by whole cycles: by one, or by a few when documents were lost (at most
 ``max_gap`` cycles: RSI's own ``Timeout`` of late answers, past which the robot has stopped).
-A document that steps back, repeats an IPOC, or jumps further or by a fraction of a cycle is a
-bad packet (``BadPacket.SEQUENCE``), dropped; :data:`SEQUENCE_RUN` of them in a row (the robot's
+A document that steps back or repeats an IPOC (``BadPacket.STALE``: delivered late behind a
+newer one) or jumps further or by a fraction of a cycle (``BadPacket.SEQUENCE``) is a bad
+packet, dropped; :data:`SEQUENCE_RUN` of them in a row (the robot's
 stream is not the one the session follows any more) latch a ``PROTOCOL`` link error, after
 which :meth:`~RsiClient.answer_stop` still ends RSI with a ``Stop`` answer to the newest
 document of the robot. Every refused document is counted by its code (``stats.bad``), and no
@@ -224,7 +225,7 @@ class RsiClient(Transport):
         if 0 < ahead <= self.max_gap * self.cycle_ms and ahead % self.cycle_ms == 0:
             self._bad_run = 0
             return True
-        self._link.stats.refuse(BadPacket.SEQUENCE)
+        self._link.stats.refuse(BadPacket.SEQUENCE if ahead > 0 else BadPacket.STALE)
         self._pending = (msg.ipoc, addr)
         self._bad_run += 1
         if self._bad_run >= SEQUENCE_RUN:

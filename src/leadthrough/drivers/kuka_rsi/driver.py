@@ -8,6 +8,18 @@ port beforehand), answers it at once with
 zero motion and takes its ``ASPos`` (the axis setpoints at ``RSI_ON``) as the reference of the
 absolute corrections (``RSI_ON(#ABSOLUTE)``: target = reference + AK).
 
+Who the robot is: documents are taken from one sender only, the robot's address and port:
+given as ``robot_address`` (``--robot-address HOST[:PORT]``), or else **fixed by the first valid
+document** (:attr:`KukaRsiDriver.peer`). Without ``robot_address`` a process that sends a valid
+document before the robot does is taken for the robot for the whole session, and the robot's
+own documents are then dropped as foreign (unanswered, it stops RSI after its ``Timeout``); so
+give ``robot_address`` on any network or computer that others share. Documents from any other
+sender are dropped unparsed and counted (``stats.bad[BadPacket.FOREIGN]``), never answered; an
+IPOC that does not advance by whole cycles is a counted bad packet, a run of them a broken link
+after which :meth:`~KukaRsiDriver.close` still answers the robot with ``Stop``
+(:mod:`~leadthrough.drivers.kuka_rsi.client`); every document is parsed with DTDs and entities
+refused and a strict grammar (:mod:`~leadthrough.drivers.kuka_rsi.messages`).
+
 Every document (4 ms) is a feedback sample:
 
 * ``AIPos`` [deg] → ``q`` [rad], ``IPOC`` [ms] → ``t`` [s] and ``sequence`` ((IPOC - first
@@ -56,6 +68,7 @@ from leadthrough.drivers.kuka_rsi.messages import RobotMessage
 from leadthrough.drivers.late_answers import LateAnswerTolerance
 from leadthrough.drivers.protocol import ControllerState, DriverFeedback
 from leadthrough.drivers.streaming import Array, StreamingDriver
+from leadthrough.drivers.wire import BadPacket
 from leadthrough.errors import DriverError
 from leadthrough.robot.description import Robot
 
@@ -122,6 +135,16 @@ class KukaRsiDriver(StreamingDriver[RobotMessage]):
     def address(self) -> tuple[str, int]:
         """The bound (address, port), the real port when 0 was asked."""
         return self.client.address
+
+    @property
+    def out_of_order(self) -> int:
+        """Documents not newer than one already taken (delivered late behind a newer one, or
+        repeated): the client drops them as ``BadPacket.STALE``; counted since ``open``."""
+        return self._out_of_order + self.client.stats.bad[BadPacket.STALE]
+
+    @out_of_order.setter
+    def out_of_order(self, value: int) -> None:
+        self._out_of_order = value
 
     @property
     def peer(self) -> tuple[str, int] | None:

@@ -10,8 +10,9 @@ closed connection is :attr:`RtdeClient.error`; a protective stop shows in the st
 ``timestamp`` (``stats.missed``).
 
 No bad message raises out of :meth:`RtdeClient.receive`: a data package the recipe refuses, or
-whose ``timestamp`` is not finite or steps back, a text message that does not parse, and a
-message of a type the protocol does not define are each counted by their
+whose ``timestamp`` is not finite (``NONFINITE``) or not after the last one (``STALE``), a text
+message that does not parse, and a message of a type the protocol does not define are each
+counted by their
 :class:`~leadthrough.drivers.wire.BadPacket` code (``stats.bad``) and dropped. Only a corrupt
 header (a size below 3: the TCP stream can no longer be split) breaks the link (``PROTOCOL``).
 Text messages are kept in a ring of the newest :data:`MAX_TEXT_MESSAGES`
@@ -323,7 +324,7 @@ class RtdeClient(Transport):
                               source="RTDE data package", field="timestamp", value=t,
                               expected="a finite controller time [s]")
         if self._last_t is not None and t <= self._last_t:
-            raise PacketError("not after the last one", code=BadPacket.SEQUENCE,
+            raise PacketError("not after the last one", code=BadPacket.STALE,
                               source="RTDE data package", field="timestamp", value=t,
                               expected=f"> {self._last_t} s")
         return RtdeState(t, values["actual_q"], values["actual_current"], values)

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
 
-from leadthrough.drivers.wire import check_length, check_uint, check_value
+from leadthrough.drivers.wire import BadPacket, PacketError, check_length, check_uint, check_value
 from leadthrough.errors import DataError
 
 __all__ = [
@@ -156,8 +156,8 @@ class FrameReader:
             return None
         size, mtype = HEADER.unpack_from(self._buf)
         if size < HEADER.size:
-            raise DataError("corrupt header", source="RTDE stream", field="size", value=size,
-                            expected=">= 3 bytes")
+            raise PacketError("corrupt header", code=BadPacket.SIZE, source="RTDE stream",
+                              field="size", value=size, expected=">= 3 bytes")
         if len(self._buf) < size:
             return None
         payload = bytes(self._buf[HEADER.size:size])
@@ -251,13 +251,15 @@ def _names(payload: bytes, source: str) -> list[str]:
     try:
         text = payload.decode("ascii")
     except UnicodeDecodeError as e:
-        raise DataError("names are not ASCII", source=source, field="variables",
-                        value=payload[:40], expected="comma-separated ASCII names") from e
+        raise PacketError("names are not ASCII", code=BadPacket.SYNTAX, source=source,
+                          field="variables", value=payload[:40],
+                          expected="comma-separated ASCII names") from e
     # a trailing comma is accepted: SDU's ur_rtde sends one, and real controllers take it
     names = text.removesuffix(",").split(",")
     if not text or any(not n for n in names):
-        raise DataError("empty variable name", source=source, field="variables", value=text,
-                        expected="comma-separated non-empty names")
+        raise PacketError("empty variable name", code=BadPacket.FIELD, source=source,
+                          field="variables", value=text,
+                          expected="comma-separated non-empty names")
     return names
 
 
@@ -270,8 +272,9 @@ def decode_setup_outputs(payload: bytes) -> tuple[float, list[str]]:
     """Parse CONTROL_PACKAGE_SETUP_OUTPUTS into (frequency [Hz], names)."""
     src = "RTDE setup outputs"
     if len(payload) < 9:
-        raise DataError("payload too short", source=src, field="length", value=len(payload),
-                        expected=">= 9 bytes (frequency and at least one name)")
+        raise PacketError("payload too short", code=BadPacket.SIZE, source=src, field="length",
+                          value=len(payload),
+                          expected=">= 9 bytes (frequency and at least one name)")
     return float(struct.unpack_from(">d", payload)[0]), _names(payload[8:], src)
 
 
@@ -295,8 +298,8 @@ def decode_setup_reply(payload: bytes) -> tuple[int, list[str]]:
     """Parse a setup answer into (recipe id, types); types may hold NOT_FOUND / IN_USE."""
     src = "RTDE setup reply"
     if not payload:
-        raise DataError("empty payload", source=src, field="length", value=0,
-                        expected=">= 1 byte")
+        raise PacketError("empty payload", code=BadPacket.SIZE, source=src, field="length",
+                          value=0, expected=">= 1 byte")
     return payload[0], payload[1:].decode("ascii", errors="replace").split(",")
 
 
