@@ -247,7 +247,9 @@ def test_http_needs_the_token(app: Pendant) -> None:
     assert status == 200 and b"<title>Viser</title>" in body
     assert headers["Referrer-Policy"] == "no-referrer"          # the URL holds the token
     assert headers["X-Frame-Options"] == "DENY"
-    assert "frame-ancestors 'none'" in headers["Content-Security-Policy"]
+    policy = headers["Content-Security-Policy"]
+    assert "frame-ancestors 'none'" in policy
+    assert f"connect-src 'self' ws://127.0.0.1:{app.server.get_port()} " in policy
     assert _get(app, f"/{token}")[0] == 200
     assert _get(app, f"/{token}/?websocket=ws://127.0.0.1")[0] == 200
     assert _get(app, f"/{token}/../{token}/")[0] == 404           # viser's own traversal check
@@ -425,3 +427,29 @@ def test_a_token_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert main(["pendant", "--token-file", str(tmp_path / "short"), "--duration", "1"]) == 2
     err = capsys.readouterr().err
     assert "--token-file" in err and "short" in err and "abc" not in err  # (not the secret)
+
+
+def test_a_page_cannot_open_viser_s_share_tunnel(caplog: pytest.LogCaptureFixture) -> None:
+    """viser answers a page's "share" request by opening a tunnel to its public relay; the
+    pendant's server refuses it (and logs it)."""
+    from leadthrough.pendant.access import serve_gated
+    gate = Gate(new_token())
+    server = serve_gated(gate, host="127.0.0.1", port=0, verbose=False)
+
+    async def ask() -> None:
+        async with ws_client.connect(f"ws://127.0.0.1:{server.get_port()}/{gate.token}",
+                                     subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
+                                     max_size=None) as c:
+            await c.send(msgspec.msgpack.encode(CAMERA))
+            await c.send(msgspec.msgpack.encode({"type": "ShareUrlRequest"}))
+            await asyncio.sleep(0.5)
+
+    try:
+        with caplog.at_level(logging.WARNING, logger="leadthrough.pendant.access"):
+            asyncio.run(ask())
+            deadline = time.monotonic() + 5
+            while not caplog.records and time.monotonic() < deadline:
+                time.sleep(0.05)
+    finally:
+        server.stop()
+    assert any("share the pendant" in r.getMessage() for r in caplog.records)

@@ -89,13 +89,18 @@ _SAFE_HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "Cache-Control": "no-store",
 }
-#: The page's Content-Security-Policy. viser's page is one inline script that decompresses
-#: its bundle with WebAssembly and runs it as a created inline module, so scripts need
-#: 'unsafe-inline' and 'wasm-unsafe-eval'; what it still forbids: connections to anywhere but
-#: the page's own server, being framed, forms, plugins and a changed base URL.
-_CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval'; "
+#: The page's Content-Security-Policy (``{host}``: the request's checked Host). viser's page
+#: is one inline script that decompresses its bundle with WebAssembly and runs it as a created
+#: inline module, and the bundle evaluates a string as code once (Chromium reports it), so
+#: scripts need 'unsafe-inline', 'unsafe-eval' and 'wasm-unsafe-eval': the policy does not
+#: stop a script injected into the page. What it forbids: connections to anywhere but the
+#: page's own server (``ws://{host}`` named too: older Safari does not match it to 'self'),
+#: being framed by another page, forms, plugins and a changed base URL.
+_CSP = ("default-src 'self'; "
+        "script-src 'self' 'unsafe-inline' 'unsafe-eval' 'wasm-unsafe-eval'; "
         "style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
-        "font-src 'self' data:; worker-src 'self' blob:; connect-src 'self' data: blob:; "
+        "font-src 'self' data:; worker-src 'self' blob:; "
+        "connect-src 'self' ws://{host} data: blob:; "
         "frame-ancestors 'none'; base-uri 'none'; form-action 'none'; object-src 'none'")
 
 _log = logging.getLogger("leadthrough.pendant.access")
@@ -366,7 +371,8 @@ class Gate:
             for name, value in _SAFE_HEADERS.items():
                 _set(response.headers, name, value)
             if any(v.startswith("text/html") for v in response.headers.get_all("Content-Type")):
-                _set(response.headers, "Content-Security-Policy", _CSP)
+                host = request.headers.get_all("Host")[0]      # (checked: exactly one)
+                _set(response.headers, "Content-Security-Policy", _CSP.format(host=host))
         return response
 
     def _index(self, viser_http: Callable[[Any, Any], Any], connection: Any,
