@@ -29,6 +29,7 @@ from typing import Any
 from leadthrough.fileio import atomic_write, atomic_write_text
 from leadthrough.teach.line_fit import WeldingLine
 from leadthrough.teach.program import TaughtProgram
+from leadthrough.teach.programs.grammar import check_target_label, comment_text
 
 __all__ = ["FORMAT_VERSION", "csv_header", "line_to_dict", "program_to_dict",
            "write_program_csv", "write_program_json"]
@@ -61,8 +62,23 @@ def line_to_dict(line: WeldingLine) -> dict[str, Any]:
             "rms_deviation_mm": line.rms_deviation_mm, "samples": line.samples}
 
 
+def _check_labels(program: TaughtProgram) -> None:
+    """Every label the export embeds is a mark label (or several joined with ``/``)."""
+    for i, label in enumerate(program.waypoints.labels):
+        check_target_label(label, i)
+    line = program.welding_line
+    if line is not None:
+        check_target_label(line.start_label, 0)
+        check_target_label(line.end_label, 1)
+
+
 def program_to_dict(program: TaughtProgram) -> dict[str, Any]:
-    """The JSON document of a taught program (see the module docstring for its layout)."""
+    """The JSON document of a taught program (see the module docstring for its layout).
+
+    Raises:
+        TeachError: A label that is not a mark label.
+    """
+    _check_labels(program)
     w = program.waypoints
     return {
         "format": "leadthrough taught path",
@@ -124,13 +140,15 @@ def write_program_csv(program: TaughtProgram, path: str | Path) -> Path:
 
     Raises:
         DataError: The output folder does not exist.
+        TeachError: A label that is not a mark label.
     """
+    _check_labels(program)
     w = program.waypoints
-    notes = {
-        "robot": program.robot,
-        "tcp_frame": program.tcp_frame,
+    notes = {  # names from the robot file: one comment line each
+        "robot": comment_text(program.robot),
+        "tcp_frame": comment_text(program.tcp_frame),
         "frame": "base (positions [m], quaternions x, y, z, w)",
-        "joints": ", ".join(program.joint_names),
+        "joints": comment_text(", ".join(program.joint_names)),
         "programmed_speed_m_s": f"{program.limits.programmed_speed_m_s:g}",
         "tolerance_mm": f"{program.tolerance_mm:g}",
     }

@@ -109,6 +109,8 @@ def check_events(log: SessionLog, source: str | None = None) -> None:
             ``events[i]`` and the field.
     """
     for i, e in enumerate(log.events):
+        if e.kind == "mark":
+            check_label(e.label, source=source, field=f"events[{i}].label")
         for name in ("kind", "label", "cause"):
             if not isinstance(getattr(e, name), str):
                 raise TeachError("not a text", source=source, field=f"events[{i}].{name}",
@@ -117,8 +119,6 @@ def check_events(log: SessionLog, source: str | None = None) -> None:
                 or not math.isfinite(e.t):
             raise TeachError("not a finite time", source=source, field=f"events[{i}].t",
                              value=e.t, expected="a finite event time [s]")
-        if e.kind == "mark":
-            check_label(e.label, source=source, field=f"events[{i}].label")
 
 
 def teach_session(log: SessionLog, robot: Robot, *, tolerance_mm: float = 1.0,
@@ -157,9 +157,8 @@ def teach_session(log: SessionLog, robot: Robot, *, tolerance_mm: float = 1.0,
                          expected="a finite averaging half-window ≥ 0 s")
     check_session_robot(log, robot, source)
     check_events(log, source)
-    if line is not None:
-        for end in line:
-            check_label(end, source=source, field="line")
+    for end in line or ():
+        check_label(end, source=source, field="line")
     marks = log.marks
     if len(marks) < 2:
         raise TeachError("session has no marks" if not marks else "session has only one mark",

@@ -165,8 +165,9 @@ _RULES = [
     Rule.of("z", r"\};", "end of position"), Rule.of("Z", r"/END", "/END"),
 ]
 #: /PROG, /ATTR, /MN: remarks, frames, a joint move first, moves; /POS: positions; /END
-_ORDER = [("pa" + _ATTR_CODES + "m", False), ("r", True), ("fg", False), ("r*J", False),
-          ("r*[JL]", True), ("s", False), ("PG(?:ujk|ujKe|Uxw)z", True), ("Z", False)]
+_ORDER = [*((c, False) for c in "pa" + _ATTR_CODES + "m"), ("r", True), ("f", False),
+          ("g", False), ("r*J", False), ("r*[JL]", True), ("s", False),
+          ("PG(?:ujk|ujKe|Uxw)z", True), ("Z", False)]
 _TOOL_REMARK = re.compile(rf"UT1 (?P<key>[XYZABC]) = (?P<v>{_N}) (?:mm|deg)")
 
 

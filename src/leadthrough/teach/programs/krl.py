@@ -118,7 +118,8 @@ _SRC_RULES = [
     Rule.of("E", r"END", "END"),
 ]
 #: the settings, a PTP first, then PTP (each after its speed) or LIN, END
-_SRC_ORDER = [("ARDIBTVOoZYS", False), ("c?P", False), ("c?(?:SP|L)", True), ("E", False)]
+_SRC_ORDER = [*((c, False) for c in "ARDIBTVOoZYS"), ("c?P", False), ("c?(?:SP|L)", True),
+              ("E", False)]
 _DAT_RULES = [
     Rule.of("A", r"&ACCESS RVP", "&ACCESS"), Rule.of("R", r"&REL \d+", "&REL"),
     Rule.of("D", rf"DEFDAT {_NAME} PUBLIC", "DEFDAT"),
@@ -130,7 +131,8 @@ _DAT_RULES = [
                  r"E3 0\.0,E4 0\.0,E5 0\.0,E6 0\.0\}", "E6POS"),
     Rule.of("E", r"ENDDAT", "ENDDAT"),
 ]
-_DAT_ORDER = [("ARD", False), ("c", True), ("F", False), ("[XQ]", True), ("E", False)]
+_DAT_ORDER = [("A", False), ("R", False), ("D", False), ("c", True), ("F", False),
+              ("[XQ]", True), ("E", False)]
 
 
 def _fields(body: str) -> dict[str, float]:

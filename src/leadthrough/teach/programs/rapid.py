@@ -135,8 +135,9 @@ _RULES = [
     Rule.of("E", r"  ENDPROC", "ENDPROC"), Rule.of("N", r"ENDMODULE", "ENDMODULE"),
 ]
 #: MODULE, comments, (tool,) speed, zone, targets, PROC, a MoveAbsJ first, moves, the ends
-_ORDER = [("M", False), ("h", True), ("(?:th)?sz", False), ("[jr]", True), ("PJK", False),
-          ("c?A", False), ("c?[AL]", True), ("EN", False)]
+_ORDER = [("M", False), ("h", True), ("(?:th)?", False), ("s", False), ("z", False),
+          ("[jr]", True), ("P", False), ("J", False), ("K", False), ("c?A", False),
+          ("c?[AL]", True), ("E", False), ("N", False)]
 
 
 def _nums(text: str) -> list[float]:

@@ -98,7 +98,7 @@ _RULES = [
     Rule.of("e", r"end", "end"),
 ]
 #: header comments, def and set_tcp, a movej first, movej or movel, end
-_ORDER = [("h", True), ("dt", False), ("c?j", False), ("c?[jl]", True), ("e", False)]
+_ORDER = [("h", True), ("d", False), ("t", False), ("c?j", False), ("c?[jl]", True), ("e", False)]
 
 
 def _floats(text: str) -> list[float]:
