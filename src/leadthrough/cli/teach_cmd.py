@@ -39,8 +39,13 @@ waypoint's joints, then linearly through the waypoints with the controller's con
 (KUKA Status/Turn, FANUC configuration string and turn numbers, ABB confdata), the welding line
 P1 -> P2 as one linear move at the programmed speed; --joint-space writes joint moves to the
 taught joints instead (the only choice for robots whose configuration data cannot single out the
-joints, e.g. 7-axis arms). Each program is read back and solved back with our inverse kinematics
-before it is written: it must give the taught joints to 0.01 degree.
+joints, e.g. 7-axis arms). Each program is read back before it is written: it must hold only the
+statements leadthrough writes, in their order, exactly the moves written, and solve back with
+our inverse kinematics to the taught joints within 0.01 degree.
+
+Mark labels are names: 1-32 letters, digits, '_', '-', '.' or spaces (not at either end). A
+session whose marks carry anything else is refused (exit 2), naming the file, the event and
+the label.
 
 A CSV of the waypoints is written only if --csv names it. Nothing is written if any check fails.
 """

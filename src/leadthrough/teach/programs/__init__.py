@@ -3,9 +3,14 @@
 Each language writes the same moves (:mod:`~leadthrough.teach.programs.targets`): a joint move to
 the first waypoint, then linear moves to poses with the controller's configuration data
 (:mod:`~leadthrough.teach.programs.configuration`), or, with ``joint_space``, joint moves to the
-taught joints. Every file is read back by the language's parser and solved back with our inverse
-kinematics (:mod:`~leadthrough.teach.programs.parsed`) before it is written: a program whose
-poses and configurations do not give back the taught joints to 0.01° is not written.
+taught joints. Every file is read back by the language's strict reader (only the statements its
+writer emits, in their order: :mod:`~leadthrough.teach.programs.grammar`), every move compared
+with the move written (count, kind, in order) and solved back with our inverse kinematics
+(:mod:`~leadthrough.teach.programs.parsed`) before it is written: a program with a statement we
+did not write, a move added or missing, or poses and configurations that do not give back the
+taught joints to 0.01° is not written. The writers embed only mark labels
+(:func:`leadthrough.labels.check_label`), valid program names and finite numbers; other text in
+comments (robot and frame names) is written with ``?`` for any character a comment cannot hold.
 
 Example::
 
