@@ -392,9 +392,11 @@ def test_bind_to_the_network_needs_allow_remote(capsys: pytest.CaptureFixture[st
     assert "starting the loop" not in captured.out
     check_access("0.0.0.0", True)                  # accepted with it (nothing is started)
     check_access("127.0.0.1", False)
-    warning = remote_warning("0.0.0.0", 8080)
+    token = new_token()
+    warning = remote_warning("0.0.0.0", 8080, token)
     assert warning is not None and "anyone on the network" in warning
     assert "move the robot" in warning and "unencrypted" in warning
+    assert f":8080/{token}/" in warning
     assert remote_warning("127.0.0.1", 8080) is None
 
 
@@ -453,3 +455,65 @@ def test_a_page_cannot_open_viser_s_share_tunnel(caplog: pytest.LogCaptureFixtur
     finally:
         server.stop()
     assert any("share the pendant" in r.getMessage() for r in caplog.records)
+
+
+class _Running:
+    """The module's running session for the command to serve (it neither starts nor stops
+    it: the loop's start is what takes the command's time)."""
+
+    def __init__(self, live: Any) -> None:
+        self._live = live
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._live, name)
+
+    def start(self, **_: Any) -> None:
+        pass
+
+    def stop(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_command_prints_the_url_with_the_token_of_its_file(
+        sim: SimulatedPendantSession, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``pendant --token-file``: the printed URL carries that token, and that URL (and only
+    it) is served while the command runs."""
+    import socket
+    import threading
+
+    import leadthrough.pendant.simulated as simulated
+    monkeypatch.setattr(simulated, "simulated_session",
+                        lambda *_, **__: sim._replace(live=_Running(sim.live)))
+    token_file = tmp_path / "token"
+    token = new_token()
+    token_file.write_text(token + "\n")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = int(s.getsockname()[1])
+    served: dict[str, int] = {}
+
+    def probe() -> None:       # while the command runs
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and len(served) < 2:
+            try:
+                for path in (f"/{token}/", "/"):
+                    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+                    conn.request("GET", path)
+                    served[path] = conn.getresponse().status
+                    conn.close()
+            except OSError:
+                time.sleep(0.1)
+
+    thread = threading.Thread(target=probe, daemon=True)
+    thread.start()
+    assert main(["pendant", "--port", str(port), "--duration", "2", "--token-file",
+                 str(token_file), "-o", str(tmp_path / "out")]) == 0
+    thread.join(5)
+    out = capsys.readouterr().out
+    assert f"pendant: http://127.0.0.1:{port}/{token}/" in out
+    assert "WARNING" not in out                          # served on this machine only
+    assert served == {f"/{token}/": 200, "/": 403}

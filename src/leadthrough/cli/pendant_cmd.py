@@ -6,6 +6,7 @@ import argparse
 import math
 import os
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -194,15 +195,22 @@ def check_access(bind: str, allow_remote: bool) -> None:
                 "to serve it to the network (unencrypted http)")
 
 
-def remote_warning(bind: str, port: int) -> str | None:
+def remote_warning(bind: str, port: int, token: str = "<token>") -> str | None:
     """What the command says on start when the page is served beyond this machine (None on
-    loopback)."""
+    loopback): who can move the robot, and the page's URL for another machine (on all
+    addresses: by this machine's name)."""
     if is_loopback(bind):
         return None
+    host = bind.strip("[]")
+    if host in ("0.0.0.0", "::"):
+        host = socket.gethostname()
+    elif ":" in host:
+        host = f"[{host}]"
     return (f"WARNING: the pendant is served to the network on {bind}:{port}: anyone on the "
             "network who has the URL can move the robot, and the page travels unencrypted "
             "(http), so anyone who can read the network's traffic can read the token. Stop it "
-            "(Ctrl-C) unless this network is trusted.")
+            f"(Ctrl-C) unless this network is trusted. From another machine: "
+            f"http://{host}:{port}/{token}/")
 
 
 def check_export_folder(out: Path) -> None:
@@ -320,7 +328,7 @@ def run(args: argparse.Namespace) -> int:
         pendant = _serve(Pendant, live, hand, note, args)
         pendant.start()
         print(f"pendant: {pendant.url}  (exports to {args.output}; Ctrl-C stops)", flush=True)
-        warning = remote_warning(args.bind, pendant.server.get_port())
+        warning = remote_warning(args.bind, pendant.server.get_port(), pendant.gate.token)
         if warning is not None:
             print(warning, flush=True)
         done = threading.Event()
