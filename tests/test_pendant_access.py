@@ -486,8 +486,9 @@ def test_the_command_prints_the_url_with_the_token_of_its_file(
     import threading
 
     import leadthrough.pendant.simulated as simulated
+    running: Any = _Running(sim.live)
     monkeypatch.setattr(simulated, "simulated_session",
-                        lambda *_, **__: sim._replace(live=_Running(sim.live)))
+                        lambda *_, **__: sim._replace(live=running))
     token_file = tmp_path / "token"
     token = new_token()
     token_file.write_text(token + "\n")
