@@ -45,7 +45,11 @@ def run(args: argparse.Namespace) -> int:
     done = recover_session(args.partial, args.output, args.robot)
     out = {"session": str(done.path), "robot": done.robot, "rows": done.rows,
            "events": done.events, "marks": done.marks, "sidecar": done.sidecar,
-           "dropped_last_line": done.dropped_line}
+           "dropped_last_line": done.dropped_line, "dropped_events": done.dropped_events}
+    if done.dropped_events:
+        print(f"leadthrough: warning: {len(done.dropped_events)} events after the last row "
+              f"recovered dropped ({', '.join(done.dropped_events)}): the rows of their time "
+              "were lost with the process", file=sys.stderr)
     if not done.sidecar:
         print(f"leadthrough: warning: no sidecar {args.partial}{SIDECAR_SUFFIX}: the session "
               "has its rows but no events (no marks)", file=sys.stderr)

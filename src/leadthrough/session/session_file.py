@@ -55,6 +55,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -415,6 +416,9 @@ class RecoveredSession:
         sidecar: Whether the partial file's sidecar was there (without it: no events).
         dropped_line: A last sidecar line cut off mid-write, dropped (the process was killed
             while writing it).
+        dropped_events: Labels of the events after the last recovered row, dropped (the rows
+            of the chunk being filled when the process died are lost, up to
+            :data:`~leadthrough.session.recorder.DEFAULT_CHUNK_ROWS` periods).
     """
 
     path: Path
@@ -424,6 +428,7 @@ class RecoveredSession:
     marks: int
     sidecar: bool
     dropped_line: bool
+    dropped_events: list[str]
 
 
 def recover_session(partial: str | Path, path: str | Path, robot: str | None = None
@@ -488,9 +493,15 @@ def recover_session(partial: str | Path, path: str | Path, robot: str | None = N
                         + ("missing" if not sidecar.is_file() else "without one"),
                         source=sidecar, field="robot",
                         expected="--robot NAME (the robot the session ran on)")
+    # the rows of the chunk being filled when the process died are lost: a mark made then
+    # names a pose the recording lacks (teach would take another sample for it)
+    times = table.column("t").to_numpy() if "t" in names and table.num_rows else np.zeros(0)
+    last = float(times[-1]) if times.size else -math.inf
+    late = [e for e in events if e.t > last]
+    events = sorted((e for e in events if e.t <= last), key=lambda e: e.t)
     settings = {**dict(header.get("settings") or {}), "recovered_from": partial.name,
-                "recovered_rows": table.num_rows, "recovered_events": len(events)}
-    events.sort(key=lambda e: e.t)
+                "recovered_rows": table.num_rows, "recovered_events": len(events),
+                "recovered_events_dropped": len(late)}
     table = table.replace_schema_metadata(session_metadata(robot, n, events, settings))
 
     def write(tmp: Path) -> None:
@@ -502,7 +513,8 @@ def recover_session(partial: str | Path, path: str | Path, robot: str | None = N
         left.unlink(missing_ok=True)
     return RecoveredSession(path=path, robot=robot, rows=table.num_rows, events=len(events),
                             marks=sum(e.kind == "mark" for e in events),
-                            sidecar=bool(header), dropped_line=dropped)
+                            sidecar=bool(header), dropped_line=dropped,
+                            dropped_events=[e.label for e in late])
 
 
 def _read_sidecar(sidecar: Path) -> tuple[dict[str, Any], list[SessionEvent], bool]:
