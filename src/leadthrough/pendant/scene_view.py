@@ -62,6 +62,8 @@ class SceneView:
         self._lock = threading.Lock()
         #: Whether the push handle is being dragged, and its position then [m].
         self.dragging, self.handle_m, self._ended = False, np.zeros(3), False
+        #: The page (viser client id) that dragged the handle last.
+        self.drag_client: int | None = None
         self.tcp_m = np.full(3, np.inf)
         self._forces = np.full(6, np.inf)
         self.handle = None
@@ -78,6 +80,7 @@ class SceneView:
             self.dragging = event.phase != "end"
             self._ended = self._ended or event.phase == "end"
             self.handle_m = np.asarray(event.target.position, dtype=float)
+            self.drag_client = event.client_id
 
     def drag_state(self) -> tuple[bool, bool, Array]:
         """(dragging, a drag ended since the last call, handle position [m]) as of now."""
