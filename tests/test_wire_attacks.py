@@ -7,9 +7,13 @@ driver call."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import socket
 import struct
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -18,6 +22,7 @@ import numpy as np
 import pytest
 
 from leadthrough.cli import build_parser
+from leadthrough.control.safety_states import Fault
 from leadthrough.drivers.controllers import connect
 from leadthrough.drivers.kuka_rsi.client import SEQUENCE_RUN, parse_address
 from leadthrough.drivers.kuka_rsi.driver import KukaRsiDriver
@@ -491,6 +496,82 @@ def test_the_robot_address_reaches_the_rsi_driver_only(er20: Robot) -> None:
     with pytest.raises(ControlError, match="only for kuka-rsi"):
         connect("ur-rtde", load_robot("ur5"), "127.0.0.1", robot_address="127.0.0.1")
     args = build_parser().parse_args(
-        ["record", "--trajectory", "t.csv", "-o", "r.parquet", "--driver", "kuka-rsi", "--host", "0.0.0.0",
-         "--robot-address", "10.0.0.2"])
+        ["record", "--trajectory", "t.csv", "-o", "r.parquet", "--driver", "kuka-rsi",
+         "--host", "0.0.0.0", "--robot-address", "10.0.0.2"])
     assert args.robot_address == "10.0.0.2"
+
+
+SENDERS = """
+import json, socket, sys, time
+port, duration, specs = int(sys.argv[1]), float(sys.argv[2]), json.loads(sys.argv[3])
+socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in specs]
+for sock in socks:
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+sent, answers = [0] * len(specs), [0] * len(specs)
+t0, k = time.perf_counter(), 0
+while time.perf_counter() - t0 < duration:
+    for i, (doc, base, per_cycle) in enumerate(specs):
+        data = doc.replace("IPOC", str(base + 4 * k)).encode()
+        for _ in range(per_cycle):
+            try:
+                socks[i].sendto(data, ("127.0.0.1", port))
+                sent[i] += 1
+            except OSError:
+                pass
+        while True:
+            try:
+                socks[i].recv(4096)
+                answers[i] += 1
+            except OSError:
+                break
+    k += 1
+    time.sleep(max(0.0, t0 + 0.004 * k - time.perf_counter()))
+print(json.dumps({"sent": sent, "answers": answers}))
+"""
+
+
+def test_a_guiding_session_under_an_impostor_and_a_flood_stays_the_robots(
+        er20: Robot, nominal_params: ParamsFile) -> None:
+    """The whole loop on the emulated robot over RSI, while another process sends, from two
+    other ports, valid documents (A1 = 0.2 deg, IPOC 2 000 000 000) and a billion-laughs flood
+    (10 a cycle): the session runs to its end (no driver timeout, the link never lost) on the
+    robot's clock (a receive that got only dropped datagrams waits on: the loop does not
+    spin), every sample is the robot's, nothing foreign is parsed or answered, and the end is
+    the driver's Stop answer."""
+    driver, port = rsi(er20)
+    guiding = LoopConfig().guiding
+    parts = build_loop(er20, nominal_params,
+                       LoopConfig(guiding=dataclasses.replace(guiding, dt=0.008)), driver.dt)
+    specs = [[rob(0, q1=0.2).decode().replace("<IPOC>0<", "<IPOC>IPOC<"), 2_000_000_000, 1],
+             [LAUGHS.decode(), 0, 10]]
+    with start("kuka-rsi", er20, seed=4, port=port, options=EmulatorOptions(q0=POSE)) as emu:
+        with driver:
+            senders = subprocess.Popen(
+                [sys.executable, "-c", SENDERS, str(port), "1.6", json.dumps(specs)],
+                stdout=subprocess.PIPE, text=True)
+            # the watchdog at 0.5 s: on a loaded machine a 50 ms stall is the machine's; the
+            # flood's own cost is the decoding time, asserted below
+            r = run_session(driver, *parts, 1.5,
+                            options=LoopOptions(enable_input=0, watchdog_s=0.5))
+            out, _ = senders.communicate(timeout=30)
+        report = emu.stop()
+    counts = json.loads(out)
+    assert r.log is not None and r.end.cause is EndCause.DURATION, r.end
+    assert r.end.fault is not Fault.DRIVER_TIMEOUT
+    assert not any(e.label in ("driver timeout", "link lost") for e in r.log.events)
+    assert any(e.label == "driver stopped" and "Stop = 1" in e.cause for e in r.log.events)
+    assert np.abs(r.log.q - np.array(POSE)).max() < 1e-3 and r.log.time.max() < 1.5e6
+    bad = driver.stats.bad
+    # the kernel drops what overflows the socket's buffer (how much depends on the machine's
+    # load); every datagram of the two that reached the driver was refused as foreign,
+    # unparsed, and none was answered
+    assert 0 < bad[BadPacket.FOREIGN] <= sum(counts["sent"])
+    assert sum(bad.values()) == bad[BadPacket.FOREIGN] + bad[BadPacket.BUDGET]
+    assert bad[BadPacket.FORBIDDEN] == 0 and counts["answers"] == [0, 0]
+    # the whole session's decoding (the robot's ~375 documents) took milliseconds; parsed,
+    # the flood's 3 750 documents had cost 38 ms each
+    assert driver.stats.decode_s < 0.1
+    # the robot's clock, not a loop spinning on dropped datagrams (which ran 1.5 s of loop
+    # time in 0.6 s of the robot's)
+    assert report.sim_time >= 1.4 and report.violations == ()

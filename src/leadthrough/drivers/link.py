@@ -40,8 +40,11 @@ log = logging.getLogger("leadthrough.drivers")
 #: Datagrams one ``receive`` takes from the socket at most (the rest wait for the next).
 MAX_DATAGRAMS = 256
 #: Decoding time one ``receive`` spends at most [s]: past it the datagrams left are dropped
-#: unparsed (``BadPacket.BUDGET``). A valid packet decodes in tens of µs; a cycle is 2-12 ms.
-PARSE_BUDGET_S = 0.5e-3
+#: unparsed (``BadPacket.BUDGET``). A valid packet decodes in tens of µs and a refused one in a
+#: few (the codecs refuse at once what their protocol never sends, and cap the size); a cycle
+#: is 2-12 ms. The budget is a backstop, half an RSI cycle: wide enough that a decode stretched
+#: by another thread holding the interpreter does not cost the robot's next packet.
+PARSE_BUDGET_S = 2e-3
 
 
 class LinkErrorKind(StrEnum):

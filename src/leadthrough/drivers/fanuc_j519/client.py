@@ -34,6 +34,7 @@ from leadthrough.drivers.fanuc_j519.packets import (
     decode_robot_packet,
 )
 from leadthrough.drivers.link import (
+    PARSE_BUDGET_S,
     LinkErrorKind,
     LinkStatus,
     SequenceTracker,
@@ -159,15 +160,26 @@ class StreamMotionClient(Transport):
             return None
         newest: StatusPacket | None = None
         stats = self._link.stats
-        for packet, _ in decode_datagrams(self._sock, timeout, self._link, decode_robot_packet):
-            if isinstance(packet, LimitAnswer):
-                self.limits[(packet.axis, packet.kind)] = packet
-                continue
-            self._seq.update(packet.sequence, stats)
-            stats.received += 1
-            if newest is not None:
-                stats.skipped += 1
-            newest = packet
+        deadline = time.monotonic() + timeout
+        spent0 = stats.decode_s
+        # packets that were all refused do not end the wait (a flood of them must not make the
+        # caller's cycle return early without a status)
+        answers = len(self.limits)
+        while newest is None and len(self.limits) == answers and self._link.error is None:
+            budget = PARSE_BUDGET_S - (stats.decode_s - spent0)
+            for packet, _ in decode_datagrams(self._sock, deadline - time.monotonic(),
+                                              self._link, decode_robot_packet,
+                                              budget_s=budget):
+                if isinstance(packet, LimitAnswer):
+                    self.limits[(packet.axis, packet.kind)] = packet
+                    continue
+                self._seq.update(packet.sequence, stats)
+                stats.received += 1
+                if newest is not None:
+                    stats.skipped += 1
+                newest = packet
+            if time.monotonic() >= deadline:
+                break
         if newest is not None:
             self._last = newest
         return newest

@@ -175,11 +175,11 @@ class RsiClient(Transport):
     def receive(self, timeout: float) -> RobotMessage | None:
         """The newest ``<Rob>`` document that arrived within ``timeout``, or None.
 
-        Args:
-            timeout: Longest wait [s] (0: poll).
-
         Documents from another sender than the robot, refused by the codec, with a bad IPOC,
         or past the cycle's parse budget are counted (``stats.bad``) and dropped (module doc).
+
+        Args:
+            timeout: Longest wait [s] (0: poll).
 
         Returns:
             The newest document, or None (timeout, socket error or a broken IPOC stream, see
@@ -190,8 +190,25 @@ class RsiClient(Transport):
         newest: RobotMessage | None = None
         stats = self._link.stats
         spent0 = stats.decode_s
-        for data, addr in drain_datagrams(self._sock, timeout, self._link,
-                                          MAX_DOCUMENT_BYTES + 1):
+        deadline = time.monotonic() + timeout
+        # datagrams that were all dropped (foreign, refused) do not end the wait: a flood of
+        # them must not make the caller's cycle return early without a document
+        while newest is None and self._link.error is None:
+            newest = self._take(self._sock, deadline - time.monotonic(), spent0, newest)
+            if time.monotonic() >= deadline:
+                break
+        if newest is not None:
+            if self.reference is None:
+                start = newest.axis_setpoint or newest.axis_actual
+                self.reference = tuple(start)
+            self._last, self._t_last = newest, time.monotonic()
+        return newest
+
+    def _take(self, sock: socket.socket, timeout: float, spent0: float,
+              newest: RobotMessage | None) -> RobotMessage | None:
+        """One drain of ``sock``: the newest document of the robot taken, or ``newest``."""
+        stats = self._link.stats
+        for data, addr in drain_datagrams(sock, timeout, self._link, MAX_DOCUMENT_BYTES + 1):
             robot = self._robot
             if (robot is not None and addr != robot) or (
                     self._robot_host is not None and addr[0] != self._robot_host):
@@ -208,11 +225,6 @@ class RsiClient(Transport):
             if newest is not None:
                 stats.skipped += 1
             newest, self._robot, self._pending = msg, addr, None
-        if newest is not None:
-            if self.reference is None:
-                start = newest.axis_setpoint or newest.axis_actual
-                self.reference = tuple(start)
-            self._last, self._t_last = newest, time.monotonic()
         return newest
 
     def _in_sequence(self, msg: RobotMessage, addr: tuple[str, int]) -> bool:

@@ -10,7 +10,8 @@ closed connection is :attr:`RtdeClient.error`; a protective stop shows in the st
 ``timestamp`` (``stats.missed``).
 
 No bad message raises out of :meth:`RtdeClient.receive`: a data package the recipe refuses, or
-whose ``timestamp`` is not finite (``NONFINITE``) or not after the last one (``STALE``), a text
+whose ``timestamp`` is not finite (``NONFINITE``), beyond :data:`MAX_TIMESTAMP_S` or negative
+(``FIELD``) or not after the last one (``STALE``), a text
 message that does not parse, and a message of a type the protocol does not define are each
 counted by their
 :class:`~leadthrough.drivers.wire.BadPacket` code (``stats.bad``) and dropped. Only a corrupt
@@ -58,6 +59,8 @@ from leadthrough.errors import DataError, DriverError
 
 __all__ = ["DEFAULT_OUTPUTS", "MAX_TEXT_MESSAGES", "RtdeClient", "RtdeState", "ServoCommand"]
 
+#: The largest ``timestamp`` taken [s] (about 30 years of controller uptime).
+MAX_TIMESTAMP_S = 1e9
 #: Text messages kept (the newest).
 MAX_TEXT_MESSAGES = 64
 _KNOWN_TYPES = frozenset(int(t) for t in MessageType)
@@ -323,6 +326,10 @@ class RtdeClient(Transport):
             raise PacketError("not finite", code=BadPacket.NONFINITE,
                               source="RTDE data package", field="timestamp", value=t,
                               expected="a finite controller time [s]")
+        if not 0.0 <= t <= MAX_TIMESTAMP_S:
+            raise PacketError("out of range", code=BadPacket.FIELD,
+                              source="RTDE data package", field="timestamp", value=t,
+                              expected=f"0..{MAX_TIMESTAMP_S:g} s since the controller started")
         if self._last_t is not None and t <= self._last_t:
             raise PacketError("not after the last one", code=BadPacket.STALE,
                               source="RTDE data package", field="timestamp", value=t,
@@ -332,7 +339,7 @@ class RtdeClient(Transport):
     def _count(self, t: float, stats: LinkStats) -> None:
         period = 1.0 / (self.frequency or 500.0)
         if self._last_t is not None:
-            missing = min(round((t - self._last_t) / period), 1 << 62) - 1
+            missing = round((t - self._last_t) / period) - 1   # bounded: t <= 1e9 s
             if missing > 0:
                 stats.gaps += 1
                 stats.missed += missing
