@@ -331,6 +331,12 @@ def test_crafted_labels_are_refused_to_that_page(app: Pendant,
         _until(lambda: "P1 at" in app.controls.points.content, 5, "the list")
         assert "<img" not in app.controls.points.content
         assert "<img" not in app.controls.messages.content
+        # past the pendant (straight to the loop): the loop's refusal quotes the label, and
+        # the page shows that notice as text
+        live.send(MarkPoint(IMG))
+        _until(lambda: "&lt;img src=x onerror=alert(1)&gt;" in app.controls.messages.content,
+               5, "the loop's refusal on the page")
+        assert "<img" not in app.controls.messages.content
     finally:
         a.close()
         b.close()
@@ -489,3 +495,15 @@ def test_an_oversize_snapshot_leaves_out_the_oldest_with_a_note() -> None:
     assert labels == [m.label for m in marks[-len(labels):]] and 0 < len(labels) < len(marks)
     assert note is not None and "oldest marks" in note
     assert fit_slow(SlowState("c", GuidingConfig()), 100_000)[1] is None
+
+
+def test_the_help_states_the_limits(capsys: pytest.CaptureFixture[str]) -> None:
+    from leadthrough.cli import main
+    from leadthrough.pendant.app import EXPORT_INTERVAL_S, MAX_EXPORTS
+    with pytest.raises(SystemExit):
+        main(["pendant", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"Exports: one at a time, {EXPORT_INTERVAL_S:g} s apart, at most {MAX_EXPORTS} a run" \
+        in text
+    assert f"{1e3 * LEASE_S:.0f} ms without its heartbeat" in text
+    assert "Take control" in text and "read-only" in text

@@ -65,8 +65,16 @@ and the operator's actions: arm guiding, mark P1 / P2 / waypoints, clear a fault
 and axes, set the virtual mass and friction within the controller's operator limits, edit the
 taught points, and export (session.parquet, points.json, path.json / path.csv).
 
-On the simulator (the default) the page also provides the enabling device and lets you push
-the tool with the mouse: drag the handle at the tool; the force (10 N per cm, at most 80 N)
+One page controls (the first to press "Take control"); every other page is read-only, and a
+page asking for control gets it when the page in control confirms or disconnects. Labels are
+1-32 letters, digits, '_', '-', '.' or spaces; a bad label, a number that is not finite or
+out of range is refused to that page and never reaches the loop. Exports: one at a time,
+5 s apart, at most 50 a run.
+
+On the simulator (the default) the page also provides the enabling device, hold-to-run:
+pressed only while held (released on letting go, on the page losing focus, or 200 ms
+without its heartbeat), and lets you push the tool with the mouse: drag the handle at the
+tool; the force (10 N per cm, at most 80 N)
 goes into the simulated robot, the estimator sees it only through the motor currents, and the
 robot follows. The guiding loop runs in its own process; the page never holds it up. A real
 robot is guided with `leadthrough guide --driver` (this version's pendant drives the simulator).
