@@ -99,7 +99,10 @@ def test_outputs_never_overwrite_the_commands_inputs(tmp_path: Path,
         before = victim.read_bytes()
         assert main(argv) == 2, argv
         err = _error(capsys)
-        assert option in err and f"overwrite the input {name}" in err, (argv, err)
+        if Path(argv[argv.index(option.strip("'")) + 1]).is_symlink():
+            assert "symbolic link" in err, (argv, err)   # no output goes through a link
+        else:
+            assert option in err and f"overwrite the input {name}" in err, (argv, err)
         assert victim.read_bytes() == before
 
 
@@ -255,7 +258,7 @@ def test_guide_on_the_simulator_names_a_bad_duration_or_seed(
 def test_a_port_that_never_answers_rtde_is_named(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     """A listener that accepts the connection and says nothing (not a UR controller): the
-    message named only the request, not where it went."""
+    message named only the request, not where it went. The link, not the input: exit 1."""
     traj = tmp_path / "traj.csv"
     _trajectory_csv(traj, [[0.01 * i] + [0.0] * 18 for i in range(3)])
     out = tmp_path / "rec.parquet"
@@ -265,7 +268,7 @@ def test_a_port_that_never_answers_rtde_is_named(tmp_path: Path,
         port = silent.getsockname()[1]
         assert main(["record", "--driver", "ur-rtde", "--host", "127.0.0.1", "--port",
                      str(port), "--robot", "er20", "--trajectory", str(traj), "-o",
-                     str(out)]) == 2
+                     str(out)]) == 1
     err = _error(capsys)
     assert f"no answer from 127.0.0.1:{port}" in err and "REQUEST_PROTOCOL_VERSION" in err
     assert not out.exists()

@@ -469,13 +469,7 @@ def recover_session(partial: str | Path, path: str | Path, robot: str | None = N
         if path.resolve() == given.resolve():
             raise DataError("the output would overwrite the partial session", source=path,
                             field="-o", value=str(path), expected="another file")
-    try:
-        table = pq.read_table(partial)
-    except (OSError, pa.ArrowException) as e:
-        raise DataError(f"not readable as Parquet ({e}): its rows were never closed (the "
-                        "session writer process was killed too), or it is not a session's",
-                        source=partial, expected="the partial file of a session whose loop's "
-                        "process ended (its writer closes the rows it has)") from e
+    table = _read_partial_rows(partial)
     names = table.column_names
     n = sum(1 for c in names if c.startswith("q_") and c[2:].isdigit())
     header, events, dropped = (_read_sidecar(sidecar) if sidecar.is_file()
@@ -515,6 +509,21 @@ def recover_session(partial: str | Path, path: str | Path, robot: str | None = N
                             marks=sum(e.kind == "mark" for e in events),
                             sidecar=bool(header), dropped_line=dropped,
                             dropped_events=[e.label for e in late])
+
+
+def _read_partial_rows(partial: Path) -> pa.Table:
+    """The rows a session's writer closed into its partial file.
+
+    Raises:
+        DataError: Not readable as Parquet (no footer: the writer was killed too).
+    """
+    try:
+        return pq.read_table(partial)
+    except (OSError, pa.ArrowException) as e:
+        raise DataError(f"not readable as Parquet ({e}): its rows were never closed (the "
+                        "session writer process was killed too), or it is not a session's",
+                        source=partial, expected="the partial file of a session whose loop's "
+                        "process ended (its writer closes the rows it has)") from e
 
 
 def _read_sidecar(sidecar: Path) -> tuple[dict[str, Any], list[SessionEvent], bool]:
