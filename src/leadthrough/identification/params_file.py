@@ -183,10 +183,10 @@ def save_params(
 def load_params(path: str | Path, robot: Robot) -> ParamsFile:
     """Read a params file and check it belongs to ``robot``.
 
-    Every number is checked: finite; a link mass > 0 kg; a rotor inertia, Coulomb level and
-    viscous slope >= 0 (the Stribeck coefficients > 0 as the paper bounds them); a file of the
-    ``consistent`` method, whose links are physical bodies, with each link's pseudo-inertia
-    positive semi-definite.
+    Every number is checked: finite; a link mass > 0 kg; a Coulomb level >= 0 and the
+    Coulomb-viscous model's viscous slope >= 0 (the Stribeck coefficients as the paper bounds
+    them); a file of the ``consistent`` method, a physical robot, with each rotor inertia >= 0
+    and each link's pseudo-inertia positive semi-definite.
 
     Raises:
         DataError: Missing, malformed, out of range (naming the file, the field, its value and
@@ -320,15 +320,15 @@ class _JointTables:
         for key, values in self.drive.items():
             values[k] = toml_number(path, f"joints.{jn}.{key}", _required(path, f"joints.{jn}", jt,
                                                                        key))
-            # a rotor's inertia, a Coulomb level and a viscous slope are never negative (the
-            # cube-root term of ols-cbrt may be: it corrects the viscous one)
-            signed = key == "rotor_inertia" or (self.model is not FrictionModel.STRIBECK
-                                                and key in ("coulomb", "viscous"))
+            # a Coulomb level is never negative, nor the viscous slope of the Coulomb-viscous
+            # model (with the cube-root term of ols-cbrt the two share the slope: either may
+            # be; its rotor inertia too, fitted with the links' base combinations)
+            signed = key == "coulomb" or (self.model is FrictionModel.COULOMB_VISCOUS
+                                          and key == "viscous")
             if signed and values[k] < -FRICTION_TOLERANCE:
-                unit = "kg·m²" if key == "rotor_inertia" else (
-                    "N·m" if key == "coulomb" else "N·m·s")
                 raise DataError("out of range", source=path, field=f"joints.{jn}.{key}",
-                                value=values[k], expected=f">= 0 {unit}")
+                                value=values[k],
+                                expected=f">= 0 {'N·m' if key == 'coulomb' else 'N·m·s'}")
             if self.model is FrictionModel.STRIBECK and key != "rotor_inertia":
                 # the paper's bounds (friction > 0, met by the solvers to their tolerance);
                 # the velocities divide
@@ -349,16 +349,24 @@ class _JointTables:
                             value=float(mass), expected="a link mass > 0 kg")
 
     def check_consistency(self, method: str) -> None:
-        """A file of the ``consistent`` method claims physically consistent links: each link's
-        pseudo-inertia positive semi-definite (its solver keeps a margin; the other methods'
-        standard parameters need not be physical, only their base combinations are
-        identified, and are checked for a positive mass only).
+        """A file of the ``consistent`` method claims a physical robot: each rotor inertia
+        >= 0 and each link's pseudo-inertia positive semi-definite (its solver keeps a margin;
+        the other methods' standard parameters and rotor inertias need not be physical, only
+        their base combinations are identified, and are checked for a positive mass only).
 
         Raises:
-            DataError: Naming the first link whose pseudo-inertia has a negative eigenvalue.
+            DataError: Naming the first rotor inertia below zero, or the first link whose
+                pseudo-inertia has a negative eigenvalue.
         """
         if method != "consistent":
             return
+        rotor = self.drive["rotor_inertia"]
+        if np.any(rotor < -FRICTION_TOLERANCE):
+            jn = self._joint_names[int(np.argmax(rotor < -FRICTION_TOLERANCE))]
+            raise DataError("out of range", source=self.path,
+                            field=f"joints.{jn}.rotor_inertia",
+                            value=float(rotor[self._joint_names.index(jn)]),
+                            expected=">= 0 kg·m² (a rotor's inertia)")
         eig = min_pseudo_inertia_eigenvalues(self.phi)
         for k, value in enumerate(eig):
             scale = max(1.0, float(self.phi[10 * k]))
