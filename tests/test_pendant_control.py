@@ -507,3 +507,36 @@ def test_the_help_states_the_limits(capsys: pytest.CaptureFixture[str]) -> None:
         in text
     assert f"{1e3 * LEASE_S:.0f} ms without its heartbeat" in text
     assert "Take control" in text and "read-only" in text
+
+
+def _dialog_button(app: Pendant, page: Page, label: str) -> Any:
+    """A button of the dialog shown on ``page`` alone (found by its label, as the page
+    shows it)."""
+    gui = app.server.get_clients()[page.id].gui
+    found = [h for h in gui._gui_input_handle_from_uuid.values()
+             if getattr(h, "label", None) == label]
+    assert len(found) == 1, label
+    return found[0]
+
+
+def test_the_page_in_control_confirms_a_hand_over(app: Pendant,
+                                                  sim: SimulatedPendantSession) -> None:
+    app.start()
+    a, b = Page(app), Page(app)
+    try:
+        a.click(app.controls.take)
+        _until(lambda: app.controller == a.id, 5, "control")
+        b.click(app.controls.take)
+        _until(lambda: app.asking == b.id, 5, "the request")
+        a.click(_dialog_button(app, a, "Keep control"))         # on a's page only
+        _until(lambda: app.asking is None, 5, "the answer")
+        assert app.controller == a.id
+        assert "the page in control kept control" in app.told(b.id)
+        b.click(app.controls.take)
+        _until(lambda: app.asking == b.id, 5, "the second request")
+        a.click(_dialog_button(app, a, "Hand over control"))
+        _until(lambda: app.controller == b.id, 5, "the hand-over")
+        assert not app.armed and not _snap(sim.live).enabled
+    finally:
+        a.close()
+        b.close()
