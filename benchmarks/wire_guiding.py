@@ -280,7 +280,7 @@ def _guide_in_process(script: str, seed: int, params: Path, work: Path, run: int
                               "--operator", script, "--mass", "100", "--seed", str(seed),
                               "--run", str(run), "-o", str(sim), "--json"),
                           capture_output=True, text=True, check=False)
-    if done.returncode not in (0, 1) or not sim.exists():
+    if done.returncode not in (0, 1, 3) or not sim.exists():   # 3: a fault was latched
         print(f"{script:<7} {'in-process simulator':<21} FAIL: {tail(done.stderr)}")
         return None
     f = _session_figures(sim)
