@@ -266,6 +266,37 @@ def test_a_frozen_page_is_released_within_the_lease(app: Pendant,
         a.close()
 
 
+def test_a_page_that_resumes_after_a_freeze_must_press_again(
+        app: Pendant, sim: SimulatedPendantSession) -> None:
+    """A frozen page whose heartbeats resume (the pointer still down) does not enable again:
+    the device is held again only after the pointer let go of it (its click) and pressed."""
+    live = sim.live
+    app.start()
+    a = Page(app)
+    try:
+        held = _guiding(app, live, a)
+        held.stop()                                   # frozen: no heartbeat
+        _until(lambda: not _snap(live).enabled, 5, "the release of the frozen page")
+        _until(lambda: _snap(live).state == State.IDLE, 10, "the stop to IDLE")
+        device = app.controls.device
+        assert device is not None
+        resumed = Holding(a, device)                  # the page thaws, pointer still down
+        try:
+            time.sleep(0.6)                           # nine heartbeats
+            assert not _snap(live).enabled and _snap(live).state == State.IDLE
+            assert any("press it again" in t for t in app.told(a.id))
+        finally:
+            resumed.stop()
+        a.click(device)                               # the pointer lets go on the button
+        pressed = Holding(a, device)                  # and presses anew
+        try:
+            _until(lambda: _snap(live).state == State.GUIDING, 10, "GUIDING on a new press")
+        finally:
+            pressed.stop()
+    finally:
+        a.close()
+
+
 def test_the_loop_releases_a_lapsed_lease_with_the_pendant_stalled(
         app: Pendant, sim: SimulatedPendantSession) -> None:
     """One heartbeat, and the pendant's process does nothing more (its page updates and

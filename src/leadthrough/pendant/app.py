@@ -25,9 +25,11 @@ on its button, which sends a heartbeat (:data:`~leadthrough.pendant.controls.HOL
 heartbeat holds the enabling input for :data:`LEASE_S` (a lease the loop's process enforces by
 itself, every controller cycle, even if this process stalls), so letting go, the pointer
 leaving, the page losing focus or becoming hidden (``page_guard.js``), a frozen or closed page
-all release it within the lease and one controller cycle. On a robot the enabling device is the
-robot's own wired input and the page cannot enable guiding by itself. The page in control
-disconnecting releases the enabling device and disarms.
+all release it within the lease and one controller cycle. A release by a missed heartbeat
+holds until the pointer lets go of the button and presses it again: heartbeats that resume
+after a stall of the page (or of this process) do not enable again. On a robot the enabling
+device is the robot's own wired input and the page cannot enable guiding by itself. The page
+in control disconnecting releases the enabling device and disarms.
 
 Every request is checked here before it is sent (types, finite numbers, ranges, labels:
 :func:`~leadthrough.pendant.messages.check_request`) and again in the loop's process; a bad one
@@ -130,6 +132,8 @@ class Pendant:
         #: The controlling page's last heartbeat of the enabling device (time.monotonic()
         #: [s]); None: released.
         self._beat: float | None = None
+        #: A heartbeat lapsed: the device is held again only after a let-go and a new press.
+        self._fresh_press = False
         self._sent_held = False
         self._holding = False
         self._controller: int | None = None
@@ -230,6 +234,12 @@ class Pendant:
             else:
                 self.tell(asking, "the page in control kept control")
 
+    @property
+    def needs_fresh_press(self) -> bool:
+        """Whether the enabling device was released by a missed heartbeat and is held again
+        only after the pointer let go of it and pressed it anew."""
+        return self._fresh_press
+
     def told(self, client: int) -> tuple[str, ...]:
         """What page ``client`` was told (refusals, control), the latest :data:`TOLD_KEPT`,
         oldest first."""
@@ -262,7 +272,7 @@ class Pendant:
     def _hand_over(self, to: int | None, why: str) -> None:
         """Control to page ``to`` (None: no page), from a released enabling device and
         disarmed guiding."""
-        self._armed, self._beat = False, None
+        self._armed, self._beat, self._fresh_press = False, None, False
         self._send_enable(force=True)
         self._release_hand()
         old, self._controller = self._controller, to
@@ -351,7 +361,15 @@ class Pendant:
                 return
             if not self.may_act(client, "the enabling device"):
                 return
-            self._beat = time.monotonic()
+            now = time.monotonic()
+            if self._beat is not None and now - self._beat > self.lease_s:
+                self._lapse()               # (this pendant stalled: the loop dropped it too)
+                return
+            if self._fresh_press:
+                self.tell(client, "enabling device released after a missed heartbeat: let go "
+                                  "of it and press it again", throttle=True)
+                return
+            self._beat = now
             self._send_enable()
 
     def release_device(self, client: int) -> None:
@@ -359,7 +377,7 @@ class Pendant:
         with self._lock:
             if client != self._controller:
                 return          # a read-only page holds nothing to let go of
-            self._beat = None
+            self._beat, self._fresh_press = None, False
             self._send_enable(force=True)
 
     def _device_held(self) -> bool:
@@ -381,11 +399,18 @@ class Pendant:
         :data:`LEASE_S` (the loop drops the lease by itself too)."""
         with self._lock:
             if self._beat is not None and time.monotonic() - self._beat > self.lease_s:
-                self._beat = None
-                self._send_enable(force=True)
-                if self._controller is not None:
-                    self.tell(self._controller, "enabling device released: no heartbeat from "
-                                                f"this page for {1e3 * self.lease_s:.0f} ms")
+                self._lapse()
+
+    def _lapse(self) -> None:
+        """A missed heartbeat: released, and held again only after the pointer let go of the
+        device and pressed it anew (heartbeats that resume after a stall of the page or of
+        this process do not press it again)."""
+        self._beat, self._fresh_press = None, True
+        self._send_enable(force=True)
+        if self._controller is not None:
+            self.tell(self._controller, "enabling device released: no heartbeat from this "
+                                        f"page for {1e3 * self.lease_s:.0f} ms; let go of it "
+                                        "and press it again")
 
     def clear_fault(self, client: int) -> None:
         """Ask the loop to clear a latched fault (the page in control only)."""
