@@ -72,7 +72,7 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TypeVar
+from typing import Any, TypeVar
 from xml.parsers import expat
 
 from leadthrough.drivers.wire import BadPacket, PacketError
@@ -134,6 +134,81 @@ def _refuse(code: BadPacket, message: str, source: str, field: str, value: objec
                        expected=expected)
 
 
+class _Reader:
+    """expat's handlers for one RSI document (see :func:`_parse`): the root, its children,
+    and a refusal at the first thing RSI never sends."""
+
+    def __init__(self, root_tag: str, source: str) -> None:
+        self.root_tag, self.source = root_tag, source
+        self.root: list[_Document] = []
+        self.stack: list[_Element | None] = []
+        self.count = 0
+
+    def start(self, tag: str, attrs: dict[str, str]) -> None:
+        self.count += 1
+        if self.count > MAX_ELEMENTS:
+            raise _refuse(BadPacket.STRUCTURE, "too many elements", self.source, "document",
+                          self.count, f"<= {MAX_ELEMENTS} elements")
+        for k, v in attrs.items():
+            if len(v) > MAX_TEXT:
+                raise _refuse(BadPacket.FIELD, "attribute value too long", self.source,
+                              f"{tag}.{k}", v[:MAX_TEXT], f"<= {MAX_TEXT} characters")
+        depth = len(self.stack)
+        if depth == 0:  # a wrong root is refused once the document is known well-formed
+            self.root.append(_Document(tag, dict(attrs), {}))
+            self.stack.append(None)
+        elif depth == 1:
+            children = self.root[0].children
+            if tag in children:
+                raise _refuse(BadPacket.STRUCTURE, "element given twice", self.source, tag,
+                              None, f"at most one <{tag}>")
+            children[tag] = el = _Element(tag, dict(attrs))
+            self.stack.append(el)
+        else:
+            raise _refuse(BadPacket.STRUCTURE, "nested element", self.source, tag, None,
+                          f"elements only directly under <{self.root_tag}>")
+
+    def end(self, tag: str) -> None:
+        self.stack.pop()
+
+    def text(self, chars: str) -> None:
+        el = self.stack[-1] if self.stack else None
+        if el is None:
+            if chars.strip(_WHITESPACE):
+                raise _refuse(BadPacket.STRUCTURE, "text outside an element", self.source,
+                              self.root_tag, chars[:MAX_TEXT], "elements only")
+            return
+        el.text.append(chars)
+        if sum(len(t) for t in el.text) > MAX_TEXT:
+            raise _refuse(BadPacket.FIELD, "text too long", self.source, el.tag,
+                          chars[:MAX_TEXT], f"<= {MAX_TEXT} characters")
+
+    def doctype(self, *_: object) -> None:
+        raise _refuse(BadPacket.FORBIDDEN, "DOCTYPE refused", self.source, "DOCTYPE", None,
+                      "no DTD (RSI documents have none; entities are refused)")
+
+    def entity(self, *_: object) -> None:
+        raise _refuse(BadPacket.FORBIDDEN, "entity declaration refused", self.source,
+                      "ENTITY", None, "no entities")
+
+    def instruction(self, target: str, _data: str) -> None:
+        raise _refuse(BadPacket.FORBIDDEN, "processing instruction refused", self.source,
+                      target, None, "no processing instructions")
+
+    def parser(self) -> Any:
+        """An expat parser with these handlers."""
+        parser = expat.ParserCreate()
+        parser.StartDoctypeDeclHandler = self.doctype
+        parser.EntityDeclHandler = self.entity
+        parser.UnparsedEntityDeclHandler = self.entity
+        parser.ExternalEntityRefHandler = self.entity  # type: ignore[assignment]
+        parser.ProcessingInstructionHandler = self.instruction
+        parser.StartElementHandler = self.start
+        parser.EndElementHandler = self.end
+        parser.CharacterDataHandler = self.text
+        return parser
+
+
 def _parse(data: bytes | str, root_tag: str, source: str) -> _Document:
     """Parse an RSI document with expat, refusing at once what RSI never sends: a DOCTYPE
     (and so every entity declaration: no billion laughs, no external entity), processing
@@ -151,85 +226,22 @@ def _parse(data: bytes | str, root_tag: str, source: str) -> _Document:
     if not raw.isascii():
         raise _refuse(BadPacket.SYNTAX, "not ASCII", source, "document", raw[:40],
                       "an ASCII document (RSI writes tags and numbers in ASCII)")
-    root: list[_Document] = []
-    stack: list[_Element | None] = []
-    count = [0]
-
-    def start(tag: str, attrs: dict[str, str]) -> None:
-        count[0] += 1
-        if count[0] > MAX_ELEMENTS:
-            raise _refuse(BadPacket.STRUCTURE, "too many elements", source, "document",
-                          count[0], f"<= {MAX_ELEMENTS} elements")
-        for k, v in attrs.items():
-            if len(v) > MAX_TEXT:
-                raise _refuse(BadPacket.FIELD, "attribute value too long", source,
-                              f"{tag}.{k}", v[:MAX_TEXT], f"<= {MAX_TEXT} characters")
-        depth = len(stack)
-        if depth == 0:  # a wrong root is refused once the document is known well-formed
-            root.append(_Document(tag, dict(attrs), {}))
-            stack.append(None)
-        elif depth == 1:
-            children = root[0].children
-            if tag in children:
-                raise _refuse(BadPacket.STRUCTURE, "element given twice", source, tag, None,
-                              f"at most one <{tag}>")
-            children[tag] = el = _Element(tag, dict(attrs))
-            stack.append(el)
-        else:
-            raise _refuse(BadPacket.STRUCTURE, "nested element", source, tag, None,
-                          f"elements only directly under <{root_tag}>")
-
-    def end(tag: str) -> None:
-        stack.pop()
-
-    def text(chars: str) -> None:
-        el = stack[-1] if stack else None
-        if el is None:
-            if chars.strip(_WHITESPACE):
-                raise _refuse(BadPacket.STRUCTURE, "text outside an element", source,
-                              root_tag, chars[:MAX_TEXT], "elements only")
-            return
-        el.text.append(chars)
-        if sum(len(t) for t in el.text) > MAX_TEXT:
-            raise _refuse(BadPacket.FIELD, "text too long", source, el.tag,
-                          chars[:MAX_TEXT], f"<= {MAX_TEXT} characters")
-
-    def doctype(*_: object) -> None:
-        raise _refuse(BadPacket.FORBIDDEN, "DOCTYPE refused", source, "DOCTYPE", None,
-                      "no DTD (RSI documents have none; entities are refused)")
-
-    def entity(*_: object) -> None:
-        raise _refuse(BadPacket.FORBIDDEN, "entity declaration refused", source, "ENTITY",
-                      None, "no entities")
-
-    def instruction(target: str, _data: str) -> None:
-        raise _refuse(BadPacket.FORBIDDEN, "processing instruction refused", source, target,
-                      None, "no processing instructions")
-
-    parser = expat.ParserCreate()
-    parser.StartDoctypeDeclHandler = doctype
-    parser.EntityDeclHandler = entity
-    parser.UnparsedEntityDeclHandler = entity
-    parser.ExternalEntityRefHandler = entity  # type: ignore[assignment]
-    parser.ProcessingInstructionHandler = instruction
-    parser.StartElementHandler = start
-    parser.EndElementHandler = end
-    parser.CharacterDataHandler = text
+    reader = _Reader(root_tag, source)
     try:
-        parser.Parse(raw, True)
+        reader.parser().Parse(raw, True)
     except expat.ExpatError as e:
         raise _refuse(BadPacket.SYNTAX, f"not well-formed XML: {e}", source, "document",
                       raw[:60], f"a <{root_tag}> document") from None
     except RecursionError:  # not reachable with the depth limit; kept typed all the same
         raise _refuse(BadPacket.STRUCTURE, "too deep", source, "document", None,
                       "a flat document") from None
-    if not root:
+    if not reader.root:
         raise _refuse(BadPacket.SYNTAX, "no root element", source, "document", raw[:60],
                       f"a <{root_tag}> document")
-    if root[0].tag != root_tag:
-        raise _refuse(BadPacket.STRUCTURE, "wrong root element", source, "root", root[0].tag,
-                      f"<{root_tag}>")
-    return root[0]
+    if reader.root[0].tag != root_tag:
+        raise _refuse(BadPacket.STRUCTURE, "wrong root element", source, "root",
+                      reader.root[0].tag, f"<{root_tag}>")
+    return reader.root[0]
 
 
 def _need(value: T | None, source: str, field: str, expected: str) -> T:
