@@ -274,7 +274,14 @@ class RsiClient(Transport):
                                expected="open() first")
         if self._last is None or self._robot is None or self._link.error is not None:
             return False
-        data = SensorMessage(self._last.ipoc, tuple(correction_deg), self.sentype,
+        return self._answer(self._last.ipoc, correction_deg, stop)
+
+    def _answer(self, ipoc: int, correction_deg: Sequence[float], stop: bool) -> bool:
+        """Send the answer to the document ``ipoc`` to the robot; False if the send failed
+        (the link then broken)."""
+        if self._sock is None or self._robot is None:      # (the callers checked already)
+            return False
+        data = SensorMessage(ipoc, tuple(correction_deg), self.sentype,
                              stop).encode(self.precision)
         try:
             self._sock.sendto(data, self._robot)
@@ -304,12 +311,4 @@ class RsiClient(Transport):
             ipoc = self._last.ipoc
         else:
             return False
-        data = SensorMessage(ipoc, tuple(correction_deg), self.sentype,
-                             True).encode(self.precision)
-        try:
-            self._sock.sendto(data, self._robot)
-        except OSError as e:
-            self._link.fail(LinkErrorKind.SOCKET, str(e))
-            return False
-        self._link.stats.sent += 1
-        return True
+        return self._answer(ipoc, correction_deg, True)
