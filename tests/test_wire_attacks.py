@@ -8,6 +8,7 @@ driver call."""
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import socket
@@ -134,19 +135,24 @@ def robot(ipoc0: int = 1_000_000, q1: float = POSE_DEG[0], **kw: object) -> Send
 def session(driver: KukaRsiDriver, duration: float) -> tuple[list[np.ndarray], list[float],
                                                               float]:
     """Answer every sample with the hold for ``duration`` [s]: the samples' q [rad], t [s],
-    and the longest step [s]."""
+    and the longest step [s]. With the garbage collector off, as the loop runs (a collection
+    of the test process's heap inside a decode would spend the parse budget)."""
     fb, cmd = driver.make_feedback(), driver.make_command()
     qs, ts, longest = [], [], 0.0
     t_end = time.monotonic() + duration
     cmd.q[:] = np.radians(POSE_DEG)
-    while time.monotonic() < t_end:
-        t0 = time.perf_counter()
-        driver.step()
-        longest = max(longest, time.perf_counter() - t0)
-        if driver.read(fb):
-            qs.append(fb.q.copy())
-            ts.append(fb.t)
-        driver.write(cmd)
+    gc.disable()
+    try:
+        while time.monotonic() < t_end:
+            t0 = time.perf_counter()
+            driver.step()
+            longest = max(longest, time.perf_counter() - t0)
+            if driver.read(fb):
+                qs.append(fb.q.copy())
+                ts.append(fb.t)
+            driver.write(cmd)
+    finally:
+        gc.enable()
     return qs, ts, longest
 
 
@@ -254,6 +260,29 @@ def test_a_billion_laughs_flood_costs_microseconds(er20: Robot) -> None:
     assert min(batches) < 1e-3
 
 
+def test_past_the_parse_budget_the_newest_document_is_still_taken(
+        er20: Robot, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A receive whose budget is spent (here: after its first decode) drops what is left
+    unparsed, the drain's newest datagram excepted: the robot waits for the answer to it, so
+    every cycle still gets its document, and the session is the robot's."""
+    import leadthrough.drivers.kuka_rsi.client as rsi_client
+    monkeypatch.setattr(rsi_client, "PARSE_BUDGET_S", 0.0)
+    real = robot(between=lambda k: [LAUGHS] * 5)
+    driver, port = rsi(er20, robot_address=("127.0.0.1", None))
+    real.start(port)
+    try:
+        driver.open()
+        qs, _, _ = session(driver, 0.3)
+        driver.close()
+    finally:
+        real.stop()
+    bad = driver.stats.bad
+    assert bad[BadPacket.BUDGET] > 0 and bad[BadPacket.UNEXPECTED] == 0
+    assert len(qs) >= 0.8 * 0.3 / (CYCLE_MS * 1e-3)
+    assert np.abs(np.array(qs) - np.array(POSE)).max() < 1e-6
+    assert len(real.answers) >= len(qs)
+
+
 @pytest.mark.parametrize(("junk", "code"), [
     (rob(5, extra="").replace(b"<IPOC>5<", b"<IPOC>" + b"9" * 400 + b"<"), BadPacket.FIELD),
     (rob(5, extra=f"<DiL>{2 ** 200}</DiL>"), BadPacket.FIELD),
@@ -278,7 +307,10 @@ def test_fields_outside_their_grammar_are_typed_counted_bad_packets(
     finally:
         real.stop()
     assert driver.stats.bad[code] >= 20 and driver.stats.bad[BadPacket.UNEXPECTED] == 0
-    assert sum(driver.stats.bad.values()) == driver.stats.bad[code]
+    # nothing else refused; but a backlog (this process held up by a loaded machine) may
+    # spend a receive's parse budget, and what is left of it, the newest excepted, is dropped
+    # unparsed as BUDGET, by design
+    assert set(driver.stats.bad) <= {code, BadPacket.BUDGET}, driver.stats.bad
     assert np.abs(np.array(qs) - np.array(POSE)).max() < 1e-6
 
 

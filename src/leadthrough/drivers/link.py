@@ -39,11 +39,12 @@ log = logging.getLogger("leadthrough.drivers")
 
 #: Datagrams one ``receive`` takes from the socket at most (the rest wait for the next).
 MAX_DATAGRAMS = 256
-#: Decoding time one ``receive`` spends at most [s]: past it the datagrams left are dropped
-#: unparsed (``BadPacket.BUDGET``). A valid packet decodes in tens of µs and a refused one in a
-#: few (the codecs refuse at once what their protocol never sends, and cap the size); a cycle
-#: is 2-12 ms. The budget is a backstop, half an RSI cycle: wide enough that a decode stretched
-#: by another thread holding the interpreter does not cost the robot's next packet.
+#: Decoding time one ``receive`` spends at most [s], counted as this thread's CPU time (so a
+#: preemption of the loop by another process does not spend it): past it the datagrams left
+#: are dropped unparsed (``BadPacket.BUDGET``). A valid packet decodes in tens of µs and a
+#: refused one in a few (the codecs refuse at once what their protocol never sends, and cap the
+#: size); a cycle is 2-12 ms. The budget is a backstop, half an RSI cycle. (A garbage
+#: collection during a decode spends it too: the loop runs with the collector off.)
 PARSE_BUDGET_S = 2e-3
 
 
@@ -85,8 +86,10 @@ class LinkStats:
         bad: Packets refused, by :class:`~leadthrough.drivers.wire.BadPacket` code (foreign
             senders, sequence errors and spent budgets included; codec refusals are also in
             ``malformed``).
-        decode_s: Time spent decoding packets in total [s].
-        decode_max_s: The longest decoding of one packet [s].
+        decode_s: This thread's CPU time spent decoding packets in total [s]
+            (``time.thread_time``: the parse's own cost, not the time another process or
+            thread held the CPU meanwhile).
+        decode_max_s: The longest decoding of one packet, CPU time [s].
     """
 
     received: int = 0
@@ -220,7 +223,7 @@ _logged_defects: set[str] = set()
 def decode_packet(data: bytes, decode: Callable[[bytes], P], stats: LinkStats) -> P | None:
     """Decode one packet; a refusal is counted by its code (``bad``, ``malformed``) and gives
     None, never an exception (a codec's own defect is counted as ``UNEXPECTED``, logged once
-    per kind of exception). The time spent is added to ``decode_s``.
+    per kind of exception). The CPU time spent is added to ``decode_s``.
 
     Args:
         data: The packet.
@@ -230,7 +233,7 @@ def decode_packet(data: bytes, decode: Callable[[bytes], P], stats: LinkStats) -
     Returns:
         The decoded packet, or None if refused.
     """
-    t0 = time.perf_counter()
+    t0 = time.thread_time()
     try:
         return decode(data)
     except DataError as e:
@@ -246,7 +249,7 @@ def decode_packet(data: bytes, decode: Callable[[bytes], P], stats: LinkStats) -
             log.error("decoder defect (packet dropped, counted): %s: %s", name, e)
         return None
     finally:
-        spent = time.perf_counter() - t0
+        spent = time.thread_time() - t0
         stats.decode_s += spent
         stats.decode_max_s = max(stats.decode_max_s, spent)
 
