@@ -19,7 +19,7 @@ from leadthrough.sim import (
     hold,
     make_operator,
 )
-from leadthrough.sim.operator_scripts import Push, PushScript, SeamOperator, random_pushes
+from leadthrough.sim.operator_scripts import PushScript, ScriptedPush, SeamOperator, random_pushes
 
 START = np.array([1.0, 0.3, 0.5])
 DT = 1e-3
@@ -79,10 +79,10 @@ def test_bad_seed_raises(seed: object) -> None:
 
 def test_bad_pushes_raise() -> None:
     with pytest.raises(SimulationError, match="push"):
-        Push(1.0, 1.05, (1.0, 0.0, 0.0), ramp_s=0.05)  # shorter than two ramps
+        ScriptedPush(1.0, 1.05, (1.0, 0.0, 0.0), ramp_s=0.05)  # shorter than two ramps
     with pytest.raises(SimulationError, match="force_base"):
-        Push(1.0, 2.0, (1.0, math.inf, 0.0))
-    a, b = Push(1.0, 2.0, (1.0, 0.0, 0.0)), Push(1.5, 3.0, (1.0, 0.0, 0.0))
+        ScriptedPush(1.0, 2.0, (1.0, math.inf, 0.0))
+    a, b = ScriptedPush(1.0, 2.0, (1.0, 0.0, 0.0)), ScriptedPush(1.5, 3.0, (1.0, 0.0, 0.0))
     with pytest.raises(SimulationError, match="overlap"):
         PushScript(name="x", pushes=(a, b), duration_s=4.0)
     with pytest.raises(SimulationError, match="duration_s"):

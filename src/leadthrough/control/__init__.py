@@ -42,8 +42,8 @@ from leadthrough.control.ik import DifferentialIK, IKConfig, IKResult
 from leadthrough.control.interpolation import (
     CommandBuffer,
     HermiteInterpolator,
+    InterpolatedCommand,
     InterpolatorStatus,
-    JointCommand,
     JointInterpolator,
 )
 from leadthrough.control.jerk_limit import JerkLimitConfig, JerkLimitedInterpolator
@@ -73,10 +73,10 @@ __all__ = [
     "HermiteInterpolator",
     "IKConfig",
     "IKResult",
+    "InterpolatedCommand",
     "InterpolatorStatus",
     "JerkLimitConfig",
     "JerkLimitedInterpolator",
-    "JointCommand",
     "JointInterpolator",
     "SafetyConfig",
     "SafetySupervisor",

@@ -51,8 +51,8 @@ from leadthrough.state_records import new_record, view
 __all__ = [
     "CommandBuffer",
     "HermiteInterpolator",
+    "InterpolatedCommand",
     "InterpolatorStatus",
-    "JointCommand",
     "JointInterpolator",
     "interpolator_dtype",
     "next_command",
@@ -76,7 +76,7 @@ class InterpolatorStatus(IntEnum):
 
 
 @dataclass
-class JointCommand:
+class InterpolatedCommand:
     """One servo command, filled in place by an interpolator.
 
     Attributes:
@@ -90,7 +90,7 @@ class JointCommand:
 
 class CommandBuffer(Protocol):
     """What ``update`` writes into: anything with preallocated ``q`` and ``qd`` arrays of shape
-    (n,) (a :class:`JointCommand`, or a driver's own command object)."""
+    (n,) (a :class:`InterpolatedCommand`, or a driver's own command object)."""
 
     q: Array
     qd: Array
@@ -99,7 +99,7 @@ class CommandBuffer(Protocol):
 class JointInterpolator(Protocol):
     """Interface of the 10 ms → 1 ms interpolators."""
 
-    def make_command(self) -> JointCommand:
+    def make_command(self) -> InterpolatedCommand:
         """A preallocated command."""
         ...
 
@@ -245,9 +245,9 @@ class HermiteInterpolator:
         seg.rate = 1.0 / period
         seg.k = substeps
 
-    def make_command(self) -> JointCommand:
+    def make_command(self) -> InterpolatedCommand:
         """A preallocated command."""
-        return JointCommand(q=np.zeros(self.n), qd=np.zeros(self.n))
+        return InterpolatedCommand(q=np.zeros(self.n), qd=np.zeros(self.n))
 
     def reset(self, q: Array) -> None:
         """Hold ``q`` at rest (shape (n,) [rad])."""

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from leadthrough.control.interpolation import CommandBuffer, InterpolatorStatus, JointCommand
+from leadthrough.control.interpolation import CommandBuffer, InterpolatedCommand, InterpolatorStatus
 from leadthrough.errors import ControlError, check_fields
 from leadthrough.robot.description import Robot
 
@@ -107,9 +107,9 @@ class JerkLimitedInterpolator:
         self._acc = np.zeros(n)
         self._rest = np.zeros(n, dtype=bool)
 
-    def make_command(self) -> JointCommand:
+    def make_command(self) -> InterpolatedCommand:
         """A preallocated command."""
-        return JointCommand(q=np.zeros(self.n), qd=np.zeros(self.n))
+        return InterpolatedCommand(q=np.zeros(self.n), qd=np.zeros(self.n))
 
     def reset(self, q: Array) -> None:
         """Hold ``q`` at rest (shape (n,) [rad])."""

@@ -42,8 +42,8 @@ from leadthrough.errors import DataError
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent_convex import (
     ConsistentConfig,
+    DecisionLayout,
     FrictionBand,
-    Layout,
     SolverError,
     closest_to_nominal,
     inner_problem,
@@ -90,7 +90,7 @@ class _Joint:
                      else load_friction_column(self.qd, load.torque[used, j])
                      if load.upper[j] > 0 else np.zeros(self.N))
 
-    def drive_target(self, z: Array, layout: Layout, j: int) -> Array:
+    def drive_target(self, z: Array, layout: DecisionLayout, j: int) -> Array:
         """The torque left for the drive's M_j, Stribeck and offset terms: b − K·φ (− f_cL·load
         column), the link (and load-friction) part held at ``z``."""
         r = self.b - self.K @ z[: 10 * layout.n]
@@ -177,7 +177,7 @@ def _nonnegative_sse(A: Array, rhs: Array, rr: float) -> Array:
     return np.asarray(np.minimum(sse.min(axis=0), rr))
 
 
-def _least_squares(joints: list[_Joint], cols: list[Array], layout: Layout, z_nom: Array,
+def _least_squares(joints: list[_Joint], cols: list[Array], layout: DecisionLayout, z_nom: Array,
                    scale: Array) -> Array:
     """Linear least squares over all joints, ridge-regularised toward nominal (rank defects)."""
     p = layout.size
@@ -192,7 +192,7 @@ def _least_squares(joints: list[_Joint], cols: list[Array], layout: Layout, z_no
     return np.asarray(z_nom + scale * np.linalg.solve(G, g))
 
 
-def _nominal_and_scale(obs: Observations, layout: Layout) -> tuple[Array, Array]:
+def _nominal_and_scale(obs: Observations, layout: DecisionLayout) -> tuple[Array, Array]:
     """z at nominal (CAD links, datasheet rotor inertia, no friction, no offset) and the scale
     of each entry of z (the inner problem's variables are (z − z_nom)/scale)."""
     robot, n = obs.robot, layout.n
@@ -243,7 +243,7 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
     if sweep is not None and load is not None:
         raise DataError("the load-dependent friction is not fitted with a friction sweep",
                         field="load", expected="None when a sweep is given")
-    layout = Layout(n, load=None if load is None else load.upper)
+    layout = DecisionLayout(n, load=None if load is None else load.upper)
     joints = [_Joint(obs, j, load) for j in range(n)]
     vmax, R = robot.velocity_limit, robot.gear_ratio
     z_nom, scale = _nominal_and_scale(obs, layout)
@@ -284,7 +284,7 @@ def identify_consistent(obs: Observations, config: ConsistentConfig | None = Non
 
 
 def _outcome(obs: Observations, z: Array, z_nom: Array, scale: Array, cfg: ConsistentConfig,
-             stribeck: StribeckParameters, iterations: int, t0: float, layout: Layout
+             stribeck: StribeckParameters, iterations: int, t0: float, layout: DecisionLayout
              ) -> ConsistentOutcome:
     """Standard parameters closest to nominal, packed with the friction and offsets (and f_cL,
     clipped to its bounds against the solver's tolerance)."""
@@ -299,7 +299,7 @@ def _outcome(obs: Observations, z: Array, z_nom: Array, scale: Array, cfg: Consi
         phi), iterations=iterations, runtime_s=time.perf_counter() - t0)
 
 
-def _with_measured_friction(obs: Observations, joints: list[_Joint], layout: Layout,
+def _with_measured_friction(obs: Observations, joints: list[_Joint], layout: DecisionLayout,
                             z_nom: Array, scale: Array, cfg: ConsistentConfig, sweep: SweepFit,
                             t0: float) -> ConsistentOutcome:
     """One inner problem with the Stribeck velocities of the sweep and the friction curve held

@@ -24,8 +24,14 @@ from leadthrough.errors import LeadthroughError, check_fields
 from leadthrough.identification.consistency import link_bounds, min_pseudo_inertia_eigenvalues
 from leadthrough.identification.observations import Observations
 
-__all__ = ["ConsistentConfig", "FrictionBand", "Layout", "SolverError", "closest_to_nominal",
-           "inner_problem"]
+__all__ = [
+    "ConsistentConfig",
+    "DecisionLayout",
+    "FrictionBand",
+    "SolverError",
+    "closest_to_nominal",
+    "inner_problem",
+]
 
 Array = NDArray[np.float64]
 
@@ -91,7 +97,7 @@ class FrictionBand:
     tolerance: Array
 
 
-class Layout:
+class DecisionLayout:
     """Index layout of z = [φ (10n), M (n), f1 (n), f2 (n), f3 (n), f4 (n), τ_0 (n)], and
     f_cL (n) of the load-dependent Coulomb friction when ``load`` (its upper bound per joint,
     shape (n,)) is given."""
@@ -216,8 +222,8 @@ def _diagnose(obs: Observations, cfg: ConsistentConfig, status: str, what: str) 
                        expected="'optimal'; try --bound none or check the data")
 
 
-def inner_problem(obs: Observations, targets: list[Array], cols: list[Array], layout: Layout,
-                  z_nom: Array, scale: Array, cfg: ConsistentConfig,
+def inner_problem(obs: Observations, targets: list[Array], cols: list[Array],
+                  layout: DecisionLayout, z_nom: Array, scale: Array, cfg: ConsistentConfig,
                   friction_bands: list[FrictionBand] | None = None) -> Array:
     """The convex problem for fixed Stribeck velocities, on QR-compressed data.
 

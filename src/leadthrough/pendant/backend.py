@@ -43,7 +43,7 @@ from leadthrough.control.safety import State
 from leadthrough.errors import ControlError
 from leadthrough.pendant.live_recording import LiveRecording
 from leadthrough.pendant.loop_process import (
-    LoopOptions,
+    LoopProcessOptions,
     LoopRecipe,
     SharedNames,
     run_loop_process,
@@ -113,7 +113,7 @@ class LiveSession:
         self._conn, child_conn = ctx.Pipe(duplex=True)
         self._process: BaseProcess = ctx.Process(
             target=run_loop_process, name="leadthrough-loop", daemon=True,
-            args=(recipe, names, child_conn, LoopOptions(paced, rt_priority)))
+            args=(recipe, names, child_conn, LoopProcessOptions(paced, rt_priority)))
         self._child_conn: Connection | None = child_conn
         self._send_lock = threading.Lock()
         self._cache: tuple[int, LoopSnapshot, SlowState] | None = None

@@ -51,8 +51,8 @@ from leadthrough.robot.description import Robot
 from leadthrough.session.loop import ServoPeriods
 from leadthrough.session.loop_config import LoopConfig, LoopParts, build_loop
 
-__all__ = ["MAX_LAG_S", "DriverRecipe", "LoopOptions", "LoopRecipe", "LoopSetup", "SharedNames",
-           "run_loop_process"]
+__all__ = ["MAX_LAG_S", "DriverRecipe", "LoopProcessOptions", "LoopRecipe", "LoopSetup",
+           "SharedNames", "run_loop_process"]
 
 Array = NDArray[np.float64]
 
@@ -138,7 +138,7 @@ class SharedNames:
 
 
 @dataclass(frozen=True)
-class LoopOptions:
+class LoopProcessOptions:
     """How the loop runs: ``paced`` (None: when the driver is simulated) and ``rt_priority``
     (SCHED_FIFO priority, None: ordinary scheduling); see
     :class:`~leadthrough.pendant.backend.LiveSession`."""
@@ -148,7 +148,7 @@ class LoopOptions:
 
 
 def run_loop_process(recipe: LoopRecipe, names: SharedNames, conn: Connection,
-                     options: LoopOptions) -> None:
+                     options: LoopProcessOptions) -> None:
     """The loop process's main: build, warm up, report ready, run until stopped."""
     blocks = [SharedBlock(name=n) for n in (names.record, names.periods, names.recording)]
     record = SeqlockRecord(blocks[0], numbers_size(names.n), names.blob_bytes)
@@ -169,7 +169,7 @@ class _Runner:
     """The loop's periods, requests at cycle starts, and what it publishes."""
 
     def __init__(self, setup: LoopSetup, names: SharedNames, blocks: list[SharedBlock],
-                 record: SeqlockRecord, conn: Connection, options: LoopOptions) -> None:
+                 record: SeqlockRecord, conn: Connection, options: LoopProcessOptions) -> None:
         driver, parts = setup.driver, setup.parts
         every = round(parts.controller.config.dt / driver.dt)
         if every < 1 or abs(every * driver.dt - parts.controller.config.dt) > 1e-9:

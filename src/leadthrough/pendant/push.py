@@ -166,7 +166,7 @@ def apply_to_hand(hand: Hand, request: object) -> bool:
     return True
 
 
-class Link(Protocol):
+class LoopLink(Protocol):
     """The pendant's link to the loop (:class:`~leadthrough.pendant.backend.LiveSession`)."""
 
     def send(self, request: Request) -> None:
@@ -182,7 +182,7 @@ class RemoteHand:
     """The simulated hand as the pendant's process sees it: requests out, force from the
     snapshot (the force the hand applied at the latest controller cycle)."""
 
-    def __init__(self, link: Link) -> None:
+    def __init__(self, link: LoopLink) -> None:
         self.link = link
 
     def push(self, force_base: ArrayLike) -> None:

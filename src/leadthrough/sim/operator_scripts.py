@@ -31,7 +31,7 @@ from leadthrough.sim.operator import Mark, ScriptedOperator, vector3
 from leadthrough.sim.seam_operator import HandTarget, SeamOperator, SeamTiming
 
 __all__ = [
-    "OPERATOR_NAMES", "HandTarget", "Push", "PushScript", "SeamOperator", "SeamTiming",
+    "OPERATOR_NAMES", "HandTarget", "PushScript", "ScriptedPush", "SeamOperator", "SeamTiming",
     "diagonal_push", "make_operator", "push_x", "random_pushes", "rest",
 ]
 
@@ -47,7 +47,7 @@ PUSH_FORCE_N, PUSH_START_S, PUSH_DURATION_S, PUSH_RAMP_S = 40.0, 1.0, 3.0, 0.05
 
 # ------------------------------------------------------------------------------------ pushes
 @dataclass(frozen=True)
-class Push:
+class ScriptedPush:
     """One push of the hand, zero outside ``[t_start, t_end)``.
 
     Attributes:
@@ -103,7 +103,7 @@ class PushScript:
     """
 
     name: str
-    pushes: tuple[Push, ...]
+    pushes: tuple[ScriptedPush, ...]
     duration_s: float
     marks: tuple[Mark, ...] = ()
     _starts: tuple[float, ...] = field(init=False, repr=False, compare=False)
@@ -155,7 +155,7 @@ def push_x(force_n: float = PUSH_FORCE_N, t_start: float = PUSH_START_S,
     """The ``push-x`` script: +x (base frame) with ``force_n`` [N] over ``[t_start, t_start +
     push_s)`` [s] (raised-cosine edges of :data:`PUSH_RAMP_S`), then ``after_s`` [s] without
     a hand."""
-    p = Push(t_start, t_start + push_s, (force_n, 0.0, 0.0))
+    p = ScriptedPush(t_start, t_start + push_s, (force_n, 0.0, 0.0))
     return PushScript(name="push-x", pushes=(p,), duration_s=p.t_end + after_s)
 
 
@@ -165,7 +165,7 @@ def diagonal_push(force_n: float = PUSH_FORCE_N, t_start: float = PUSH_START_S,
     ``[t_start, t_start + push_s)`` [s]; marks P1 half-way through the wait before the push and
     P2 1.5 s after the release (the robot at rest), then ``after_s`` [s] in all after release."""
     c = force_n / math.sqrt(2.0)
-    p = Push(t_start, t_start + push_s, (c, c, 0.0))
+    p = ScriptedPush(t_start, t_start + push_s, (c, c, 0.0))
     marks = (Mark(0.5 * t_start, "P1"), Mark(p.t_end + 1.5, "P2"))
     return PushScript(name="diagonal", pushes=(p,), duration_s=p.t_end + after_s, marks=marks)
 
@@ -202,7 +202,7 @@ def random_pushes(seed: int, n_pushes: int = 8, *,
         raise SimulationError("bad ranges", field="random_pushes", value=ranges,
                               expected="0 <= low <= high, pushes at least twice the ramp")
     rng = np.random.default_rng([seed, 7])
-    pushes: list[Push] = []
+    pushes: list[ScriptedPush] = []
     t = t_first
     for _ in range(n_pushes):
         d = rng.standard_normal(3)
@@ -210,7 +210,7 @@ def random_pushes(seed: int, n_pushes: int = 8, *,
         f = rng.uniform(*force_range_n) * d
         length = rng.uniform(*push_range_s)
         ramp = rng.uniform(*ramp_range_s)
-        pushes.append(Push(t, t + length, (float(f[0]), float(f[1]), float(f[2])), ramp))
+        pushes.append(ScriptedPush(t, t + length, (float(f[0]), float(f[1]), float(f[2])), ramp))
         t += length + rng.uniform(*pause_range_s)
     return PushScript(name="random", pushes=tuple(pushes), duration_s=pushes[-1].t_end + after_s)
 
