@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from leadthrough.control import GuidingConfig, GuidingController, State
-from leadthrough.control.operator_limits import OperatorLimits, adjusted_config
+from leadthrough.control.guiding_types import adjusted_config
+from leadthrough.control.operator_limits import OperatorLimits
 from leadthrough.control.virtual_friction import VirtualFrictionConfig
 from leadthrough.errors import ControlError
 from leadthrough.robot import Robot

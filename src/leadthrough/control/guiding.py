@@ -74,10 +74,10 @@ from leadthrough.control.guiding_types import (
     GuidingInput,
     GuidingOutput,
     GuidingStatus,
+    adjusted_config,
 )
 from leadthrough.control.ik import DifferentialIK
 from leadthrough.control.ik_step import update_manipulability_of
-from leadthrough.control.operator_limits import adjusted_config
 from leadthrough.control.safety import Event, Fault, SafetySupervisor, State
 from leadthrough.errors import ControlError
 from leadthrough.robot.description import Robot
@@ -253,7 +253,7 @@ class GuidingController:
                friction: tuple[float, float] | None = None) -> GuidingConfig:
         """Change what an operator may change: the frame, the enabled axes, the virtual mass
         and the fixed friction, the last two clamped to ``config.operator_limits``
-        (:func:`~leadthrough.control.operator_limits.adjusted_config`).
+        (:func:`~leadthrough.control.guiding_types.adjusted_config`).
 
         Call it between cycles, while the controller is IDLE or in FAULT: a change of frame
         or axes while the law is running would turn the motion (its twist and the release

@@ -28,16 +28,11 @@ values from the paper.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 from leadthrough.errors import ControlError, check_fields
 
-if TYPE_CHECKING:
-    from leadthrough.control.guiding_types import GuidingConfig
-
-__all__ = ["OperatorLimits", "adjusted_config"]
+__all__ = ["OperatorLimits"]
 
 
 def _range(bounds: tuple[float, float], positive: bool) -> bool:
@@ -102,52 +97,3 @@ def _clamp(name: str, value: float, bounds: tuple[float, float]) -> float:
         raise ControlError("not finite", field=name, value=value,
                            expected=f"a number in [{bounds[0]:g}, {bounds[1]:g}]")
     return min(max(v, bounds[0]), bounds[1])
-
-
-def adjusted_config(config: GuidingConfig, commissioned: GuidingConfig, *,
-                    frame: str | None = None, axes_enabled: Sequence[bool] | None = None,
-                    mass: tuple[float, float] | None = None,
-                    friction: tuple[float, float] | None = None) -> GuidingConfig:
-    """The controller's settings with an operator's change, mass and friction clamped to
-    ``config.operator_limits``.
-
-    Args:
-        config: The settings in force.
-        commissioned: The settings the controller was built with: the stopping friction δ_s
-            stays theirs, raised to δ if the operator's δ exceeds it.
-        frame: ``"base"`` or ``"tool"``; None: unchanged.
-        axes_enabled: 6 booleans (x, y, z, ωx, ωy, ωz); None: unchanged.
-        mass: (translational [kg], rotational [kg·m²]) virtual mass; None: unchanged.
-        friction: (translational [N], rotational [N·m]) virtual friction δ; None: unchanged.
-
-    Raises:
-        ControlError: An unknown frame, not 6 booleans, a mass with the velocity law, a
-            friction with the automatic friction (eq. 36 sets it), or a value that is not a
-            finite number.
-    """
-    vf = config.virtual_friction
-    changes: dict[str, object] = {}
-    if frame is not None:
-        changes["frame"] = frame
-    if axes_enabled is not None:
-        axes = tuple(axes_enabled)
-        if len(axes) != 6 or not all(isinstance(a, bool) for a in axes):
-            raise ControlError("not 6 booleans", field="axes_enabled", value=axes,
-                               expected="6 booleans (x, y, z, ωx, ωy, ωz)")
-        changes["axes_enabled"] = axes
-    if mass is not None:
-        if config.controller != "virtual-friction":
-            raise ControlError("the velocity law has no virtual mass", field="mass",
-                               value=mass, expected="the 'virtual-friction' controller")
-        m, inertia = config.operator_limits.clamp_mass(*mass)
-        vf = replace(vf, mass=(m,) * 3 + (inertia,) * 3)
-    if friction is not None:
-        if config.friction_mode != "fixed":
-            raise ControlError("the friction is automatic (eq. 36)", field="friction",
-                               value=friction, expected="friction_mode 'fixed'")
-        f, t = config.operator_limits.clamp_friction(*friction)
-        delta = (f,) * 3 + (t,) * 3
-        stop = tuple(max(s, d) for s, d in zip(commissioned.virtual_friction.stopping_friction,
-                                               delta, strict=True))
-        vf = replace(vf, friction=delta, stopping_friction=stop)
-    return replace(config, virtual_friction=vf, **changes)  # type: ignore[arg-type]

@@ -22,51 +22,12 @@ import scipy.optimize
 from numpy.typing import NDArray
 
 from leadthrough.dynamics.model import DriveModelParameters
-from leadthrough.errors import check_fields
 from leadthrough.identification.observations import Observations
-from leadthrough.identification.proposed_problem import ProposedProblem
+from leadthrough.identification.proposed_problem import ProposedConfig, ProposedProblem
 
 __all__ = ["ProposedConfig", "ProposedOutcome", "identify_proposed"]
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class ProposedConfig:
-    """Settings of the paper's method.
-
-    Attributes:
-        bound: Relative bound around nominal of eq. 37 (0.3 = ±30 %).
-        k_omega: Weight K_ω of the std term in J.
-        max_rate_hz: Data are subsampled to at most this rate for the search [Hz].
-        population: Population size of the global search.
-        generations: Generations of the global search.
-        polish_iterations: L-BFGS-B iterations after the search (0: none).
-        max_friction: Upper bound of f1, f2, f3 as a fraction of the joint's max torque.
-        seed: Seed of the search.
-    """
-
-    bound: float = 0.3
-    k_omega: float = 1.0
-    max_rate_hz: float = 100.0
-    population: int = 60
-    generations: int = 150
-    polish_iterations: int = 300
-    max_friction: float = 0.2
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        checks = [
-            ("bound", 0 < self.bound < 1, "0 < bound < 1"),
-            ("k_omega", self.k_omega >= 0, ">= 0"),
-            ("max_rate_hz", self.max_rate_hz > 0, "> 0 Hz"),
-            ("population", self.population >= 5, ">= 5"),
-            ("generations", self.generations >= 1, ">= 1"),
-            ("polish_iterations", self.polish_iterations >= 0, ">= 0"),
-            ("max_friction", 0 < self.max_friction <= 1, "in (0, 1]"),
-            ("seed", self.seed >= 0, ">= 0"),
-        ]
-        check_fields("proposed", self, checks)
 
 
 @dataclass(frozen=True)
