@@ -9,17 +9,16 @@ Per servo period (``driver.dt``):
    state (``fb.state``) is checked, the mark button read, one request served;
 3. every ``controller_every`` periods (10 ms), the **controller cycle**: the guiding controller
    takes the measured state, the estimated wrench and the enabling device's state and produces
-   a joint setpoint; the interpolator turns it into 1 ms position + velocity commands; the
-   snapshot is published (:mod:`~leadthrough.session.snapshot`);
+   a joint setpoint; the interpolator turns it into 1 ms position + velocity commands;
 4. the row is recorded (:mod:`~leadthrough.session.recorder`) and the compute time of steps
    2–3 measured.
 
 **Start.** The first sample: each part's compiled code loaded and a few periods computed on
 it, then every part reset there; on a real controller the packets of the start answered as the
-controller wants them (:mod:`~leadthrough.session.loop_start`).
+controller wants them (:func:`~leadthrough.session.loop_start.start_loop`).
 
 **Enabling.** The enabling device (a digital input of the driver, ``LoopOptions.enable_input``;
-a ``deadman`` function; or, on a simulated driver, ``LoopRequests.set_enable``) starts guiding
+or a ``deadman`` function) starts guiding
 only on a fresh press seen while the loop is ready: the estimator reports OK (after its warm-up
 and tare: guiding on an estimate that has not settled would start the robot on filter
 transients), no fault is latched and no stop is requested
@@ -92,6 +91,7 @@ from leadthrough.estimation.estimator import ExternalForceEstimator
 from leadthrough.session.controller_events import transition_event
 from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, LoopEnd
+from leadthrough.session.loop_start import start_loop
 from leadthrough.session.pacing import ComputeTimes, PeriodClock
 from leadthrough.session.record import SessionLog
 from leadthrough.session.recorder import ChunkSink, SessionRecorder
@@ -163,7 +163,7 @@ def run_session(
         duration_s: Stop after this long [s]; None: run until ``requests.stop()``.
         options: How the loop meets the driver and the operator (the enabling and mark inputs,
             pacing, the watchdog).
-        requests: The channel for requests from other threads, and the published snapshot.
+        requests: The channel for requests from other threads.
         deadman: The enabling device's level as a function of the loop's time, instead of an
             input (e.g. a scripted operator).
         applied_wrench: A simulator's truth: the wrench applied this period (base frame),
@@ -191,7 +191,7 @@ def run_session(
     times = ComputeTimes()
     interpreter = _InterpreterSettings()   # from the start on: no collection between the
     try:                                   # start's last packet and the first answer
-        t_start = loop.start()
+        t_start = start_loop(loop)
     except BaseException:
         interpreter.restore()
         raise
@@ -236,14 +236,11 @@ def _end(loop: ServoLoop, rec: SessionRecorder, escaped: BaseException | None,
          settings: dict[str, object]) -> SessionLog | None:
     """After the last period, however the loop left: first the driver's stop, which answers the
     controller's packet the last period read (:func:`stop_driver`), with the interpreter still
-    set for the loop (the requests left unmade are noted just before, so that the stop's note
-    is the last); then the interpreter restored, the loop closed, and the recording finished
-    whatever the steps before did. Returns the recording (None where it went to a sink)."""
+    set for the loop; then the interpreter restored, the loop closed, and the recording
+    finished whatever the steps before did. Returns the recording (None where it went to a
+    sink)."""
     try:
-        try:
-            loop.note_unmade()
-        finally:
-            stop_driver(loop, escaped)
+        stop_driver(loop, escaped)
     finally:
         interpreter.restore()
         try:
@@ -335,15 +332,10 @@ def _check_setup(driver: Driver, estimator: ExternalForceEstimator,
     if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
         raise ControlError("must be > 0", field="duration_s", value=duration_s,
                            expected="> 0 s, or None (until a stop request)")
-    if deadman is not None and (options.enable_input is not None or options.software_enable):
+    if deadman is not None and options.enable_input is not None:
         raise ControlError("two enabling inputs", field="deadman",
-                           value="a function and options.enable_input/software_enable",
+                           value="a function and options.enable_input",
                            expected="one enabling device")
-    if options.software_enable and (requests is None or not driver.simulated):
-        raise ControlError("a software enabling device needs a simulated driver and requests",
-                           field="options.software_enable", value=True,
-                           expected="False for a real robot (wire its enabling device to an "
-                                    "input: enable_input)")
     if not driver.simulated and options.watchdog_s <= 2 * dt:
         raise ControlError("shorter than two servo periods", field="options.watchdog_s",
                            value=options.watchdog_s, expected=f"> {2 * dt} s")

@@ -70,17 +70,14 @@ class LoopOptions:
             the enabling device; None: no enabling input from the driver. Guiding starts only
             on a fresh press of it (:class:`~leadthrough.session.operator_inputs.EnablingDevice`);
             with no enabling input at all, the loop never guides.
-        software_enable: Take the enabling device from ``LoopRequests.set_enable`` (a page's
-            button) instead; a simulated driver only: a software button is no enabling device
-            for a real robot.
-        mark_input: The digital input wired to the "mark point" button; None: marks come only
-            from ``LoopRequests.mark``.
+        mark_input: The digital input wired to the "mark point" button; None: no marks.
         reset_input: The digital input wired to the fault reset button; None: resets come
             only from ``LoopRequests.reset_fault``. A fresh press (debounced as the mark
             button) is a reset request: accepted with a fault latched, its cause cleared
             (the controller reporting OK, the feedback finite and within the following-error
             limit) and the commanded motion at rest; guiding then needs a fresh press of the
-            enabling device (:mod:`~leadthrough.session.operator_link`).
+            enabling device
+            (:meth:`ServoLoop.reset_fault <leadthrough.session.servo_loop.ServoLoop.reset_fault>`).
         paced: Pace a simulated driver to the wall clock (real time) instead of running flat
             out; a real driver paces the loop itself.
         watchdog_s: A driver exchange (write, step, read) longer than this is a fault, and one
@@ -94,7 +91,6 @@ class LoopOptions:
     """
 
     enable_input: int | None = None
-    software_enable: bool = False
     mark_input: int | None = None
     reset_input: int | None = None
     paced: bool = False
@@ -113,8 +109,6 @@ class LoopOptions:
              and (self.reset_input is None
                   or self.reset_input not in (self.enable_input, self.mark_input)),
              bits + ", not the enabling or the mark input"),
-            ("software_enable", not (self.software_enable and self.enable_input is not None),
-             "False with an enable_input (one enabling device)"),
             ("watchdog_s", math.isfinite(self.watchdog_s) and self.watchdog_s > 0, "> 0 s"),
             ("abort_s", math.isfinite(self.abort_s) and self.abort_s >= self.watchdog_s,
              ">= watchdog_s"),

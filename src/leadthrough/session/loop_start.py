@@ -1,5 +1,5 @@
-"""The guiding loop's start (:meth:`ServoLoop.start
-<leadthrough.session.servo_loop.ServoLoop.start>`): the first sample, every part warmed up and
+"""The guiding loop's start (:func:`start_loop`, on a
+:class:`~leadthrough.session.servo_loop.ServoLoop`): the first sample, every part warmed up and
 reset on it, and a packet just come for the first period to answer.
 
 On a real controller the start is where packets are most easily answered late: the first one
@@ -38,7 +38,6 @@ from numpy.typing import NDArray
 
 from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
 from leadthrough.errors import ControlError
-from leadthrough.session import operator_link
 
 if TYPE_CHECKING:
     from leadthrough.session.servo_loop import ServoLoop
@@ -107,9 +106,6 @@ def _set_up(loop: ServoLoop, q0: Array, answer_all: bool) -> None:
     """The start's compute on the first sample ``q0``, then (a real controller) a packet just
     come for the first period to answer."""
     driver, fb, cmd = loop.driver, loop.fb, loop.cmd
-    if loop.board is not None:   # before the dry periods: they write it too
-        loop.board.attach(driver.n)
-        operator_link.publish_settings(loop)
     t0 = fb.t
     dry_periods(loop, q0, t0)
     _reset(loop, q0, t0)
@@ -153,7 +149,7 @@ def dry_periods(loop: ServoLoop, q0: Array, t: float) -> None:
     already touched, and code the interpreter has already specialised: each part's ``warm_up``
     loads its compiled code on copies of its state, but the first update of the state itself
     took 2-3 times the steady-state median, and the period's own code (the controller cycle, the
-    enabling device, the snapshot) ran unspecialised in the first cycles. Nothing of them is the
+    enabling device) ran unspecialised in the first cycles. Nothing of them is the
     session's: their transitions and notes are dropped."""
     estimator, controller, interpolator = loop.estimator, loop.controller, loop.interpolator
     estimator.reset(q0)
@@ -183,11 +179,10 @@ def _periods(loop: ServoLoop, t: float) -> None:
 def _operator_held(loop: ServoLoop) -> Iterator[None]:
     """While the start's dry periods run: no enabling device, mark or reset button, requests
     or controller-state fault is read, and what they may write (the session's events, the
-    snapshot's notices, the enabling device's history, the loop's flags) is put back after."""
+    enabling device's history, the loop's flags) is put back after."""
     saved = (loop.requests, loop.enable_level, loop.mark_bit, loop.reset_bit, loop.inputs,
              loop.controller_ready, loop.controller_tripped, loop.held, loop.ready)
-    events, board = len(loop.events), loop.board
-    notices = (board.notice, board.fault_cause) if board is not None else None
+    events = len(loop.events)
     loop.requests, loop.enable_level, loop.mark_bit, loop.reset_bit = None, None, -1, -1
     loop.controller_tripped = True   # the controller's state is the first period's to read
     try:
@@ -197,8 +192,6 @@ def _operator_held(loop: ServoLoop) -> Iterator[None]:
          loop.controller_ready, loop.controller_tripped, loop.held, loop.ready) = saved
         del loop.events[events:]
         loop.enabling.reset()
-        if board is not None and notices is not None:
-            board.notice, board.fault_cause = notices
 
 
 def fresh_packet(driver: Driver, fb: DriverFeedback, hold: JointCommand | None = None,

@@ -3,8 +3,17 @@
 
 :class:`ServoLoop` holds every preallocated input and output, the operator's inputs, the state
 of the link to the driver (:class:`Link`), the stop in progress and the session's events; its
-:meth:`ServoLoop.period` runs one servo period. The requests from other threads are served by
-:mod:`leadthrough.session.operator_link`.
+:meth:`ServoLoop.period` runs one servo period; :meth:`ServoLoop.reset_fault` is the fault reset
+of the reset input and of the requests from other threads (:mod:`leadthrough.session.requests`).
+The start is :func:`~leadthrough.session.loop_start.start_loop`'s.
+
+**Fault reset**: at rest, with the robot controller reporting OK, the feedback finite and the
+robot within the following-error limit of its command (beyond it the reported position cannot
+be trusted to restart from: an encoder or a following fault), unless the controller stopped the
+robot itself (``Fault.CONTROLLER_STATE``: it stopped short of the commanded stop). Every part
+restarts at the measured position (after an E-stop the robot stopped where it was, short of the
+commanded stop); the estimator warms up and tares again, and guiding needs a fresh press. A
+reset that cannot be made is refused with a note (a ``loop`` event in the recording).
 """
 
 from __future__ import annotations
@@ -21,16 +30,15 @@ from leadthrough.control.guiding import GuidingController
 from leadthrough.control.interpolation import InterpolatorStatus, JointInterpolator
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.drivers.protocol import ControllerState, Driver, DriverFeedback, JointCommand
+from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
-from leadthrough.session import operator_link
 from leadthrough.session.controller_events import transition_event
 from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, Link, LoopEnd
-from leadthrough.session.loop_start import start_loop
 from leadthrough.session.operator_inputs import EnablingDevice, MarkButton, input_bit
 from leadthrough.session.pacing import PeriodClock
 from leadthrough.session.record import Mark, SessionEvent
-from leadthrough.session.requests import LoopRequests, Request
+from leadthrough.session.requests import LoopRequests, Request, RequestKind
 from leadthrough.session.rest_rezero import zero_velocity_update
 from leadthrough.session.watchdog import DriverWatchdog
 
@@ -50,7 +58,7 @@ class ServoLoop:
         interpolator: Controller cycle → servo period interpolation.
         every: Servo periods per controller cycle.
         options: The loop's options.
-        requests: Requests from other threads, and the snapshot board; or None.
+        requests: Requests from other threads, or None.
         deadman: The enabling device's level as a function of time, or None.
     """
 
@@ -78,17 +86,13 @@ class ServoLoop:
         #: The digital inputs of the last sample that carried them (a sample without them,
         #: e.g. before J519 echoes its I/O request, keeps the last: 0, released, at first).
         self.inputs = 0
-        self.enable_level = _enable_source(self, options, requests, deadman)
+        self.enable_level = _enable_source(self, options, deadman)
         self.mark_bit = -1 if options.mark_input is None else options.mark_input
         self.mark_button = MarkButton()
         self.reset_bit = -1 if options.reset_input is None else options.reset_input
         self.reset_button = MarkButton()   # one reset request per (debounced) press
         self.requests = requests
-        self.board = None if requests is None else requests.board
         self.held = self.ready = False
-        self.deferred: list[Request] = []        # settings waiting for rest
-        #: The session's friction: requests may raise it, not lower it.
-        self.friction_floor = cfg.virtual_friction.friction
         # the link, and the end
         self.link = Link.OK
         self.controller_tripped = False           # a controller-state fault is latched
@@ -126,12 +130,7 @@ class ServoLoop:
         # warm-up at set-up, are not the session's)
         self.seen = controller.event_count
 
-    # ------------------------------------------------------------------ start and end
-    def start(self) -> float:
-        """The first sample: every part reset there, their compiled code loaded; returns the
-        sample's time [s] (:func:`~leadthrough.session.loop_start.start_loop`)."""
-        return start_loop(self)
-
+    # ------------------------------------------------------------------ the end
     def begin_end(self, cause: EndCause, t: float) -> None:
         """Stop, then end: the controller is released (a stop at the acceleration limit) and
         the loop ends once the commanded motion is at rest."""
@@ -154,26 +153,11 @@ class ServoLoop:
         return self.end is not None
 
     def close(self) -> None:
-        """After the last period and the driver's stop (the requests left unmade already
-        noted: :meth:`note_unmade`): the watchdog stops, the last snapshot says why it ended."""
+        """After the last period and the driver's stop: the watchdog stops, the controller's
+        last transitions are taken into the events."""
         if self.watch is not None:
             self.watch.stop()
         self.drain()
-        if self.board is not None and self.board.fields is not None:
-            end = self.end
-            self.board.end_cause = "" if end is None else f"{end.cause}: {end.detail}".rstrip(
-                ": ")
-            self.board.begin()
-            self.board.fields.running = False
-            self.board.end()
-
-    def note_unmade(self) -> None:
-        """The requests deferred until rest that the session's end left unmade, noted (at the
-        end's time) and dropped."""
-        t = self.end.t if self.end is not None else math.nan
-        for request in self.deferred:
-            self.note(t, f"{request.kind} not made", "the session ended before rest")
-        self.deferred.clear()
 
     def session_events(self) -> list[SessionEvent]:
         """Transitions, marks and the loop's notes, in time order."""
@@ -248,11 +232,11 @@ class ServoLoop:
             self.mark(t_loop, None)
         if self.reset_bit >= 0 and self.reset_button.update(
                 input_bit(self.inputs, self.reset_bit), t_loop):
-            operator_link.reset_fault(self, t_loop)
+            self.reset_fault(t_loop)
         requests = self.requests
         if requests is not None:
             if requests.pending:
-                operator_link.serve(self, requests.take(), t_loop)
+                self.serve(requests.take(), t_loop)
             if requests.stop_requested:
                 self.begin_end(EndCause.STOP_REQUESTED, t_loop)
         if i % self.every == 0:
@@ -325,7 +309,7 @@ class ServoLoop:
         self.note(t, "controller state", name)
 
     def _cycle(self, i: int, t_loop: float) -> None:
-        """The controller cycle, its setpoint for the interpolator, the snapshot."""
+        """The controller cycle, and its setpoint for the interpolator."""
         c_in, c_out, e_out, fb = self.c_in, self.c_out, self.e_out, self.fb
         c_in.t = t_loop
         c_in.sequence = fb.sequence
@@ -345,39 +329,72 @@ class ServoLoop:
         self.interpolator.set_target(c_out.q, c_out.qd)
         if self.controller.event_count != self.seen:
             self.drain()
-        if self.deferred and self.at_rest():
-            operator_link.apply_deferred(self, t_loop)
-        if self.board is not None:
-            operator_link.publish(self, i, t_loop)
+
+    # ------------------------------------------------------------------ the operator
+    def serve(self, request: Request | None, t: float) -> None:
+        """Serve one request from another thread (a fault reset, at once)."""
+        if request is not None and request.kind is RequestKind.RESET_FAULT:
+            self.reset_fault(t)
+
+    def reset_fault(self, t: float) -> None:
+        """Clear a latched fault and restart at the measured position (see the module doc)."""
+        refusal = self._reset_refusal()
+        if refusal is not None:
+            self.note(t, "reset refused", refusal)
+            return
+        try:
+            self.restart(self.fb.q.copy(), t)
+        except ControlError as e:
+            self.note(t, "reset refused", str(e))
+            return
+        self.note(t, "fault reset", "restarted at the measured position; the estimator tares "
+                                    "again (hands off), then press the enabling device")
+
+    def _reset_refusal(self) -> str | None:
+        """Why a fault reset cannot be made now (None: it can)."""
+        if self.controller.state != State.FAULT:
+            return "no fault is latched"
+        if not self.at_rest():
+            return "the stop is not complete"
+        state = int(self.fb.state)
+        if state != ControllerState.NORMAL:
+            name = (ControllerState(state).name if state in ControllerState._value2member_map_
+                    else f"code {state}")
+            return f"the robot controller reports {name}"
+        q, q_cmd = self.fb.q, self.c_out.q
+        if not np.isfinite(q).all():
+            return "the measured position is not finite"
+        error = np.abs(q - q_cmd)
+        limit = self.controller.config.safety.following_error_limit
+        # after the controller's own stop the robot is short of the commanded stop, where it
+        # reports: its position is good to restart from
+        if self.controller.fault != Fault.CONTROLLER_STATE and error.max() > limit:
+            j = int(np.argmax(error))
+            return (f"joint {j + 1} is {error[j]:.4f} rad from its command (limit {limit} rad): "
+                    "check the robot and its encoders, then restart the session")
+        return None
 
     # ------------------------------------------------------------------ events
     def note(self, t: float, label: str, detail: str) -> None:
-        """A loop event (recorded, logged, the snapshot's notice)."""
+        """A loop event (recorded and logged)."""
         self.events.append(SessionEvent(t=t, kind="loop", label=label, cause=detail))
         log.info("t = %.3f s: %s: %s", t, label, detail)
-        if self.board is not None:
-            self.board.notice = f"{label}: {detail}"
 
     def mark(self, t: float, label: str | None) -> None:
         """A mark at ``t`` (``label`` None: ``P<k>``)."""
         mark = Mark(t=t, label=label if label is not None else f"P{len(self.marks) + 1}")
         self.marks.append(mark)
         self.events.append(SessionEvent(t=t, kind="mark", label=mark.label))
-        if self.board is not None:
-            self.board.marks = tuple(self.marks)
 
     def drain(self) -> None:
         """The controller's new transitions into the session's events."""
         count = self.controller.event_count
         for e in self.controller.events_since(self.seen):
-            event = transition_event(e)
-            self.events.append(event)
-            if self.board is not None and e.to_state == State.FAULT:
-                self.board.fault_cause = event.cause
+            self.events.append(transition_event(e))
         self.seen = count
 
 
-def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests | None,
+def _enable_source(loop: ServoLoop, options: LoopOptions,
                    deadman: Callable[[float], bool] | None) -> Callable[[float], bool] | None:
     """The enabling device's level at the loop's time; None: no enabling device."""
     if deadman is not None:
@@ -385,6 +402,4 @@ def _enable_source(loop: ServoLoop, options: LoopOptions, requests: LoopRequests
     bit = options.enable_input
     if bit is not None:
         return lambda t: input_bit(loop.inputs, bit)
-    if options.software_enable and requests is not None:
-        return lambda t: requests.enable_held
     return None

@@ -83,8 +83,6 @@ class SimSessionConfig:
             intervals of sample time [s] (``t_release`` may be inf); None: pressed when the
             loop is ready (``loop.estimator.warm_up_s + tare_s``) and held to the end; ``()``:
             never pressed (the loop then never guides).
-        software_enable: The enabling device is a page's button (``LoopRequests.set_enable``)
-            instead of the script's (``enable_held_s`` is then ignored).
         plant: Simulated plant (:mod:`leadthrough.sim.plant`): the one the params were
             identified on.
         warm_up_s: Production-like motion the (realistic) robot did before the session [s]:
@@ -101,7 +99,6 @@ class SimSessionConfig:
     paced: bool = False
     faults: tuple[InjectedFault, ...] = ()
     enable_held_s: tuple[tuple[float, float], ...] | None = None
-    software_enable: bool = False
     plant: PlantPreset = PlantPreset.REALISTIC
     warm_up_s: float = 0.0
 
@@ -207,7 +204,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
         record_feedback: Keep every read of the driver in ``SimSession.feedback`` (for
             :func:`replay_session`).
         wrap_driver: Wraps the driver the loop talks to (e.g. to probe every servo period).
-        requests: Requests into the loop from other threads, and its snapshot (a pendant).
+        requests: Requests into the loop from other threads (a stop, a fault reset).
         inspect_loop: Called with the loop's estimator, controller and interpolator once they
             are built, before the session starts (to read their state as it runs, e.g.
             ``benchmarks/force_error_budget.py``); it must not change them.
@@ -225,8 +222,7 @@ def run_sim_session(robot: Robot, params: ParamsFile, config: SimSessionConfig,
     sim_driver = SimDriver(sim)
     for fault in config.faults:
         sim_driver.inject(fault)
-    if not config.software_enable:
-        sim_driver.script_input(InputScript(ENABLE_INPUT, _enable_held(config)))
+    sim_driver.script_input(InputScript(ENABLE_INPUT, _enable_held(config)))
     sim_driver.script_input(InputScript(MARK_INPUT, tuple((m.t, m.t + MARK_PRESS_S)
                                                           for m in operator.marks)))
     if record_feedback and not math.isfinite(duration):
@@ -306,9 +302,7 @@ def _scene(robot: Robot, config: SimSessionConfig) -> tuple[Array, ScriptedOpera
 
 def _options(config: SimSessionConfig) -> LoopOptions:
     """The loop's options of a simulated session: the enabling device on its input."""
-    return LoopOptions(enable_input=None if config.software_enable else ENABLE_INPUT,
-                       software_enable=config.software_enable, mark_input=MARK_INPUT,
-                       paced=config.paced)
+    return LoopOptions(enable_input=ENABLE_INPUT, mark_input=MARK_INPUT, paced=config.paced)
 
 
 def _enable_held(config: SimSessionConfig) -> tuple[tuple[float, float], ...]:
