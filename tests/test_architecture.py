@@ -5,7 +5,10 @@
   layer imports a later one (the real-time control does not import the estimator, the estimator
   not the controller, identification not estimation);
 * no function in ``src/`` is longer than 80 lines;
-* no module defines slot indices (``A, B, C = range(3)``): state is named fields.
+* no module defines slot indices (``A, B, C = range(3)``): state is named fields;
+* no import circle among the package's modules (module-level imports, those under
+  ``if TYPE_CHECKING:`` included: a circle of types is still two modules that need each other);
+* no two classes in ``src/`` share a name (one name, one thing).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+from collections import defaultdict
 from pathlib import Path
 
 import pytest
@@ -103,3 +107,108 @@ def test_state_is_named_not_indexed_by_slot_constants() -> None:
                     and isinstance(node.targets[0], ast.Tuple):
                 slots.append(f"{path.relative_to(SRC)}:{node.lineno}")
     assert not slots, "\n".join(slots)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(SRC.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _top_level(body: list[ast.stmt]) -> list[ast.stmt]:
+    """The module's statements, those under a module-level ``if`` (``TYPE_CHECKING``) or
+    ``try`` included, not those of functions and classes."""
+    out: list[ast.stmt] = []
+    for node in body:
+        out.append(node)
+        if isinstance(node, ast.If):
+            out += _top_level(node.body) + _top_level(node.orelse)
+        elif isinstance(node, ast.Try):
+            out += _top_level(node.body + node.orelse + node.finalbody)
+            for handler in node.handlers:
+                out += _top_level(handler.body)
+    return out
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module → the package's modules it imports at module level. ``from P import x`` is an
+    import of the module ``P.x`` where that is a module, else of ``P``."""
+    paths = {_module_name(p): p for p in _modules()}
+    graph: dict[str, set[str]] = {}
+    for name, path in paths.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        deps: set[str] = set()
+        for node in _top_level(ast.parse(path.read_text(encoding="utf-8")).body):
+            if isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+                    base = ".".join(anchor + ([base] if base else []))
+                subs = {f"{base}.{a.name}" for a in node.names} & paths.keys()
+                deps |= subs
+                if len(subs) < len(node.names):
+                    deps.add(base)
+        graph[name] = {d for d in deps if d in paths and d != name}
+    return graph
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """One circle (a path back to its start) per strongly connected group of ``graph``."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    groups: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while (w := stack.pop()) != v:
+                group.append(w)
+            group.append(v)
+            if len(group) > 1:
+                groups.append(group)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    circles = []
+    for group in groups:
+        members, start = set(group), min(group)
+        path, seen = [start], {start}
+        while True:       # walk inside the group until a module repeats: a circle
+            nxt = min(graph[path[-1]] & members)
+            if nxt in seen:
+                circles.append([*path[path.index(nxt):], nxt])
+                break
+            path.append(nxt)
+            seen.add(nxt)
+    return circles
+
+
+def test_no_import_circle_among_the_packages_modules() -> None:
+    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c", "a"]]
+    graph = _import_graph()
+    assert "leadthrough.session.servo_loop" in graph["leadthrough.session.loop"]
+    circles = _circles(graph)
+    assert not circles, "\n".join(" -> ".join(c) for c in circles)
+
+
+def test_no_two_classes_share_a_name() -> None:
+    where: dict[str, list[str]] = defaultdict(list)
+    for path in _modules():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef):
+                where[node.name].append(f"{path.relative_to(SRC)}:{node.lineno}")
+    shared = {name: places for name, places in where.items() if len(places) > 1}
+    assert not shared, "\n".join(f"{n}: {', '.join(p)}" for n, p in sorted(shared.items()))
