@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import errno
 import socket
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from leadthrough.dynamics.model import MAX_COMMAND_LAG_S
 from leadthrough.errors import ControlError, DataError
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.fileio import require_folder
+from leadthrough.identification.calibration import check_command_lag, check_sweep
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.session.realtime import MAX_FIFO_PRIORITY
@@ -98,30 +97,18 @@ def with_command_lag(pf: ParamsFile, lag: float | None) -> ParamsFile:
     Raises:
         DataError: Not a finite lag from 0 to ``MAX_COMMAND_LAG_S``.
     """
-    if lag is None:
-        return pf
-    if not (np.isfinite(lag) and 0.0 <= lag <= MAX_COMMAND_LAG_S):
-        raise DataError("out of range", field="--command-lag", value=lag,
-                        expected=f"0 <= seconds <= {MAX_COMMAND_LAG_S:g}")
-    return replace(pf, params=replace(pf.params, command_lag=float(lag)))
+    return check_command_lag(pf, lag, field="--command-lag")
 
 
 def require_sweep(pf: ParamsFile, allow_no_sweep: bool) -> ParamsFile:
     """``pf`` if it can guide: identified with a friction sweep, or ``--allow-no-sweep``
-    (``guide`` and ``pendant``).
+    (``guide`` and ``pendant``; the library's check,
+    :func:`~leadthrough.identification.calibration.check_sweep`).
 
     Raises:
         DataError: Naming the file, ``meta.friction_sweep`` and the ways out.
     """
-    if not (pf.friction_sweep or allow_no_sweep):
-        raise DataError(
-            "these parameters cannot guide: their friction was not measured at guiding speeds",
-            source=pf.path, field="meta.friction_sweep", value=False,
-            expected="true: record a friction sweep (leadthrough excite --sweep, then record) "
-                     "and identify with --method consistent --friction-sweep; or pass "
-                     "--allow-no-sweep to guide anyway (the identified friction is then 15-24 %"
-                     " low at guiding speeds: a 40 N push barely moves the robot)")
-    return pf
+    return check_sweep(pf, allow_no_sweep, opt_out="--allow-no-sweep")
 
 
 def check_output(path: Path, suffixes: tuple[str, ...],

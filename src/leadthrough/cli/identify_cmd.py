@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -16,19 +15,13 @@ from leadthrough.data.preprocess import PreprocessConfig
 from leadthrough.data.recording import Recording
 from leadthrough.errors import DataError
 from leadthrough.fileio import require_folder
-from leadthrough.identification.api import (
-    METHODS,
-    IdentifyConfig,
-    evaluate,
-    identify,
-    identify_with_sweep,
-)
-from leadthrough.identification.command_lag import measure_command_lag
+from leadthrough.identification.api import METHODS, IdentifyConfig, evaluate
+from leadthrough.identification.calibration import calibrate
 from leadthrough.identification.consistency import min_pseudo_inertia_eigenvalues
 from leadthrough.identification.consistent import ConsistentConfig
 from leadthrough.identification.metrics import ResidualStats
-from leadthrough.identification.params_file import load_params, save_params
-from leadthrough.identification.presliding import PreslidingFit, fit_presliding
+from leadthrough.identification.params_file import load_params
+from leadthrough.identification.presliding import PreslidingFit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot, load_robot
@@ -199,20 +192,12 @@ def run_identify(args: argparse.Namespace) -> int:
     sim_seed = rec.sim_seed
     sweep = _companion(args, "friction_sweep", rec, robot)
     presliding_test = _companion(args, "presliding_test", rec, robot)
-    # the presliding test is fitted first: a bad file fails before the long identification
-    pre = None if presliding_test is None else fit_presliding(presliding_test, robot)
     bar = Progress(f"identifying ({args.method})", 1)
-    if sweep is not None:
-        result = identify_with_sweep(rec, sweep, robot, _identify_config(args)).result
-    else:
-        result = identify(rec, robot, args.method, _identify_config(args), progress=bar)
+    cal = calibrate(rec, robot, args.method, _identify_config(args), friction_sweep=sweep,
+                    presliding_test=presliding_test, progress=bar)
+    result, pre, lag = cal.result, cal.presliding, cal.command_lag
     bar.close(f"J = {result.J:.3f}")
-    params = result.params if pre is None else pre.applied_to(result.params)
-    lag = measure_command_lag(rec)  # None where the recording logged no commands
-    if lag is not None:
-        params = replace(params, command_lag=lag.lag_s)
-    save_params(args.output, robot, args.method, params, result.stats, sim_seed,
-                friction_sweep=sweep is not None)
+    cal.save(args.output, robot, sim_seed)
     if args.urdf_out is not None:
         write_urdf_with_inertias(robot, result.params.phi, args.urdf_out)
     eig = {jn: float(v) for jn, v in zip(robot.joint_names, result.min_pseudo_inertia_eig,

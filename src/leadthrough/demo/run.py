@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -35,11 +35,13 @@ from leadthrough.demo.guiding_steps import (
 from leadthrough.errors import LeadthroughError
 from leadthrough.excitation.design import ExcitationConfig
 from leadthrough.excitation.friction_sweep import FrictionSweepConfig
-from leadthrough.identification.api import METHODS, IdentifyConfig, identify_with_sweep
+from leadthrough.identification.api import METHODS, IdentifyConfig
+from leadthrough.identification.calibration import calibrate
 from leadthrough.identification.comparison import Table2, ratio_summary, table2, table2_markdown
+from leadthrough.identification.friction_sweep import SweepFit
 from leadthrough.identification.params_file import ParamsFile, save_params
 from leadthrough.identification.plots import plot_torque_fit
-from leadthrough.identification.presliding import fit_presliding
+from leadthrough.identification.presliding import PreslidingFit
 from leadthrough.identification.proposed import ProposedConfig
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
@@ -209,23 +211,22 @@ def _calibration(res: DemoResult, robot: Robot, seed: int, quick: bool, out: Pat
         path = save_params(out / f"params_{m}.toml", robot, m, r.params, r.stats, seed)
         res.files[f"params ({m})"] = path
         params[m] = ParamsFile.from_result(r, path, seed)
-    guided = identify_with_sweep(cal.identification.measured, sweep.measured, robot, cfg)
-    fit = fit_presliding(pre.measured, robot)
-    guided = replace(guided, result=replace(
-        guided.result, params=fit.applied_to(guided.result.params)))
-    path = save_params(out / "params_guiding.toml", robot, GUIDING_METHOD,
-                       guided.result.params, guided.result.stats, seed, friction_sweep=True)
+    guided = calibrate(cal.identification.measured, robot, GUIDING_METHOD, cfg,
+                       friction_sweep=sweep.measured, presliding_test=pre.measured)
+    # both given, both fitted
+    sweep_fit, fit = cast(SweepFit, guided.sweep), cast(PreslidingFit, guided.presliding)
+    path = guided.save(out / "params_guiding.toml", robot, seed)
     res.files["params (guiding: consistent + friction sweep)"] = path
-    res.sweep_rms = guided.sweep.rms.tolist()
+    res.sweep_rms = sweep_fit.rms.tolist()
     say("      guiding parameters: consistent with the friction sweep (fit RMS "
-        + ", ".join(f"{v:.2f}" for v in guided.sweep.rms) + " N·m), z0 "
+        + ", ".join(f"{v:.2f}" for v in sweep_fit.rms) + " N·m), z0 "
         + ", ".join(f"{1e4 * v:.2f}" for v in fit.presliding) + " e-4 rad, relaxation "
         + ", ".join(f"{v:.3f}" for v in fit.relaxation) + " 1/s")
     held = preprocess(cal.held_out.measured, robot, cfg.preprocess)
     res.files["fig3"] = plot_torque_fit(
         out / "fig3.png", robot, held, {m: comp.results[m].params for m in METHODS},
         title=f"{robot.name} (simulated), held-out trajectory")
-    return params, ParamsFile.from_result(guided.result, path, seed, friction_sweep=True)
+    return params, guided.params_file(path, seed)
 
 
 def _teach(res: DemoResult, robot: Robot, out: Path, say: Callable[[str], None]) -> None:

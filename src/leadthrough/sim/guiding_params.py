@@ -17,14 +17,13 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 from leadthrough.errors import DataError
 from leadthrough.excitation.design import ExcitationConfig, design_excitation
-from leadthrough.identification.api import IdentifyConfig, SweepCalibration, identify_with_sweep
-from leadthrough.identification.params_file import ParamsFile, load_params, save_params
-from leadthrough.identification.presliding import fit_presliding
+from leadthrough.identification.api import IdentifyConfig
+from leadthrough.identification.calibration import Calibration, calibrate
+from leadthrough.identification.params_file import ParamsFile, load_params
 from leadthrough.robot.description import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.sim.calibration_set import (
@@ -64,11 +63,13 @@ def shipped_guiding_params(robot: Robot, seed: int = DEFAULT_SIM_SEED) -> Params
 
 def calibrate_for_guiding(robot: Robot, seed: int = DEFAULT_SIM_SEED, duration_s: float = 60.0,
                           progress: Callable[[str], None] | None = None,
-                          plant: PlantPreset | str = PlantPreset.REALISTIC) -> SweepCalibration:
+                          plant: PlantPreset | str = PlantPreset.REALISTIC) -> Calibration:
     """The demo's guiding calibration: an optimised excitation, a friction sweep and a
-    presliding test recorded on simulated instance ``seed``, identified with ``consistent`` and
-    the sweep's friction, with each joint's z₀ from the presliding test (as ``leadthrough
-    identify --friction-sweep S --presliding-test P`` does).
+    presliding test recorded on simulated instance ``seed``, calibrated with ``consistent``
+    and the sweep's friction, each joint's z₀ from the presliding test and the command lag
+    from the excitation (:func:`~leadthrough.identification.calibration.calibrate`, as
+    ``leadthrough identify --friction-sweep S --presliding-test P`` does; the in-process
+    simulator's lag is 0).
 
     Args:
         robot: The robot.
@@ -84,12 +85,10 @@ def calibrate_for_guiding(robot: Robot, seed: int = DEFAULT_SIM_SEED, duration_s
                             SimConfig(seed=seed, run=0, plant=plant_preset(plant)))
     start = guide_start_pose(robot)
     sweep = record_friction_sweep(robot, seed=seed, run=2, q_start=start, plant=plant)
-    pre = fit_presliding(record_presliding_test(robot, seed=seed, run=3, q_start=start,
-                                                plant=plant).measured, robot)
+    pre = record_presliding_test(robot, seed=seed, run=3, q_start=start, plant=plant)
     say("recorded the excitation, the friction sweep and the presliding test")
-    cal = identify_with_sweep(rec.measured, sweep.measured, robot, IdentifyConfig())
-    params = pre.applied_to(cal.result.params)
-    return replace(cal, result=replace(cal.result, params=params))
+    return calibrate(rec.measured, robot, "consistent", IdentifyConfig(),
+                     friction_sweep=sweep.measured, presliding_test=pre.measured)
 
 
 def main() -> None:
@@ -97,8 +96,7 @@ def main() -> None:
     robot = load_robot("er20")
     t0 = time.perf_counter()
     cal = calibrate_for_guiding(robot, progress=print)
-    path = save_params(shipped_params_path(robot.name), robot, "consistent", cal.result.params,
-                       cal.result.stats, DEFAULT_SIM_SEED, friction_sweep=True)
+    path = cal.save(shipped_params_path(robot.name), robot, DEFAULT_SIM_SEED)
     print(f"-> {path} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
 
 
