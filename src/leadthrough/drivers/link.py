@@ -22,7 +22,7 @@ import select
 import socket
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TypeVar
@@ -257,10 +257,16 @@ def decode_packet(data: bytes, decode: Callable[[bytes], P], stats: LinkStats) -
 def decode_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
                      decode: Callable[[bytes], P], size: int = 4096,
                      budget_s: float = PARSE_BUDGET_S,
-                     ) -> list[tuple[P, tuple[str, int]]]:
-    """:func:`drain_datagrams`, then decode each (:func:`decode_packet`): refused ones are
-    counted by code and dropped; once ``budget_s`` of decoding is spent the rest are dropped
-    unparsed (``BUDGET``).
+                     accept: Callable[[tuple[str, int]], bool] | None = None,
+                     ) -> Iterator[tuple[P, tuple[str, int]]]:
+    """:func:`drain_datagrams`, then decode each (:func:`decode_packet`), oldest first:
+    datagrams from a sender that ``accept`` refuses are dropped unparsed (``FOREIGN``), refused
+    ones are counted by code and dropped; once ``budget_s`` of decoding is spent the rest are
+    dropped unparsed (``BUDGET``), except the drain's newest datagram (one more decode of at
+    most ``size`` bytes): the controller waits for the answer to it.
+
+    A generator: ``accept`` is asked for each datagram when it is reached, so a caller that
+    fixes its peer on a packet has the rest of the same drain judged by it.
 
     Args:
         sock: A UDP socket.
@@ -268,19 +274,23 @@ def decode_datagrams(sock: socket.socket, timeout: float, status: LinkStatus,
         status: Counters (``timeouts``, ``malformed``, ``bad``) and the latched error.
         decode: The codec; raises :class:`~leadthrough.errors.DataError` on bad input.
         size: Receive buffer size [bytes].
-        budget_s: Decoding time this call may spend [s].
+        budget_s: Decoding CPU time this call may spend [s].
+        accept: Whether a sender is the controller (None: every sender).
 
-    Returns:
+    Yields:
         The decoded packets with their senders, oldest first.
     """
-    out = []
     stats = status.stats
     spent0 = stats.decode_s
-    for data, addr in drain_datagrams(sock, timeout, status, size):
-        if stats.decode_s - spent0 > budget_s:
+    drained = drain_datagrams(sock, timeout, status, size)
+    newest = len(drained) - 1
+    for k, (data, addr) in enumerate(drained):
+        if accept is not None and not accept(addr):
+            stats.refuse(BadPacket.FOREIGN)
+            continue
+        if stats.decode_s - spent0 > budget_s and k != newest:
             stats.refuse(BadPacket.BUDGET)
             continue
         packet = decode_packet(data, decode, stats)
         if packet is not None:
-            out.append((packet, addr))
-    return out
+            yield packet, addr

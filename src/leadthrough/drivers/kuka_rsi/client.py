@@ -46,8 +46,7 @@ from leadthrough.drivers.link import (
     LinkStatus,
     SequenceTracker,
     Transport,
-    decode_packet,
-    drain_datagrams,
+    decode_datagrams,
 )
 from leadthrough.drivers.wire import BadPacket
 from leadthrough.errors import DriverError
@@ -208,21 +207,11 @@ class RsiClient(Transport):
               newest: RobotMessage | None) -> RobotMessage | None:
         """One drain of ``sock``: the newest document of the robot taken, or ``newest``."""
         stats = self._link.stats
-        drained = drain_datagrams(sock, timeout, self._link, MAX_DOCUMENT_BYTES + 1)
-        last = len(drained) - 1
-        for k, (data, addr) in enumerate(drained):
-            robot = self._robot
-            if (robot is not None and addr != robot) or (
-                    self._robot_host is not None and addr[0] != self._robot_host):
-                stats.refuse(BadPacket.FOREIGN)
-                continue
-            # past the budget only the drain's newest datagram is still decoded (one more
-            # decode of at most MAX_DOCUMENT_BYTES): the robot waits for the answer to it
-            if stats.decode_s - spent0 > PARSE_BUDGET_S and k != last:
-                stats.refuse(BadPacket.BUDGET)
-                continue
-            msg = decode_packet(data, RobotMessage.decode, stats)
-            if msg is None or not self._in_sequence(msg, addr):
+        for msg, addr in decode_datagrams(sock, timeout, self._link, RobotMessage.decode,
+                                          MAX_DOCUMENT_BYTES + 1,
+                                          PARSE_BUDGET_S - (stats.decode_s - spent0),
+                                          self._from_robot):
+            if not self._in_sequence(msg, addr):
                 continue
             self._ipoc.update(msg.ipoc, stats)
             stats.received += 1
@@ -230,6 +219,13 @@ class RsiClient(Transport):
                 stats.skipped += 1
             newest, self._robot, self._pending = msg, addr, None
         return newest
+
+    def _from_robot(self, addr: tuple[str, int]) -> bool:
+        """Whether ``addr`` is the robot: its address and port once fixed (by
+        ``robot_address`` or the first valid document), its host if only that was given."""
+        robot = self._robot
+        return not ((robot is not None and addr != robot) or (
+            self._robot_host is not None and addr[0] != self._robot_host))
 
     def _in_sequence(self, msg: RobotMessage, addr: tuple[str, int]) -> bool:
         """Whether ``msg``'s IPOC follows the last one taken by whole cycles, at most
