@@ -333,13 +333,9 @@ def fit_slow(slow: SlowState, capacity: int) -> tuple[bytes, str | None]:
     if len(blob) <= capacity:
         return blob, None
     dropped: list[str] = []
-    events = slow.events
-    while len(blob) > capacity and events:
-        events = events[len(events) // 2 + 1:] if len(events) > 1 else ()
-        blob = replace(slow, events=events).encode()
-    if len(events) != len(slow.events):
-        dropped.append(f"{len(slow.events) - len(events)} oldest transitions")
-    slow = replace(slow, events=events)
+    slow, blob, n = _drop_oldest(slow, "events", blob, capacity)
+    if n:
+        dropped.append(f"{n} oldest transitions")
     if len(blob) > capacity and slow.notices:
         slow = replace(slow, notices=tuple(replace(n, text=n.text[:200])
                                            for n in slow.notices[-5:]),
@@ -347,16 +343,28 @@ def fit_slow(slow: SlowState, capacity: int) -> tuple[bytes, str | None]:
                        error=None if slow.error is None else slow.error[:200])
         blob = slow.encode()
         dropped.append("notices shortened")
-    marks = slow.marks
-    while len(blob) > capacity and marks:
-        marks = marks[len(marks) // 2 + 1:] if len(marks) > 1 else ()
-        blob = replace(slow, marks=marks).encode()
-    if len(marks) != len(slow.marks):
-        dropped.append(f"{len(slow.marks) - len(marks)} oldest marks")
+    slow, blob, n = _drop_oldest(slow, "marks", blob, capacity)
+    if n:
+        dropped.append(f"{n} oldest marks")
     if len(blob) > capacity:
         raise RequestError("the snapshot's record is too small for its settings",
                            field="blob_bytes", value=capacity, expected=f">= {len(blob)}")
     return blob, "the snapshot's record is full: " + ", ".join(dropped) + " left out of it"
+
+
+def _drop_oldest(slow: SlowState, name: str, blob: bytes,
+                 capacity: int) -> tuple[SlowState, bytes, int]:
+    """Halve the oldest of ``slow``'s tuple ``name`` away (one more each time) until its
+    encoding ``blob`` fits ``capacity`` or nothing is left; returns the state, its encoding and
+    how many were dropped."""
+    items: tuple[Any, ...] = getattr(slow, name)
+    kept = items
+    change: dict[str, Any] = {}
+    while len(blob) > capacity and kept:
+        kept = kept[len(kept) // 2 + 1:] if len(kept) > 1 else ()
+        change[name] = kept
+        blob = replace(slow, **change).encode()
+    return replace(slow, **change), blob, len(items) - len(kept)
 
 
 def numbers_size(n: int) -> int:
