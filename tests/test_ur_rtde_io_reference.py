@@ -26,7 +26,7 @@ import rtde_io
 import rtde_receive
 
 from leadthrough.drivers.ur_rtde.client import DEFAULT_OUTPUTS, RtdeClient
-from wire_helpers import free_loopback_address, spawn_emulator, stop_process
+from wire_helpers import emulated_ur5
 
 INTS = {18: 1818, 19: -19, 22: 2_000_000_022}
 DOUBLES = {18: 18.5, 20: -0.25, 22: 1e6}
@@ -36,12 +36,8 @@ REGISTERS = ([f"input_int_register_{i}" for i in range(18, 24)]
 
 @pytest.fixture
 def emulator_host() -> Iterator[str]:
-    host = free_loopback_address(30004)
-    proc = spawn_emulator("ur-rtde", "ur5", host, 30004)
-    try:
+    with emulated_ur5() as host:
         yield host
-    finally:
-        stop_process(proc)
 
 
 def _controller_outputs(host: str, names: list[str], until: Any) -> dict[str, Any]:

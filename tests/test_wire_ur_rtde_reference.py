@@ -26,17 +26,13 @@ import pytest
 import rtde_receive
 
 from leadthrough.drivers.ur_rtde.client import RtdeClient
-from wire_helpers import free_loopback_address, spawn_emulator, stop_process
+from wire_helpers import emulated_ur5
 
 
 @pytest.fixture
 def emulator_host() -> Iterator[str]:
-    host = free_loopback_address(30004)
-    proc = spawn_emulator("ur-rtde", "ur5", host, 30004)
-    try:
+    with emulated_ur5() as host:
         yield host
-    finally:
-        stop_process(proc)
 
 
 def test_ur_rtde_reads_actual_q_and_current(emulator_host: str) -> None:

@@ -2,20 +2,33 @@
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TypeVar
 
 import numpy as np
 
-from leadthrough.sim.emulators.process import (  # noqa: F401 (re-exported)
+from leadthrough.sim.emulators.process import (  # (also re-exported)
     free_loopback_address,
     spawn_emulator,
     stop_emulator,
 )
 
 T = TypeVar("T")
+
+
+@contextlib.contextmanager
+def emulated_ur5() -> Iterator[str]:
+    """``leadthrough emulate ur-rtde --robot ur5`` in its own process on a free loopback
+    address (RTDE port 30004); yields the address, stops the process after."""
+    host = free_loopback_address(30004)
+    proc = spawn_emulator("ur-rtde", "ur5", host, 30004)
+    try:
+        yield host
+    finally:
+        stop_process(proc)
 
 
 def wait_for_line(proc: subprocess.Popen[str], start: str, timeout: float) -> str:
