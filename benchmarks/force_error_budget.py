@@ -71,7 +71,7 @@ from leadthrough.estimation.wrench import wrench_from_torque
 from leadthrough.robot import Robot, load_robot
 from leadthrough.session.loop_config import LoopConfig, LoopParts
 from leadthrough.session.metrics import MOTION_SPEED, PHANTOM_WINDOW_S, hands_off_intervals
-from leadthrough.session.record import SessionLog
+from leadthrough.session_format import SessionLog
 from leadthrough.sim.driver import SimDriver
 from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session

@@ -41,9 +41,9 @@ import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
 
 from leadthrough.session.loop import GIL_SWITCH_S
-from leadthrough.session.record import session_columns
 from leadthrough.session.recorder import DEFAULT_CHUNK_ROWS, RecordChunk, chunks_to_log
 from leadthrough.session.session_file import SessionFileSink
+from leadthrough.session_format import session_columns
 
 
 def _probe(work: Callable[[], None], priority: int | None) -> np.ndarray:

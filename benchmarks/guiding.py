@@ -47,7 +47,7 @@ from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop_config import LoopConfig, build_loop
 from leadthrough.session.metrics import force_error_in_motion, phantom_forces, release_overruns
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
-from leadthrough.session.record import SessionLog
+from leadthrough.session_format import SessionLog
 from leadthrough.sim.calibration_set import (
     record_calibration_set,
     record_friction_sweep,

@@ -103,7 +103,7 @@ def _session_figures(path: Path) -> dict[str, Any]:
     import numpy as np
 
     from leadthrough.session.metrics import release_overruns
-    from leadthrough.session.record import load_session
+    from leadthrough.session_format import load_session
 
     log = load_session(path)
     speed = np.linalg.norm(log.twist_cmd_base[:, :3], axis=1)

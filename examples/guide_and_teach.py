@@ -17,7 +17,7 @@ import numpy as np
 
 from leadthrough.identification.params_file import load_params
 from leadthrough.robot import load_robot
-from leadthrough.session.record import save_session
+from leadthrough.session_format import save_session
 from leadthrough.sim.session import SimSessionConfig, run_sim_session
 from leadthrough.teach import teach_session, write_program_json
 

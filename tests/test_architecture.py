@@ -86,6 +86,59 @@ def test_layers_import_only_what_the_pipeline_allows() -> None:
     assert not wrong, "\n".join(wrong)
 
 
+#: Packages that read a session file but import nothing of the real-time loop or the pendant.
+READ_SESSIONS_ONLY = ("teach", "report")
+#: What they may not import (the session's format is the top-level ``session_format``).
+REAL_TIME = ("leadthrough.session", "leadthrough.pendant")
+
+
+def _all_imports(source: str, package: str) -> set[str]:
+    """Every module ``source`` (a module of ``package``) imports, anywhere in it (inside
+    functions too), relative imports resolved; ``from P import x`` counts ``P`` and ``P.x``."""
+    parts = package.split(".")
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = parts[:len(parts) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names)
+    return names
+
+
+def _reaches(name: str, packages: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in packages)
+
+
+def test_the_import_finder_sees_lazy_relative_and_from_package_imports() -> None:
+    source = ("import numpy\n"
+              "def f():\n    from leadthrough.session.loop import run_session\n"
+              "def g():\n    from ..pendant import backend\n"
+              "from leadthrough import session\n")
+    found = _all_imports(source, "leadthrough.teach")
+    assert {"leadthrough.session.loop", "leadthrough.pendant.backend",
+            "leadthrough.session"} <= found
+    assert not _reaches("leadthrough.session_format", REAL_TIME)
+    assert _reaches("leadthrough.session", REAL_TIME)
+
+
+def test_teach_and_report_import_nothing_of_the_loop_or_the_pendant() -> None:
+    wrong = []
+    for path in _modules():
+        if _package(path) not in READ_SESSIONS_ONLY:
+            continue
+        module = _module_name(path)
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for name in _all_imports(path.read_text(encoding="utf-8"), package):
+            if _reaches(name, REAL_TIME):
+                wrong.append(f"{path.relative_to(SRC)} imports {name}")
+    assert not wrong, "\n".join(wrong)
+
+
 def test_no_function_is_longer_than_80_lines() -> None:
     long = []
     for path in _modules():

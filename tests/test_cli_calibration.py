@@ -247,7 +247,7 @@ def test_the_simulated_robot_follows_the_params(workdir: Path, tmp_path: Path,
     that robot by default and refuses another; payload refuses a recording of another one."""
     from leadthrough.identification.params_file import load_params
     from leadthrough.robot import load_robot
-    from leadthrough.session.record import load_session
+    from leadthrough.session_format import load_session
 
     rec = workdir / "rec0.parquet"
     assert load_recording(rec).sim_seed == 1

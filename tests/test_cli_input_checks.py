@@ -23,7 +23,7 @@ from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import save_params
 from leadthrough.robot import load_robot
 from leadthrough.session.realtime import RealtimeRequest, setup_realtime
-from leadthrough.session.record import FORMAT_VERSION, session_metadata
+from leadthrough.session_format import FORMAT_VERSION, session_metadata
 from leadthrough.sim.guiding_params import shipped_params_path
 
 COLUMN_MAP = """delimiter = ","

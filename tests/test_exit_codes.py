@@ -27,7 +27,7 @@ from leadthrough.drivers.controllers import DEFAULT_PORTS
 from leadthrough.excitation.fourier import TrajectorySamples
 from leadthrough.excitation.trajectory_file import save_trajectory
 from leadthrough.robot.description import load_robot
-from leadthrough.session.record import load_session
+from leadthrough.session_format import load_session
 from leadthrough.sim.driver import InjectedFault, InjectedFaultKind
 from leadthrough.sim.emulators import EmulatorOptions, FaultPlan, Window, start
 from leadthrough.sim.guiding_params import shipped_params_path

@@ -38,8 +38,8 @@ from leadthrough.fileio import atomic_write_text
 from leadthrough.identification.metrics import ResidualStats
 from leadthrough.identification.params_file import load_params, save_params
 from leadthrough.robot.description import Robot, load_robot
-from leadthrough.session.record import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.session.session_file import SessionFileSink
+from leadthrough.session_format import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.sim.guiding_params import shipped_params_path
 from leadthrough.teach.path import forward_tcp
 
@@ -247,7 +247,7 @@ _KILLED_SESSION = """
 import os, signal, sys, time
 import numpy as np
 from scipy.spatial.transform import Rotation
-from leadthrough.session.record import load_session
+from leadthrough.session_format import load_session
 from leadthrough.session.recorder import SessionRecorder
 from leadthrough.session.session_file import SessionFileSink
 

@@ -35,7 +35,7 @@ import pytest
 
 from leadthrough.control.safety_states import State
 from leadthrough.drivers.controllers import DEFAULT_PORTS
-from leadthrough.session.record import SessionLog, load_session
+from leadthrough.session_format import SessionLog, load_session
 from leadthrough.sim.emulators import EMULATORS
 from leadthrough.sim.emulators.kuka_rsi import IPOC_START
 from leadthrough.sim.emulators.process import emulator_report

@@ -27,11 +27,11 @@ from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session import loop_start
 from leadthrough.session.loop import GIL_SWITCH_S, EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
-from leadthrough.session.record import SessionLog, load_session
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.servo_loop import ServoLoop
 from leadthrough.session.session_file import SessionFileSink
 from leadthrough.session.watchdog import STACK_BYTES, DriverWatchdog
+from leadthrough.session_format import SessionLog, load_session
 from leadthrough.sim.driver import InjectedFault, InjectedFaultKind, InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session

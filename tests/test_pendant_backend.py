@@ -20,11 +20,16 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from leadthrough.control.guiding import GuidingConfig
+from leadthrough.control.guiding_types import GuidingOutput
 from leadthrough.control.hand_release import HandReleaseConfig
 from leadthrough.control.safety import Fault, State
+from leadthrough.drivers.protocol import DriverFeedback, JointCommand
 from leadthrough.errors import ControlError, TeachError
+from leadthrough.estimation.estimator import EstimatorOutput
+from leadthrough.identification.params_file import ParamsFile
 from leadthrough.pendant.backend import (
     Adjust,
     ClearFault,
@@ -42,7 +47,8 @@ from leadthrough.pendant.taught_points import TaughtPoints
 from leadthrough.pendant.transitions import describe
 from leadthrough.robot import Robot
 from leadthrough.session.loop_config import LoopConfig
-from leadthrough.session.record import load_session
+from leadthrough.session.recorder import SessionRecorder
+from leadthrough.session_format import SessionEvent, load_session
 from leadthrough.sim.driver import InjectedFaultKind
 from leadthrough.sim.guiding_params import shipped_guiding_params
 from leadthrough.sim.operator_scripts import push_x
@@ -135,7 +141,8 @@ def test_settings_change_at_rest_only_and_are_reported(sim: SimulatedPendantSess
                     "the refusal")
     assert refused.settings.frame == "tool" and "IDLE or FAULT" in refused.notices[-1].text
     live.send(ClearFault())
-    warned = until(live, lambda s: s.notices[-1].text == "no fault to clear", 0.05, "notice")
+    warned = until(live, lambda s: s.notices[-1].text == "reset refused: no fault is latched",
+                   0.05, "notice")
     assert [n.number for n in warned.notices] == sorted({n.number for n in warned.notices})
 
 
@@ -152,7 +159,8 @@ def test_a_fault_latches_until_cleared_at_rest(sim: SimulatedPendantSession) -> 
     live.send(SetEnable(False))
     live.send(ClearFault())
     cleared = until(live, lambda s: s.state == State.IDLE, 0.5, "IDLE after the clear")
-    assert cleared.cause == "FAULT_CLEARED"
+    assert cleared.cause == "RESET"        # restarted at the measured position
+    assert cleared.notices[-1].text.startswith("fault reset: restarted at the measured")
 
 
 def test_the_loop_reports_why_it_did_not_start(er20: Robot) -> None:
@@ -197,21 +205,30 @@ def test_snapshots_are_copies(sim: SimulatedPendantSession) -> None:
 
 
 # --------------------------------------------------------------------- the recording ring
-class _Rows:
-    """Stands in for the loop: each stored row holds its own time in every column."""
+class _Cycle:
+    """Stands in for the loop's state of a controller cycle (the loop's own record types):
+    :meth:`store` records a row that holds its time in every number but the state codes."""
 
-    def store(self, rec: object, i: int, t: float) -> None:
-        for column in vars(rec).values():
-            if column is not None:
-                column[i] = t
+    def __init__(self, n: int) -> None:
+        self.fb = DriverFeedback(t=0.0, q=np.zeros(n), current=np.zeros(n), sequence=0)
+        self.cmd = JointCommand.zeros(n)
+        self.e_out, self.c_out = EstimatorOutput(n), GuidingOutput(n)
+        self.applied = np.zeros(6)
+
+    def store(self, ring: LiveRecording, t: float) -> None:
+        for array in (self.fb.q, self.fb.current, self.cmd.q, self.cmd.qd, self.e_out.tau_ext,
+                      self.e_out.wrench, self.c_out.transform_tool_to_base,
+                      self.c_out.twist_base, self.applied):
+            array[...] = t
+        ring.store(t, self.fb, self.cmd, self.e_out, self.c_out, self.applied)
 
 
 @settings(max_examples=40, deadline=None)
 @given(st.integers(2, 40), st.integers(0, 120))
 def test_the_ring_keeps_the_last_rows_in_order(capacity: int, written: int) -> None:
-    ring, loop = LiveRecording(capacity, 2, True), _Rows()
+    ring, loop = LiveRecording(capacity, 2, True), _Cycle(2)
     for k in range(written):
-        ring.store(loop, float(k))  # type: ignore[arg-type]
+        loop.store(ring, float(k))
     rows, first = ring.rows()
     ring.block.close()
     kept = min(written, capacity - 1) if written >= capacity else written
@@ -221,13 +238,13 @@ def test_the_ring_keeps_the_last_rows_in_order(capacity: int, written: int) -> N
 
 
 def test_the_ring_never_returns_a_row_being_written() -> None:
-    ring, loop = LiveRecording(50, 6, True), _Rows()
+    ring, loop = LiveRecording(50, 6, True), _Cycle(6)
     stop = threading.Event()
 
     def writer() -> None:
         k = 0
         while not stop.is_set():
-            ring.store(loop, float(k))  # type: ignore[arg-type]
+            loop.store(ring, float(k))
             k += 1
 
     thread = threading.Thread(target=writer)
@@ -238,7 +255,8 @@ def test_the_ring_never_returns_a_row_being_written() -> None:
             rows, first = ring.rows()
             expected = np.arange(first, first + rows.time.size, dtype=float)
             assert np.array_equal(rows.time, expected)
-            for column in (rows.q, rows.current, rows.rot.reshape(len(rows.rot), 9)):
+            for column in (rows.q, rows.current, rows.rot.reshape(len(rows.rot), 9),
+                           rows.applied):
                 assert np.all(column == expected[:, None])
             complete += rows.time.size > 0
     finally:
@@ -246,6 +264,40 @@ def test_the_ring_never_returns_a_row_being_written() -> None:
         thread.join()
         ring.block.close()
     assert complete > 0     # (a writer that laps the ring during a copy leaves no rows)
+
+
+def test_the_rings_session_is_the_loop_recorders_session_of_the_kept_cycles() -> None:
+    """The export's session is the loop's recording of the same cycles (one row layout, one
+    conversion): every column, the orientation as a quaternion, the state codes, the events."""
+    n, capacity, written = 3, 8, 13
+    ring, loop = LiveRecording(capacity, n, True), _Cycle(n)
+    recorder = SessionRecorder(n, True, chunk_rows=4)
+    rng = np.random.default_rng(7)
+    for k in range(written):
+        t = 0.01 * k
+        for array in (loop.fb.q, loop.fb.current, loop.cmd.q, loop.cmd.qd, loop.e_out.tau_ext,
+                      loop.e_out.wrench, loop.c_out.twist_base, loop.applied):
+            array[:] = rng.normal(size=array.shape)
+        loop.c_out.transform_tool_to_base[:3, :3] = Rotation.from_rotvec(
+            rng.normal(size=3)).as_matrix()
+        loop.c_out.transform_tool_to_base[:3, 3] = rng.normal(size=3)
+        loop.c_out.state, loop.c_out.fault = State(k % 4), Fault(k % 3)
+        ring.store(t, loop.fb, loop.cmd, loop.e_out, loop.c_out, loop.applied)
+        c = loop.c_out
+        recorder.store(t, loop.fb.q, loop.fb.current, loop.e_out.tau_ext, loop.e_out.wrench,
+                       loop.cmd.q, loop.cmd.qd, c.transform_tool_to_base, c.twist_base,
+                       int(c.state), int(c.fault), loop.applied)
+    full = recorder.finish("er20", [], {})
+    assert full is not None
+    live = ring.session_log("er20", [], [(0.1, "P1")], {"seed": 7})
+    ring.block.close()
+    kept = slice(written - (capacity - 1), written)   # the oldest slot is the one being written
+    for name in ("time", "q", "current", "tau_ext", "wrench_base", "q_cmd", "qd_cmd",
+                 "tcp_cmd_base", "tcp_cmd_quat", "twist_cmd_base", "state", "fault",
+                 "wrench_applied_base"):
+        assert np.array_equal(getattr(live, name), getattr(full, name)[kept]), name
+    assert live.events == [SessionEvent(t=0.1, kind="mark", label="P1")]
+    assert live.settings == {"seed": 7} and live.robot == "er20"
 
 
 # --------------------------------------------------------------------- the point list
@@ -348,15 +400,19 @@ def test_after_a_release_the_law_alone_stays_at_rest(er20: Robot) -> None:
     assert [_moves_again_at_rest(er20, light_guiding(), run) for run in REST_RUNS] == [None] * 4
 
 
-def test_marks_stop_at_the_limit_with_a_notice() -> None:
-    from types import SimpleNamespace
+def test_marks_stop_at_the_limit_with_a_notice(er20: Robot,
+                                               nominal_params: ParamsFile) -> None:
+    """The loop's one request handler: marks up to :data:`MAX_MARKS`, then a notice; a
+    simulator's request on a loop without a simulator is refused with a notice."""
+    from loop_helpers import bare_loop
 
-    from leadthrough.pendant.loop_requests import MAX_MARKS, RequestHandler
-    loop = SimpleNamespace(fb=SimpleNamespace(q=np.zeros(6)))
-    handler = RequestHandler(None, loop, None)  # type: ignore[arg-type]
+    from leadthrough.session.servo_loop import MAX_MARKS
+    loop = bare_loop(er20, nominal_params)
+    loop.fb.q[:] = 0.0
     for k in range(MAX_MARKS + 1):
-        handler.apply(MarkPoint(f"W{k + 1}"), float(k))
-    assert len(handler.marks) == MAX_MARKS
-    assert handler.notices[-1].text.startswith(f"not marked: {MAX_MARKS} marks")
-    handler.apply(InjectFault(InjectedFaultKind.STALE, 0.0, 1.0), 0.0)      # not a simulator
-    assert handler.notices[-1].text == "not a simulator: InjectFault refused"
+        loop.serve(MarkPoint(f"W{k + 1}"), float(k))
+    assert len(loop.marks) == MAX_MARKS and loop.marks[-1].label == f"W{MAX_MARKS}"
+    assert loop.notices[-1].text.startswith(f"not marked: {MAX_MARKS} marks")
+    assert sum(e.kind == "mark" for e in loop.events) == MAX_MARKS
+    loop.serve(InjectFault(InjectedFaultKind.STALE, 0.0, 1.0), 0.0)      # not a simulator
+    assert loop.notices[-1].text == "not a simulator: InjectFault refused"

@@ -5,7 +5,7 @@ programs, and a newline in it ended the comment: the label ``"W1\\n    SetDO do1
 MoveAbsJ [[0,0,0,0,0,0],...],v5000,fine,tool0;"`` gave a RAPID program with a digital output and
 an unchecked full-speed move that still "solved back". Here the attack is replayed:
 
-* through a session file written with :func:`~leadthrough.session.record.save_session` whose
+* through a session file written with :func:`~leadthrough.session_format.save_session` whose
   mark label is then altered in the file's metadata, read by ``leadthrough teach``: exit 2, the
   error names the file, the event's field and the label, nothing is written;
 * into each of the four program writers directly: refused;
@@ -36,7 +36,7 @@ from leadthrough.labels import MAX_LABEL_CHARS, LabelError, is_label
 from leadthrough.robot import Robot
 from leadthrough.robot.arm_configuration import arm_structure, branch_values
 from leadthrough.robot.inverse_kinematics import pose_of
-from leadthrough.session.record import SessionEvent, SessionLog, save_session
+from leadthrough.session_format import SessionEvent, SessionLog, save_session
 from leadthrough.teach import teach_session, write_program_csv, write_program_json
 from leadthrough.teach.programs import LANGUAGES, check_program, target_configurations
 from leadthrough.teach.programs.round_trip import SINGULARITY_MARGIN_DEG, sample_configurations

@@ -20,7 +20,7 @@ import pytest
 from leadthrough.cli import main
 from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.inverse_kinematics import pose_of
-from leadthrough.session.record import SessionEvent, SessionLog, save_session
+from leadthrough.session_format import SessionEvent, SessionLog, save_session
 from leadthrough.teach import teach_session
 from leadthrough.teach.programs import LANGUAGES, ProgramOptions, render_robot_program
 from leadthrough.teach.programs.parsed import solve_back

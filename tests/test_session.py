@@ -31,7 +31,7 @@ from leadthrough.session.metrics import (
     release_motion_times,
     release_overruns,
 )
-from leadthrough.session.record import SessionEvent, SessionLog, load_session, save_session
+from leadthrough.session_format import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.sim.driver import InjectedFault as Fault
 from leadthrough.sim.driver import InjectedFaultKind as FaultKind
 from leadthrough.sim.guiding_params import shipped_guiding_params

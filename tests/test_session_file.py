@@ -22,9 +22,9 @@ from leadthrough.robot import Robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, build_loop
-from leadthrough.session.record import SessionEvent, SessionLog, load_session
 from leadthrough.session.recorder import RecordChunk, SessionRecorder
 from leadthrough.session.session_file import SessionFileSink
+from leadthrough.session_format import SessionEvent, SessionLog, load_session
 from leadthrough.sim.driver import InputScript, SimDriver
 from leadthrough.sim.robot import SimConfig, SimRobot
 

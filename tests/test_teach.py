@@ -28,7 +28,7 @@ from leadthrough.cli import main
 from leadthrough.errors import LeadthroughError, TeachError
 from leadthrough.fileio import read_comment_header
 from leadthrough.robot import Robot
-from leadthrough.session.record import SessionEvent, SessionLog, load_session, save_session
+from leadthrough.session_format import SessionEvent, SessionLog, load_session, save_session
 from leadthrough.teach import (
     check_limits,
     fit_line,

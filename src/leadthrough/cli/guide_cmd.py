@@ -32,7 +32,7 @@ from leadthrough.fileio import require_folder
 from leadthrough.identification.params_file import ParamsFile, load_params
 from leadthrough.robot.description import load_robot
 from leadthrough.session.loop_config import SLOW_COMMAND_VELOCITY, LoopConfig
-from leadthrough.session.record import save_session
+from leadthrough.session_format import save_session
 from leadthrough.sim.operator_scripts import OPERATOR_NAMES
 from leadthrough.sim.plant import PLANT_NAMES
 from leadthrough.sim.session import (

@@ -58,9 +58,9 @@ from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import EndCause, LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
 from leadthrough.session.realtime import RealtimeRequest, setup_realtime
-from leadthrough.session.record import SessionEvent
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.session_file import SessionFileSink
+from leadthrough.session_format import SessionEvent
 
 __all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot", "latched_faults"]
 

@@ -14,7 +14,7 @@ from leadthrough.errors import DataError, TeachError, UnknownRobotError
 from leadthrough.fileio import atomic_write_text, require_folder
 from leadthrough.labels import check_label
 from leadthrough.robot.description import Robot, load_robot
-from leadthrough.session.record import SessionLog, load_session
+from leadthrough.session_format import SessionLog, load_session
 from leadthrough.teach.export import line_to_dict, program_to_dict, write_program_csv
 from leadthrough.teach.program import TaughtProgram, teach_session
 from leadthrough.teach.programs import LANGUAGES, ProgramOptions, render_robot_program

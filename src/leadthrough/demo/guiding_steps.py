@@ -19,7 +19,7 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
 from leadthrough.session.loop_config import LoopConfig
 from leadthrough.session.plots import plot_force_velocity, plot_path_3d
-from leadthrough.session.record import SessionLog, save_session
+from leadthrough.session_format import SessionLog, save_session
 from leadthrough.sim.calibration_set import CalibrationSet, record_excitation
 from leadthrough.sim.mujoco_model import Payload
 from leadthrough.sim.plant import PlantPreset, plant_preset

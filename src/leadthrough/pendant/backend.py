@@ -13,8 +13,10 @@ period; only the operating system's scheduler is shared. The pendant's side:
   :meth:`~LiveSession.period_times` and the recording for the export
   (:meth:`~LiveSession.session_log`) are rings in shared memory, read the same way;
 * **requests out**: :meth:`LiveSession.send` writes a request into a ``multiprocessing`` pipe;
-  the loop takes what has arrived at the start of each controller cycle
-  (:mod:`~leadthrough.pendant.loop_requests`). Refusals and results come back as notices.
+  the loop reads what has arrived every servo period and serves it in order
+  (:class:`~leadthrough.session.requests.PipeRequests`, :meth:`ServoLoop.serve
+  <leadthrough.session.servo_loop.ServoLoop.serve>`). Refusals and results come back as
+  notices.
 
 A frozen, slow or closed browser therefore changes nothing in the loop's process
 (``benchmarks/pendant_isolation.py`` measures it). If the pendant's process dies, the loop sees
@@ -66,7 +68,7 @@ from leadthrough.pendant.messages import (
 )
 from leadthrough.pendant.shared_state import PeriodRing, SeqlockRecord, SharedBlock
 from leadthrough.robot.description import Robot
-from leadthrough.session.record import SessionLog
+from leadthrough.session_format import SessionLog
 
 __all__ = ["Adjust", "ClearFault", "LiveSession", "LoopSnapshot", "MarkPoint", "MarkedPoint",
            "Notice", "PeriodTimes", "Request", "SetEnable", "SimulatorRequest"]
@@ -99,10 +101,9 @@ class LiveSession:
         self.robot = robot
         cycles = max(2, round(record_s / controller_dt))
         window = max(1, timing_window)
-        specs = LiveRecording.columns(cycles, robot.n, recipe.with_truth)
         self._blocks = [SharedBlock(SeqlockRecord.size(numbers_size(robot.n), BLOB_BYTES)),
                         SharedBlock(PeriodRing.nbytes(window)),
-                        SharedBlock(LiveRecording.nbytes(specs))]
+                        SharedBlock(LiveRecording.nbytes(cycles, robot.n, recipe.with_truth))]
         self._record = SeqlockRecord(self._blocks[0], numbers_size(robot.n), BLOB_BYTES)
         self._periods = PeriodRing(self._blocks[1], window)
         self.recording = LiveRecording(cycles, robot.n, recipe.with_truth, self._blocks[2])

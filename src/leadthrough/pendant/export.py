@@ -28,7 +28,7 @@ from leadthrough.errors import TeachError
 from leadthrough.fileio import atomic_write_text
 from leadthrough.pendant.backend import MarkedPoint
 from leadthrough.robot.description import Robot
-from leadthrough.session.record import SessionLog, save_session
+from leadthrough.session_format import SessionLog, save_session
 from leadthrough.teach import forward_tcp, teach_session, write_program_csv, write_program_json
 from leadthrough.teach.program import TaughtProgram
 

@@ -254,7 +254,9 @@ class _Runner:
             done = np.nan if deadline is None else (time.perf_counter() - deadline) * 1e6
             periods.store(i, work, done)
             if cycle:
-                self.recording.store(loop, t_loop)
+                applied = self.setup.applied_wrench
+                self.recording.store(t_loop, loop.fb, loop.cmd, loop.e_out, loop.c_out,
+                                     applied() if applied is not None else None)
                 self._publish(t_loop)
             i += 1
 

@@ -13,7 +13,8 @@ creates and the loop's process attaches to by name:
   too;
 * :class:`PeriodRing`: the timing of the last servo periods (written by the loop, a counter
   advanced after each entry);
-* :func:`shared_columns`: arrays (the live recording's columns) placed in a block.
+* the live recording's rows (:mod:`leadthrough.pendant.live_recording`), a ring of the loop
+  recorder's rows in a block.
 """
 
 from __future__ import annotations
@@ -21,14 +22,12 @@ from __future__ import annotations
 import contextlib
 import time
 import zlib
-from collections.abc import Sequence
-from dataclasses import dataclass
 from multiprocessing import shared_memory
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ColumnSpec", "PeriodRing", "SeqlockRecord", "SharedBlock", "shared_columns"]
+__all__ = ["PeriodRing", "SeqlockRecord", "SharedBlock"]
 
 _HEAD = 4          # sequence, blob length, numbers' CRC, blob's CRC (int64 each)
 
@@ -170,28 +169,3 @@ class PeriodRing:
         idx = np.arange(run - keep, run)
         k = idx % self.size
         return idx, self.work_us[k], self.done_us[k]
-
-
-@dataclass(frozen=True)
-class ColumnSpec:
-    """One array of a shared group: attribute name, shape and dtype (a string)."""
-
-    name: str
-    shape: tuple[int, ...]
-    dtype: str
-
-    @property
-    def nbytes(self) -> int:
-        """Its size [bytes], rounded up to 8."""
-        size = int(np.prod(self.shape)) * np.dtype(self.dtype).itemsize
-        return (size + 7) // 8 * 8
-
-
-def shared_columns(block: SharedBlock, specs: Sequence[ColumnSpec],
-                   offset: int = 0) -> dict[str, NDArray[np.generic]]:
-    """The arrays of ``specs`` laid out one after another in ``block`` from ``offset``."""
-    arrays: dict[str, NDArray[np.generic]] = {}
-    for spec in specs:
-        arrays[spec.name] = np.ndarray(spec.shape, np.dtype(spec.dtype), block.shm.buf, offset)
-        offset += spec.nbytes
-    return arrays

@@ -1,11 +1,11 @@
 """The guiding controller's state transitions as the session's events (what the log, the
-pendant and ``teach`` read: :class:`~leadthrough.session.record.SessionEvent`).
+pendant and ``teach`` read: :class:`~leadthrough.session_format.SessionEvent`).
 """
 
 from __future__ import annotations
 
 from leadthrough.control.safety import Event
-from leadthrough.session.record import SessionEvent
+from leadthrough.session_format import SessionEvent
 
 __all__ = ["transition_event"]
 

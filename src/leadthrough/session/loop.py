@@ -93,13 +93,13 @@ from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, LoopEnd
 from leadthrough.session.loop_start import start_loop
 from leadthrough.session.pacing import ComputeTimes, PeriodClock
-from leadthrough.session.record import SessionLog
 from leadthrough.session.recorder import ChunkSink, SessionRecorder
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.servo_loop import ServoLoop
-from leadthrough.session.servo_periods import ServoPeriods, SessionBuffers
+from leadthrough.session.servo_periods import ServoPeriods
+from leadthrough.session_format import SessionLog
 
-__all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods", "SessionBuffers",
+__all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods",
            "run_session", "stop_driver", "transition_event"]
 
 Array = NDArray[np.float64]

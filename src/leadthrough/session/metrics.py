@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from leadthrough.control.safety import State
 from leadthrough.errors import ControlError
 from leadthrough.session.loop import LoopResult
-from leadthrough.session.record import SessionLog
+from leadthrough.session_format import SessionLog
 
 __all__ = ["CycleTime", "SessionSummary", "faults_without_hand", "force_error_in_motion",
            "force_errors_in_motion", "hands_off_intervals", "phantom_forces",
@@ -273,7 +273,7 @@ def summarize(result: LoopResult, controller_dt: float, deceleration: float) -> 
 
     Raises:
         ControlError: The session was recorded to a file, not in memory (load it with
-            :func:`~leadthrough.session.record.load_session` and summarise the log).
+            :func:`~leadthrough.session_format.load_session` and summarise the log).
     """
     log = result.log
     if log is None:

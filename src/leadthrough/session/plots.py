@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from leadthrough.fileio import atomic_write
-from leadthrough.session.record import SessionLog
+from leadthrough.session_format import SessionLog
 
 __all__ = ["plot_force_velocity", "plot_path_3d"]
 

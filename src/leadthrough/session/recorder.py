@@ -3,7 +3,7 @@
 :class:`SessionRecorder` writes each period's row into a preallocated chunk
 (:class:`RecordChunk`, ``chunk_rows`` rows: a row write copies into existing arrays); a full
 chunk goes to its sink and the recorder continues in a fresh one. The in-memory sink keeps
-the chunks and joins them into a :class:`~leadthrough.session.record.SessionLog` at the end;
+the chunks and joins them into a :class:`~leadthrough.session_format.SessionLog` at the end;
 memory grows by one chunk at a time, with the session's length.
 """
 
@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from leadthrough.errors import DataError
-from leadthrough.session.record import SessionEvent, SessionLog
+from leadthrough.session_format import SessionEvent, SessionLog
 
 __all__ = ["DEFAULT_CHUNK_ROWS", "ChunkSink", "MemorySink", "RecordChunk",
            "SessionRecorder", "chunks_to_log"]
@@ -100,11 +100,53 @@ class RecordChunk:
         """Every row is filled."""
         return self.rows == self.time.size
 
+    def arrays(self) -> dict[str, NDArray[Any]]:
+        """Its arrays by name (``time``, ``q``, ..., ``applied`` if kept), in memory order;
+        each has one row per servo period."""
+        return {name: getattr(self, name)
+                for name, _, _ in _layout(0, 0, self.applied is not None)}
+
+    def write(self, i: int, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
+              q_cmd: Array, qd_cmd: Array, transform: Array, twist: Array, state: int,
+              fault: int, applied: Array | None) -> None:
+        """Row ``i``: one servo period (copies into the existing arrays; ``rows`` unchanged).
+
+        Args:
+            i: Row, below :attr:`size`.
+            t: Time [s].
+            q: Measured joint positions [rad], shape (n,).
+            current: Measured motor currents [A], shape (n,).
+            tau_ext: Estimated external joint torque [N·m], shape (n,).
+            wrench: Estimated TCP wrench, base axes [N, N·m], shape (6,).
+            q_cmd: Joint position command [rad], shape (n,).
+            qd_cmd: Joint velocity feed-forward [rad/s], shape (n,).
+            transform: Commanded TCP pose in the base frame, 4x4 (translation in [m]).
+            twist: Commanded TCP twist, base axes [m/s, rad/s], shape (6,).
+            state: Safety state code.
+            fault: Fault code.
+            applied: The simulator's applied wrench [N, N·m], shape (6,), or None (kept only
+                by a chunk that keeps it).
+        """
+        self.time[i] = t
+        self.q[i] = q
+        self.current[i] = current
+        self.tau_ext[i] = tau_ext
+        self.wrench[i] = wrench
+        self.q_cmd[i] = q_cmd
+        self.qd_cmd[i] = qd_cmd
+        self.tcp[i] = transform[:3, 3]
+        self.rot[i] = transform[:3, :3]
+        self.twist[i] = twist
+        self.state[i] = state
+        self.fault[i] = fault
+        if self.applied is not None and applied is not None:
+            self.applied[i] = applied
+
     def copy_from(self, other: RecordChunk) -> None:
         """The filled rows of ``other`` (a chunk of the same layout) into this one."""
         self.rows = other.rows
-        for name, _, _ in _layout(0, 0, other.applied is not None):
-            getattr(self, name)[:other.rows] = getattr(other, name)[:other.rows]
+        for name, array in other.arrays().items():
+            getattr(self, name)[:other.rows] = array[:other.rows]
 
     def quaternions(self) -> Array:
         """The commanded TCP orientations of the filled rows, (x, y, z, w), shape (rows, 4)."""
@@ -208,23 +250,11 @@ class SessionRecorder:
     def store(self, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
               q_cmd: Array, qd_cmd: Array, transform: Array, twist: Array, state: int,
               fault: int, applied: Array | None) -> None:
-        """Record one servo period."""
+        """Record one servo period (the arguments of :meth:`RecordChunk.write`)."""
         c = self.chunk
         i = c.rows
-        c.time[i] = t
-        c.q[i] = q
-        c.current[i] = current
-        c.tau_ext[i] = tau_ext
-        c.wrench[i] = wrench
-        c.q_cmd[i] = q_cmd
-        c.qd_cmd[i] = qd_cmd
-        c.tcp[i] = transform[:3, 3]
-        c.rot[i] = transform[:3, :3]
-        c.twist[i] = twist
-        c.state[i] = state
-        c.fault[i] = fault
-        if c.applied is not None and applied is not None:
-            c.applied[i] = applied
+        c.write(i, t, q, current, tau_ext, wrench, q_cmd, qd_cmd, transform, twist, state,
+                fault, applied)
         c.rows = i + 1
         self.rows += 1
         if self._events is not None and len(self._events) != self._noted:

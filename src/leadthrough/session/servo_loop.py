@@ -37,10 +37,10 @@ from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, Link, LoopEnd
 from leadthrough.session.operator_inputs import EnablingDevice, MarkButton, input_bit
 from leadthrough.session.pacing import PeriodClock
-from leadthrough.session.record import Mark, SessionEvent
 from leadthrough.session.requests import LoopRequests, Request, RequestKind
 from leadthrough.session.rest_rezero import zero_velocity_update
 from leadthrough.session.watchdog import DriverWatchdog
+from leadthrough.session_format import Mark, SessionEvent
 
 __all__ = ["ServoLoop"]
 

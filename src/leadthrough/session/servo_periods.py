@@ -1,6 +1,6 @@
-"""One servo period at a time with a caller-supplied enabling function, and the preallocated
-recording, for a runner that drives the periods itself (the pendant's live session,
-:mod:`leadthrough.pendant.backend`). :func:`leadthrough.session.loop.run_session` runs
+"""One servo period at a time with a caller-supplied enabling function, for a runner that
+drives the periods itself (the pendant's live session, :mod:`leadthrough.pendant.backend`).
+:func:`leadthrough.session.loop.run_session` runs
 :class:`~leadthrough.session.servo_loop.ServoLoop` instead (requests, enabling inputs, link
 faults, recording to disk).
 """
@@ -12,7 +12,6 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from leadthrough.control.guiding import GuidingController
 from leadthrough.control.interpolation import JointInterpolator
@@ -20,10 +19,9 @@ from leadthrough.drivers.protocol import Driver, DriverFeedback, JointCommand
 from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus, ExternalForceEstimator
 from leadthrough.session.pacing import sleep_until
-from leadthrough.session.record import SessionEvent, SessionLog
 from leadthrough.session.rest_rezero import zero_velocity_update
 
-__all__ = ["ServoPeriods", "SessionBuffers"]
+__all__ = ["ServoPeriods"]
 
 Array = NDArray[np.float64]
 
@@ -105,57 +103,3 @@ class ServoPeriods:
             zero_velocity_update(self.estimator, c_out.rest_s, self.settle_s, self.cycle_s,
                                   self.rezero_samples)
         self.interpolator.set_target(c_out.q, c_out.qd)
-
-    def store(self, rec: SessionBuffers, i: int, t_loop: float) -> None:
-        """Record servo period ``i``."""
-        fb, cmd, e_out, c_out = self.fb, self.cmd, self.e_out, self.c_out
-        rec.store(i, t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
-                  c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
-                  int(c_out.fault),
-                  self.applied_wrench() if self.applied_wrench is not None else None)
-
-
-class SessionBuffers:
-    """Preallocated session arrays."""
-
-    def __init__(self, steps: int, n: int, with_truth: bool) -> None:
-        self.time = np.zeros(steps)
-        self.q = np.zeros((steps, n))
-        self.current = np.zeros((steps, n))
-        self.tau_ext = np.zeros((steps, n))
-        self.wrench = np.zeros((steps, 6))
-        self.q_cmd = np.zeros((steps, n))
-        self.qd_cmd = np.zeros((steps, n))
-        self.tcp = np.zeros((steps, 3))
-        self.rot = np.zeros((steps, 3, 3))
-        self.twist = np.zeros((steps, 6))
-        self.state = np.zeros(steps, dtype=np.int64)
-        self.fault = np.zeros(steps, dtype=np.int64)
-        self.applied = np.zeros((steps, 6)) if with_truth else None
-
-    def store(self, i: int, t: float, q: Array, current: Array, tau_ext: Array, wrench: Array,
-              q_cmd: Array, qd_cmd: Array, transform: Array, twist: Array, state: int,
-              fault: int, applied: Array | None) -> None:
-        self.time[i] = t
-        self.q[i] = q
-        self.current[i] = current
-        self.tau_ext[i] = tau_ext
-        self.wrench[i] = wrench
-        self.q_cmd[i] = q_cmd
-        self.qd_cmd[i] = qd_cmd
-        self.tcp[i] = transform[:3, 3]
-        self.rot[i] = transform[:3, :3]
-        self.twist[i] = twist
-        self.state[i] = state
-        self.fault[i] = fault
-        if self.applied is not None and applied is not None:
-            self.applied[i] = applied
-
-    def to_log(self, robot: str, events: list[SessionEvent],
-               settings: dict[str, object]) -> SessionLog:
-        quat = Rotation.from_matrix(self.rot).as_quat()  # x, y, z, w
-        return SessionLog(robot=robot, time=self.time, q=self.q, current=self.current,
-                          tau_ext=self.tau_ext, wrench_base=self.wrench, q_cmd=self.q_cmd,
-                          qd_cmd=self.qd_cmd, tcp_cmd_base=self.tcp, tcp_cmd_quat=quat,
-                          twist_cmd_base=self.twist, state=self.state, fault=self.fault,
-                          wrench_applied_base=self.applied, events=events, settings=settings)

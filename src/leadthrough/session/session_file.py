@@ -10,8 +10,8 @@ Parquet row group and hands the chunk back. A few chunks
 circulate, so memory is a handful of chunks whatever the session's length. At the end the
 events (marks, transitions, the loop's notes) and settings go into the file's key-value metadata
 and the file is moved into place: the result reads with
-:func:`~leadthrough.session.record.load_session` like one written by
-:func:`~leadthrough.session.record.save_session`.
+:func:`~leadthrough.session_format.load_session` like one written by
+:func:`~leadthrough.session_format.save_session`.
 
 Why a process: a writer thread of the loop's own process converted and wrote a chunk every 10 s
 while holding Python's interpreter lock in steps of up to a few ms, and the loop's thread,
@@ -63,12 +63,6 @@ import leadthrough
 from leadthrough.errors import DataError
 from leadthrough.fileio import atomic_write, refuse_symlink, require_file
 from leadthrough.labels import check_label
-from leadthrough.session.record import (
-    FORMAT_VERSION,
-    SessionEvent,
-    load_session,
-    session_metadata,
-)
 from leadthrough.session.recorder import DEFAULT_CHUNK_ROWS, RecordChunk
 from leadthrough.session.writer_link import (
     SIDECAR_SUFFIX,
@@ -76,6 +70,12 @@ from leadthrough.session.writer_link import (
     open_chunk_memory,
     recv_message,
     send_message,
+)
+from leadthrough.session_format import (
+    FORMAT_VERSION,
+    SessionEvent,
+    load_session,
+    session_metadata,
 )
 
 __all__ = ["POOL_CHUNKS", "SIDECAR_SUFFIX", "RecoveredSession", "SessionFileSink",
@@ -438,7 +438,7 @@ def recover_session(partial: str | Path, path: str | Path, robot: str | None = N
     Reads the rows the writer process closed into ``partial`` (``<session>.parquet.partial``)
     and the metadata and events of its sidecar (``<partial>.jsonl``), checks them (the
     columns of a session, the joints, the robot, every mark label), and writes ``path``
-    atomically: it reads with :func:`~leadthrough.session.record.load_session` (checked before
+    atomically: it reads with :func:`~leadthrough.session_format.load_session` (checked before
     it is moved into place) like one finished normally, its settings noting the recovery. The
     partial file and its sidecar are removed once ``path`` is in place.
 

@@ -25,9 +25,9 @@ from typing import BinaryIO
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from leadthrough.session.record import session_columns
 from leadthrough.session.recorder import RecordChunk, chunks_to_log
 from leadthrough.session.writer_link import SIDECAR_SUFFIX, recv_message, send_message
+from leadthrough.session_format import session_columns
 
 __all__ = ["serve_writer"]
 

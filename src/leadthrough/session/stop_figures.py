@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from leadthrough.control.safety_states import Fault, State
 from leadthrough.robot.description import Robot
 from leadthrough.robot.inverse_kinematics import pose_of
-from leadthrough.session.record import SessionLog
+from leadthrough.session_format import SessionLog
 
 __all__ = ["StopFigures", "stop_figures"]
 

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leadthrough.errors import SimulationError
-from leadthrough.session.record import Mark
+from leadthrough.session_format import Mark
 
 __all__ = ["ConstantWrench", "HandPush", "Mark", "NoOperator", "Operator", "ScriptedOperator",
            "vector3"]

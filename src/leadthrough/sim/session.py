@@ -34,8 +34,8 @@ from leadthrough.robot.poses import guide_start_pose
 from leadthrough.session.loop import LoopResult, run_session
 from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
 from leadthrough.session.metrics import SessionSummary, summarize
-from leadthrough.session.record import SessionLog
 from leadthrough.session.requests import LoopRequests
+from leadthrough.session_format import SessionLog
 from leadthrough.sim.driver import InjectedFault, InputScript, SimDriver
 from leadthrough.sim.operator import ScriptedOperator
 from leadthrough.sim.operator_scripts import make_operator

@@ -5,7 +5,7 @@ check at a programmed speed, and JSON / CSV export.
 Example::
 
     from leadthrough.robot import load_robot
-    from leadthrough.session.record import load_session
+    from leadthrough.session_format import load_session
     from leadthrough.teach import teach_session, write_program_json
 
     log = load_session("seam.parquet")

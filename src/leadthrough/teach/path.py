@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from leadthrough.errors import TeachError
 from leadthrough.robot.description import Robot
-from leadthrough.session.record import SessionEvent, SessionLog
+from leadthrough.session_format import SessionEvent, SessionLog
 
 __all__ = ["TcpPath", "TcpPoses", "check_mark_time", "check_session_robot", "find_mark",
            "forward_tcp", "tcp_path"]

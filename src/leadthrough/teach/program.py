@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from leadthrough.errors import TeachError
 from leadthrough.labels import check_label
 from leadthrough.robot.description import Robot
-from leadthrough.session.record import SessionEvent, SessionLog
+from leadthrough.session_format import SessionEvent, SessionLog
 from leadthrough.teach.limits_check import LimitReport, check_limits
 from leadthrough.teach.line_fit import WeldingLine, fit_welding_line
 from leadthrough.teach.path import check_mark_time, check_session_robot, find_mark, tcp_path

@@ -1,4 +1,8 @@
-"""A guiding session as recorded by the real-time loop, and its Parquet file.
+"""The session file's format: a guiding session's rows and events, and its Parquet file.
+
+A top-level module, outside the real-time package: the loop (:mod:`leadthrough.session`) and
+its writer process write sessions in this format; teach-in (:mod:`leadthrough.teach`), the
+session's figures and reports, and the pendant's export read them, without importing the loop.
 
 One row per servo period (1 ms): measured joint positions and currents, the estimator's joint
 torque and wrench, the 1 ms joint command, and the controller's latest commanded TCP pose and
