@@ -179,3 +179,102 @@ def test_a_missing_web_stack_names_the_extra(capsys: pytest.CaptureFixture[str],
     assert "pip install 'leadthrough[pendant]'" in line
     with pytest.raises(MissingPackageError, match="extra"):
         run(build_parser().parse_args(["pendant", "--port", "0"]))
+
+
+# ------------------------------------------------------------------ on a robot (--driver)
+ROBOT = ["--driver", "ur-rtde", "--host", "127.0.0.1", "--params", str(SHIPPED)]
+
+
+def test_a_robot_needs_its_enabling_input(capsys: pytest.CaptureFixture[str]) -> None:
+    """As ``guide --driver``: the same error, naming ``--enable-input``."""
+    err = _refused(capsys, *ROBOT, "--duration", "1")
+    assert "'--enable-input'" in err and "no enabling device" in err
+    assert "the controller's digital input wired to the enabling device" in err
+
+
+@pytest.mark.parametrize(("drop", "option"), [("--host", "'--host'"),
+                                              ("--params", "'--params'")])
+def test_a_robot_needs_its_address_and_parameters(capsys: pytest.CaptureFixture[str],
+                                                  drop: str, option: str) -> None:
+    i = ROBOT.index(drop)
+    argv = ROBOT[:i] + ROBOT[i + 2:]
+    err = _refused(capsys, *argv, "--enable-input", "0", "--duration", "1")
+    assert option in err and "a robot needs" in err
+
+
+@pytest.mark.parametrize(("extra", "expected"), [
+    (["--enable-input", "0", "--reset-input", "0"], "'loop.reset_input' = 0"),
+    (["--enable-input", "1", "--mark-input", "1"], "'loop.mark_input' = 1"),
+    (["--enable-input", "64"], "'loop.enable_input' = 64"),
+    (["--enable-input", "0", "--watchdog", "nan"], "'loop.watchdog_s' = nan"),
+    (["--enable-input", "0", "--watchdog", "-0.1"], "'loop.watchdog_s' = -0.1"),
+    (["--enable-input", "0", "--controller-port", "70000"], "'--controller-port' = 70000"),
+    (["--enable-input", "0", "--controller-port", "0"], "'--controller-port' = 0"),
+    (["--enable-input", "0", "--robot-address", "127.0.0.2"], "only for kuka-rsi"),
+    (["--enable-input", "0", "--seed", "3"], "'--seed' = 3"),
+    (["--enable-input", "0", "--hand-release"], "'--hand-release' = True"),
+])
+def test_a_robot_sessions_options_are_checked(capsys: pytest.CaptureFixture[str],
+                                              extra: list[str], expected: str) -> None:
+    """The inputs and the watchdog as ``guide --driver`` checks them (the loop's options),
+    the controller's port, and no simulator setting: each refused before anything connects."""
+    err = _refused(capsys, *ROBOT, *extra, "--duration", "1")
+    assert expected in err, err
+
+
+@pytest.mark.parametrize("option", [["--enable-input", "0"], ["--mark-input", "1"],
+                                    ["--reset-input", "2"], ["--watchdog", "0.5"],
+                                    ["--host", "127.0.0.1"], ["--controller-port", "30004"],
+                                    ["--robot-address", "127.0.0.2"]])
+def test_a_robots_options_on_the_simulator(capsys: pytest.CaptureFixture[str],
+                                           option: list[str]) -> None:
+    """On the simulator the page is the enabling device: a robot's option is refused, not
+    ignored."""
+    err = _refused(capsys, *option, "--duration", "1")
+    assert f"'{option[0]}'" in err and "setting of a robot session" in err
+
+
+def test_a_robots_parameters_need_their_sweep(capsys: pytest.CaptureFixture[str],
+                                              bare_params: Path) -> None:
+    err = _refused(capsys, "--driver", "fanuc-j519", "--host", "127.0.0.1", "--params",
+                   str(bare_params), "--enable-input", "0", "--duration", "1")
+    assert "'meta.friction_sweep' = False" in err and "--allow-no-sweep" in err
+
+
+def test_a_robot_session_runs_the_guide_loops_recipe(monkeypatch: pytest.MonkeyPatch,
+                                                     tmp_path: Path) -> None:
+    """A good robot command builds the loop of ``guide --driver`` (a DriverRecipe) with the
+    controller's port, the inputs and ``guide``'s watchdog default; the page's --port is not
+    the controller's."""
+    import leadthrough.cli.pendant_cmd as pendant_cmd
+    from leadthrough.cli.guide_robot import DEFAULT_WATCHDOG_S
+    from leadthrough.pendant.loop_process import DriverRecipe
+
+    class BuiltError(Exception):
+        pass
+
+    seen: list[tuple[object, dict[str, object]]] = []
+
+    def live_session(recipe: object, robot: object, **kwargs: object) -> None:
+        seen.append((recipe, kwargs))
+        raise BuiltError
+
+    monkeypatch.setattr(pendant_cmd, "LiveSession", live_session)
+    base = ["pendant", "--host", "127.0.0.5", "--params", str(SHIPPED), "--port", "0",
+            "--enable-input", "0", "--mark-input", "1", "-o", str(tmp_path)]
+    with pytest.raises(BuiltError):
+        main([*base, "--driver", "ur-rtde", "--controller-port", "30010", "--reset-input",
+              "2", "--rt-priority", "20"])
+    with pytest.raises(BuiltError):
+        main([*base, "--driver", "kuka-rsi", "--robot-address", "127.0.0.6:49200",
+              "--watchdog", "2"])
+    (ur, ur_kwargs), (rsi, _) = seen
+    assert isinstance(ur, DriverRecipe) and isinstance(rsi, DriverRecipe)
+    assert (ur.driver, ur.host, ur.port, ur.robot_address) == ("ur-rtde", "127.0.0.5", 30010,
+                                                               None)
+    assert (ur.options.enable_input, ur.options.mark_input, ur.options.reset_input) == (0, 1, 2)
+    assert ur.options.watchdog_s == DEFAULT_WATCHDOG_S and ur.options.abort_s == 1.0
+    assert ur.params.friction_sweep and ur_kwargs["rt_priority"] == 20
+    assert (rsi.driver, rsi.port, rsi.robot_address) == ("kuka-rsi", None, "127.0.0.6:49200")
+    assert rsi.options.watchdog_s == 2.0 and rsi.options.abort_s == 2.0
+    assert rsi.options.reset_input is None

@@ -9,7 +9,6 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -20,10 +19,10 @@ from leadthrough.cli.arg_checks import (
     check_rt_priority,
     require_sweep,
 )
+from leadthrough.cli.guide_robot import add_input_arguments, loop_options, require_enable_input
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.hand_release import HandReleaseConfig
-from leadthrough.drivers.controllers import CONTROLLERS
-from leadthrough.drivers.protocol import Driver
+from leadthrough.drivers.controllers import CONTROLLERS, DEFAULT_PORTS
 from leadthrough.errors import ControlError, DataError, MissingPackageError
 from leadthrough.identification.params_file import load_params
 from leadthrough.pendant.access import (
@@ -36,16 +35,16 @@ from leadthrough.pendant.access import (
 from leadthrough.pendant.backend import LiveSession
 from leadthrough.pendant.loop_process import DriverRecipe
 from leadthrough.robot.description import Robot, load_robot
+from leadthrough.session.loop_config import LoopOptions
 
-__all__ = ["DRIVERS", "check_access", "check_address", "check_arguments", "check_export_folder",
-           "register", "remote_warning"]
+__all__ = ["check_access", "check_address", "check_arguments", "check_export_folder",
+           "check_robot_arguments", "register", "remote_warning"]
 
-#: Drivers of real controllers the pendant's live loop may run, by name: ``(robot, host) ->
-#: Driver``. None yet: the pendant's loop (:class:`~leadthrough.session.loop.ServoPeriods`)
-#: does not carry the robot loop's safety (:class:`~leadthrough.session.servo_loop.ServoLoop`:
-#: link faults and the watchdog, the controller's state, the enabling input's fresh press), so
-#: a robot is guided with ``leadthrough guide --driver`` until the two loops are one.
-DRIVERS: dict[str, Callable[[Robot, str], Driver]] = {}
+#: The robot session's options that are the simulator's only.
+_SIM_ONLY = ("seed", "hand_release")
+#: The options of a robot session only.
+_ROBOT_ONLY = ("host", "controller_port", "robot_address", "enable_input", "mark_input",
+               "reset_input", "watchdog")
 
 #: The page's port without ``--port`` (the next free one if taken; with ``--port``: that one).
 DEFAULT_PORT = 8080
@@ -76,8 +75,16 @@ pressed only while held (released on letting go, on the page losing focus, or 20
 without its heartbeat), and lets you push the tool with the mouse: drag the handle at the
 tool; the force (10 N per cm, at most 80 N)
 goes into the simulated robot, the estimator sees it only through the motor currents, and the
-robot follows. The guiding loop runs in its own process; the page never holds it up. A real
-robot is guided with `leadthrough guide --driver` (this version's pendant drives the simulator).
+robot follows. The guiding loop runs in its own process; the page never holds it up.
+
+On a robot (--driver {drivers} --host H --params P --enable-input I) the loop is the
+one `leadthrough guide --driver` runs, with its faults (the link, stale feedback, the
+controller's own state such as an E-stop, the watchdog: each a commanded stop, shown on the
+page with its cause): the enabling device is the controller's input I, wired to the robot's
+own enabling switch, and guiding starts only on a fresh press of it (the page cannot enable
+guiding); --mark-input marks P1, P2 ... from a button, --reset-input clears a fault from one
+(the page's "Clear fault" does too). The controller's port is --controller-port (--port is
+the page's). Stopping the pendant (Ctrl-C) brings the robot to rest, then ends the stream.
 
 Access: the page's URL carries a secret token, new on every run (or the one in
 --token-file), printed on the terminal: open that URL. Every request without the token, or
@@ -97,23 +104,37 @@ def register(sub: Any) -> None:
     """Add the subcommand."""
     p = sub.add_parser("pendant", help="live browser pendant (simulator or robot)",
                        description=_DESCRIPTION.format(clients=DEFAULT_MAX_CLIENTS,
-                                                       kb=MAX_MESSAGE_BYTES // 1024),
+                                                       kb=MAX_MESSAGE_BYTES // 1024,
+                                                       drivers="{" + ",".join(
+                                                           sorted(CONTROLLERS)) + "}"),
                        epilog="examples:\n  leadthrough pendant\n"
                               "  leadthrough pendant --bind 0.0.0.0 --allow-remote --port 8080 "
                               "-o taught\n"
-                              "  leadthrough pendant --params params_guiding.toml",
+                              "  leadthrough pendant --params params_guiding.toml\n"
+                              "  leadthrough pendant --driver ur-rtde --host 192.168.0.10 "
+                              "--params params_guiding.toml --enable-input 0 --mark-input 1",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     where = p.add_mutually_exclusive_group()
     where.add_argument("--sim", action="store_true",
                        help="the simulated robot (the default)")
-    where.add_argument("--driver", default=None, metavar="D",
-                       help="a real controller (refused in this version: the pendant drives the "
-                            "simulator; guide a robot with 'leadthrough guide --driver')")
-    p.add_argument("--host", default=None, metavar="H", help="the controller's address")
+    where.add_argument("--driver", default=None, choices=sorted(CONTROLLERS),
+                       help="a real controller's streaming interface (needs --host, --params "
+                            "and --enable-input)")
+    g = p.add_argument_group("on a robot controller")
+    g.add_argument("--host", default=None, metavar="H",
+                   help="the controller's address (kuka-rsi: this PC's address to listen on)")
+    g.add_argument("--controller-port", type=int, default=None, metavar="P",
+                   help="the controller interface's port (default: its own: " + ", ".join(
+                       f"{DEFAULT_PORTS[d]} {d}" for d in sorted(DEFAULT_PORTS)) + "); "
+                        "--port is the page's")
+    g.add_argument("--robot-address", default=None, metavar="HOST[:PORT]",
+                   help="kuka-rsi: the robot's address (and port): documents from any other "
+                        "sender are dropped (default: the first valid document's sender)")
+    add_input_arguments(g)
     p.add_argument("--robot", default="er20", help="robot (default: er20)")
     p.add_argument("--params", type=Path, default=None,
-                   help="identified parameters (default on the simulator: the shipped "
-                        "identification of the simulated er20)")
+                   help="identified parameters (required on a robot; default on the "
+                        "simulator: the shipped identification of the simulated er20)")
     p.add_argument("--seed", type=int, default=None,
                    help="simulated robot instance, >= 0 (default: the parameters' own)")
     p.add_argument("--allow-no-sweep", action="store_true",
@@ -134,7 +155,8 @@ def register(sub: Any) -> None:
                    help=f"pages connected at once, 1-{MAX_CLIENTS_LIMIT} (default "
                         f"{DEFAULT_MAX_CLIENTS}); another is refused")
     p.add_argument("--port", type=int, default=None,
-                   help=f"port, 1-65535, refused if in use; 0: any free port (default: "
+                   help=f"the page's port, 1-65535, refused if in use; 0: any free port "
+                        f"(default: "
                         f"{DEFAULT_PORT}, or the next free one if taken)")
     p.add_argument("-o", "--output", type=Path, default=Path("leadthrough-pendant"),
                    help="folder of the exports, made on the first export if missing (its "
@@ -151,7 +173,7 @@ def register(sub: Any) -> None:
                         "of the tool, whatever the force estimate says, as `guide "
                         "--hand-release` (off by default: it brakes a hand that eases off; "
                         "without it the paper's law may move the tool again at rest after a "
-                        "release, issue 24)")
+                        "release)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds, finite and > 0 (default: run until Ctrl-C)")
     p.set_defaults(func=run)
@@ -186,7 +208,57 @@ def check_arguments(args: argparse.Namespace) -> None:
         _refuse("--max-clients", args.max_clients, "out of range",
                 f"an integer 1-{MAX_CLIENTS_LIMIT}")
     check_access(args.bind, args.allow_remote)
+    if args.driver is None:
+        for name in _ROBOT_ONLY:
+            if getattr(args, name) is not None:
+                option = f"--{name.replace('_', '-')}"
+                raise ControlError(f"{option} is a setting of a robot session",
+                                   field=option, value=getattr(args, name),
+                                   expected=f"--driver {{{','.join(sorted(CONTROLLERS))}}} "
+                                            f"--host H ... {option} ..., or no {option} on "
+                                            "the simulator (the page is its enabling device)")
+    args.options = None if args.driver is None else check_robot_arguments(args)
     args.token = None if args.token_file is None else read_token_file(args.token_file)
+
+
+def check_robot_arguments(args: argparse.Namespace) -> LoopOptions:
+    """The options of a robot session (``--driver``) that need no network: ``--host`` and
+    ``--params`` given, ``--enable-input`` (as ``guide --driver``), no simulator setting, the
+    inputs, the watchdog and the controller's port; returns the loop's options.
+
+    Raises:
+        ControlError: Naming the option, the value and what is expected (exit code 2).
+    """
+    for name in _SIM_ONLY:
+        value = getattr(args, name)
+        if value not in (None, False):
+            option = f"--{name.replace('_', '-')}"
+            raise ControlError(f"{option} is a setting of the simulated session",
+                               field=option, value=value,
+                               expected=f"no {option} with --driver" + (
+                                   "; on a robot: leadthrough guide --driver D --hand-release"
+                                   if name == "hand_release" else ""))
+    if args.host is None:
+        raise ControlError("a robot needs its controller's address", field="--host",
+                           value=None, expected="--host H: the controller's address "
+                                                "(kuka-rsi: this PC's address to listen on)")
+    if args.params is None:
+        raise ControlError("a robot needs its identified parameters", field="--params",
+                           value=None, expected="--params params_guiding.toml (leadthrough "
+                                                "identify on this robot)")
+    require_enable_input(args)
+    port = args.controller_port
+    lowest = 0 if args.driver == "kuka-rsi" else 1    # the PC listens: 0 takes a free port
+    if port is not None and not lowest <= port <= 65535:
+        raise ControlError("out of range", field="--controller-port", value=port,
+                           expected=f"{lowest}-65535, or no --controller-port for "
+                                    f"{DEFAULT_PORTS[args.driver]}")
+    if args.robot_address is not None and args.driver != "kuka-rsi":
+        raise ControlError("only for kuka-rsi", field="--robot-address",
+                           value=args.robot_address,
+                           expected=f"no --robot-address with --driver {args.driver} (it "
+                                    "connects to --host)")
+    return loop_options(args)
 
 
 def check_access(bind: str, allow_remote: bool) -> None:
@@ -255,28 +327,16 @@ def check_address(bind: str, port: int | None) -> None:
 
 
 def _robot_session(args: argparse.Namespace, robot: Robot) -> tuple[LiveSession, str]:
-    """A live session on a real controller through the same backend as the simulator's."""
-    factory = DRIVERS.get(args.driver)
-    if factory is None:
-        if not DRIVERS:
-            raise ControlError(
-                "the pendant guides the simulator only in this version: its live loop does "
-                "not yet carry the robot loop's link, controller-state and enabling-input "
-                "safety", field="--driver", value=args.driver,
-                expected=f"--sim; on a robot: leadthrough guide --driver "
-                         f"{{{','.join(sorted(CONTROLLERS))}}} --host H --params P "
-                         f"--enable-input I --mark-input I")
-        raise ControlError("no such driver", field="--driver", value=args.driver,
-                           expected=f"a real-controller driver: {', '.join(sorted(DRIVERS))}; "
-                                    f"or --sim")
-    if args.host is None or args.params is None:
-        raise ControlError("a robot needs its address and its identified parameters",
-                           field="--host/--params", value=(args.host, args.params),
-                           expected="--host H --params params.toml")
+    """A live session on a real controller through the same backend as the simulator's: the
+    loop of ``guide --driver`` (:class:`~leadthrough.pendant.loop_process.DriverRecipe`)."""
     params = require_sweep(load_params(args.params, robot), args.allow_no_sweep)
-    recipe = DriverRecipe(robot, params, factory, args.host)
-    return (LiveSession(recipe, robot, rt_priority=args.rt_priority),
-            f"{args.params} ({params.method})")
+    options = args.options if getattr(args, "options", None) is not None else (
+        check_robot_arguments(args))
+    recipe = DriverRecipe(robot, params, args.driver, args.host, port=args.controller_port,
+                          robot_address=args.robot_address, options=options)
+    return (LiveSession(recipe, robot, record_s=args.record_s, rt_priority=args.rt_priority),
+            f"{args.params} ({params.method}); {args.driver} at {args.host}, enabling input "
+            f"{options.enable_input}")
 
 
 def _sessions(args: argparse.Namespace, robot: Robot, simulated_session: Any
@@ -284,11 +344,6 @@ def _sessions(args: argparse.Namespace, robot: Robot, simulated_session: Any
     """The live session (not started), the simulated hand (None on a robot) and the
     parameters' note."""
     if args.driver is not None:
-        if args.hand_release:
-            raise ControlError("--hand-release is a setting of the simulated session here",
-                               field="--hand-release", value=True,
-                               expected="--sim; on a robot: leadthrough guide --driver D "
-                                        "--hand-release")
         live, note = _robot_session(args, robot)
         return live, None, note
     params = None if args.params is None else require_sweep(load_params(args.params, robot),
