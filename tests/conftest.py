@@ -31,8 +31,10 @@ from leadthrough.robot import Robot, load_robot
 from leadthrough.robot.poses import guide_start_pose
 from leadthrough.sim.calibration_set import (
     CalibrationSet,
+    SimRecording,
     record_calibration_set,
     record_friction_sweep,
+    record_presliding_test,
 )
 
 
@@ -84,6 +86,14 @@ def calibrated_params(sweep_calibration: tuple[object, object, object]) -> Param
     return ParamsFile.from_result(sc.result, sim_seed=1)  # type: ignore[attr-defined]
 
 
+@pytest.fixture(scope="session")
+def presliding_test_run(er20: Robot) -> SimRecording:
+    """The presliding test on the simulated er20 (seed 1, run 3, from the guiding start pose,
+    the default realistic plant), recorded once for the modules that only read it (the
+    presliding fit's bounds, the calibration recipe)."""
+    return record_presliding_test(er20, seed=1, run=3, q_start=guide_start_pose(er20))
+
+
 #: Test modules that run a loop or a controller against the wall clock (emulators on loopback
 #: sockets, the pendant's processes, Chromium).
 REALTIME_MODULES = frozenset({
@@ -103,11 +113,31 @@ def _realtime(module: str | Path) -> bool:
     return Path(module).stem in REALTIME_MODULES
 
 
+#: Compute test modules that read the same expensive session fixture: one work unit each, so
+#: that the fixture is built once (on the worker that runs them).
+SHARED_FIXTURE_UNITS = {
+    "test_identification": "ideal_calibration_set", "test_friction_sweep": "ideal_calibration_set",
+    "test_presliding": "presliding_test_run", "test_calibration": "presliding_test_run",
+}
+
+#: The slowest compute work units, slowest first (measured, 2 workers): they start before the
+#: others, so that the last unit of the run is a short one and neither worker idles at the end.
+SLOW_COMPUTE_UNITS = (
+    "test_cli", "test_cli_calibration", "presliding_test_run", "ideal_calibration_set",
+    "test_load_friction", "test_control_properties", "test_consistent",
+    "test_examples", "test_exit_codes", "test_session",
+)
+
+
 class TwoGroupScheduling(LoadScopeScheduling):
-    """pytest-xdist scheduling in two work units: the wall-clock tests
-    (:data:`REALTIME_MODULES`) and the rest, each run on one worker of its own
-    (``-n 2 --dist loadgroup`` in pyproject.toml), so that a loop on loopback never runs beside
-    another (their controllers' watchdogs are real).
+    """pytest-xdist scheduling (``-n 2 --dist loadgroup`` in pyproject.toml): the wall-clock
+    tests (:data:`REALTIME_MODULES`) are one work unit, run first on one worker, so that a loop
+    on loopback never runs beside another (their controllers' watchdogs are real); the other
+    tests are one unit per module (or per :data:`SHARED_FIXTURE_UNITS` group), dealt to
+    whichever worker is free, the slowest (:data:`SLOW_COMPUTE_UNITS`) first. A worker runs
+    its units in the order it was dealt them, so the worker of the wall-clock tests takes
+    compute units only after them, and the other worker's compute tests are the only thing
+    beside them (niced, see :func:`pytest_runtest_protocol`).
 
     The unit of a test is read from its node id's module here, in the controller's scheduler.
     ``xdist_group`` marks added at collection do not work on pytest 9.2: xdist 3.8 writes the
@@ -115,8 +145,32 @@ class TwoGroupScheduling(LoadScopeScheduling):
     longer read, so every test went its own way (pytest-dev/pytest-xdist#1386, fix pending in
     #1388)."""
 
+    _ordered = False
+
     def _split_scope(self, nodeid: str) -> str:
-        return "realtime" if _realtime(nodeid.split("::", 1)[0]) else "compute"
+        module = Path(nodeid.split("::", 1)[0]).stem
+        if module in REALTIME_MODULES:
+            return "realtime"
+        return SHARED_FIXTURE_UNITS.get(module, module)
+
+    def _assign_work_unit(self, node: Any) -> None:
+        """Deal the units in :func:`_unit_rank` order (xdist's: by number of tests)."""
+        if not self._ordered:
+            units = sorted(self.workqueue.items(), key=lambda unit: _unit_rank(unit[0]))
+            self.workqueue.clear()
+            self.workqueue.update(units)
+            self._ordered = True
+        super()._assign_work_unit(node)
+
+
+def _unit_rank(unit: str) -> int:
+    """The wall-clock unit first, then the slow compute units slowest first, then the rest
+    (a stable sort keeps xdist's order among those)."""
+    if unit == "realtime":
+        return 0
+    if unit in SLOW_COMPUTE_UNITS:
+        return 1 + SLOW_COMPUTE_UNITS.index(unit)
+    return 1 + len(SLOW_COMPUTE_UNITS)
 
 
 @pytest.hookimpl(optionalhook=True)   # no such hook with -p no:xdist
@@ -136,8 +190,9 @@ def pytest_configure(config: pytest.Config) -> None:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None
                             ) -> Generator[None, object, object]:
-    """Under pytest-xdist, the worker of the ``compute`` group lowers its priority once
-    (niceness :data:`COMPUTE_NICE`, inherited by the processes it starts): where the
+    """Under pytest-xdist, a worker lowers its priority at its first compute test (niceness
+    :data:`COMPUTE_NICE`, inherited by the processes it starts; the worker of the wall-clock
+    tests only reaches one after all of those): where the
     wall-clock tests wait on a 1-8 ms controller cycle, the CPU-bound tests beside them only
     use the time they leave.
 

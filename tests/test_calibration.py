@@ -19,8 +19,7 @@ from leadthrough.identification.command_lag import measure_command_lag
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.identification.presliding import fit_presliding
 from leadthrough.robot.description import Robot
-from leadthrough.robot.poses import guide_start_pose
-from leadthrough.sim.calibration_set import record_excitation, record_presliding_test
+from leadthrough.sim.calibration_set import SimRecording, record_excitation
 from leadthrough.sim.robot import SimConfig
 
 #: Commands shifted this many samples ahead of the positions: a lag of 3 ms at 1 kHz.
@@ -39,9 +38,9 @@ def excitation(er20: Robot) -> Recording:
 
 
 @pytest.fixture(scope="module")
-def presliding_test(er20: Robot) -> Recording:
-    """A presliding test of the same instance."""
-    return record_presliding_test(er20, seed=1, run=3, q_start=guide_start_pose(er20)).measured
+def presliding_test(presliding_test_run: SimRecording) -> Recording:
+    """A presliding test of the same instance (conftest's, shared with test_presliding)."""
+    return presliding_test_run.measured
 
 
 def _synthetic(n: int) -> Recording:

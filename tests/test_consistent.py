@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from leadthrough.data.preprocess import ProcessedData
 from leadthrough.dynamics import FrictionModel, model_torque, standard_parameters
-from leadthrough.identification.api import IdentifyConfig, identify
+from leadthrough.dynamics.model import DriveModelParameters
+from leadthrough.identification.api import IdentificationResult, IdentifyConfig, identify
 from leadthrough.identification.consistency import (
     link_bounds,
     min_pseudo_inertia_eigenvalues,
@@ -61,12 +62,23 @@ def test_relaxed_bounds_contain_the_papers_box(j: int, u: list[float]) -> None:
     assert np.all(phi[4:] >= b.inertia_lower - tol) and np.all(phi[4:] <= b.inertia_upper + tol)
 
 
-def test_consistent_beats_proposed_fast_and_physical(er20: Robot) -> None:
+@pytest.fixture(scope="module")
+def stribeck_consistent(er20: Robot) -> tuple[DriveModelParameters, ProcessedData,
+                                              IdentificationResult]:
+    """Eq. 15 truth, its noise-free data (run 1) and the consistent method's result on it,
+    computed once for the tests that only read them (the method reads no ``proposed``
+    settings)."""
     truth = _true_params(er20, FrictionModel.STRIBECK)
     data = _data(er20, truth, 1)
+    return truth, data, identify(data, er20, "consistent")
+
+
+def test_consistent_beats_proposed_fast_and_physical(
+        er20: Robot, stribeck_consistent: tuple[DriveModelParameters, ProcessedData,
+                                                IdentificationResult]) -> None:
+    truth, data, cons = stribeck_consistent
     cfg = IdentifyConfig(proposed=ProposedConfig(generations=40, polish_iterations=400))
     prop = identify(data, er20, "proposed", cfg)
-    cons = identify(data, er20, "consistent", cfg)
     assert cons.J < prop.J
     assert np.all(cons.min_pseudo_inertia_eig >= 0)
     # the link part is exact up to the Stribeck grid: it predicts other motions well
@@ -108,9 +120,11 @@ def test_infeasible_bounds_name_the_link(tmp_path: Path, er20: Robot) -> None:
     assert e.value.field == "links.joint_6" and "bounds" in str(e.value)
 
 
-def test_urdf_export_round_trip(tmp_path: Path, er20: Robot) -> None:
-    truth = _true_params(er20, FrictionModel.STRIBECK)
-    res = identify(_data(er20, truth, 1), er20, "consistent")
+def test_urdf_export_round_trip(
+        tmp_path: Path, er20: Robot,
+        stribeck_consistent: tuple[DriveModelParameters, ProcessedData, IdentificationResult]
+        ) -> None:
+    res = stribeck_consistent[2]
     path = write_urdf_with_inertias(er20, res.params.phi, tmp_path / "identified.urdf")
     model = pin.buildModelFromUrdf(str(path))
     np.testing.assert_allclose(standard_parameters(model), res.params.phi, atol=1e-10)

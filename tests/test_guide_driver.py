@@ -297,7 +297,7 @@ def test_a_fault_is_reset_from_its_input_and_guiding_needs_a_fresh_press(
         emu = spawn_emulator(kind, "er20", host, DEFAULT_PORTS[kind], "--cycle-ms",
                              str(RSI_CYCLE_MS), *_reset_emulator_args())
         wait_for_line(guide, "leadthrough: guiding", 120)
-        time.sleep(14.0)                         # two or three periods
+        time.sleep(10.5)                         # past the second period's press (7 s)
         guide.send_signal(signal.SIGINT)
         stdout, stderr = guide.communicate(timeout=60)
     finally:

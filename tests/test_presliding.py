@@ -26,7 +26,7 @@ from leadthrough.identification.presliding import (
 )
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
-from leadthrough.sim.calibration_set import record_presliding_test
+from leadthrough.sim.calibration_set import SimRecording, record_presliding_test
 from leadthrough.sim.robot import SimConfig, SimRobot
 
 SHORT = PreslidingTestConfig(amplitudes=(3e-5, 1e-4, 2e-4, 4e-4, 8e-4, 1.5e-3), move_s=0.3,
@@ -186,13 +186,14 @@ def test_fit_on_the_simulator_measures_the_gears_presliding(er20: Robot) -> None
     assert fit.pairs.first.size >= 30 and fit.pairs.unpaired == 0
 
 
-def test_the_wrists_friction_relaxes_at_rest_on_the_simulator(er20: Robot) -> None:
+def test_the_wrists_friction_relaxes_at_rest_on_the_simulator(
+        er20: Robot, presliding_test_run: SimRecording) -> None:
     """The simulated servo dithers a joint held still far below one count, and the plant's
     LuGre bristles wear under it (the friction at rest decays over seconds). On the true
     positions with no play operator, the plain Dahl fit reads the wrists' z₀ to 10 %, so the
     motion explains it; on the encoder it reads them 20-30 % short, and the relaxation rate r
     takes the unseen motion's place: the wrists' residual falls 2-5×."""
-    rec = record_presliding_test(er20, seed=1, run=3, q_start=guide_start_pose(er20))
+    rec = presliding_test_run
     truth = SimRobot(er20, SimConfig(seed=1)).truth.drive
     plain_cfg = PreslidingAnalysisConfig(max_relaxation=0.0)
     seen = replace(rec.measured, q=rec.log.truth.q)
@@ -209,9 +210,10 @@ def test_the_wrists_friction_relaxes_at_rest_on_the_simulator(er20: Robot) -> No
 
 @pytest.mark.xfail(strict=True, reason="known bias: with the relaxation the wrists' z₀ reads "
                    "11-22 % long (19-29 % short without it; README, Presliding test)")
-def test_the_wrists_presliding_within_the_main_axes_tolerance(er20: Robot) -> None:
+def test_the_wrists_presliding_within_the_main_axes_tolerance(
+        er20: Robot, presliding_test_run: SimRecording) -> None:
     """The wrists held to joints 1–3's 12 %: fails today (strict), so a fix shows up."""
-    rec = record_presliding_test(er20, seed=1, run=3, q_start=guide_start_pose(er20))
+    rec = presliding_test_run
     fit = fit_presliding(rec.measured, er20)
     truth = SimRobot(er20, SimConfig(seed=1)).truth.drive
     np.testing.assert_allclose(fit.presliding[3:], truth.bristle_presliding[3:], rtol=0.12)

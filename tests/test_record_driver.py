@@ -6,6 +6,7 @@ command broke its limits."""
 from __future__ import annotations
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -98,11 +99,18 @@ def test_a_trajectory_is_recorded_at_the_controllers_cycle(kind: str,
     rec = done.recording
     assert report.violations == () and report.refused == 0
     # the approach moved the robot 0.05 rad at 10 % of the limits; the recording is the
-    # trajectory only, one sample per cycle (a loaded machine may lose a few)
+    # trajectory only, one sample per controller cycle that answered: on the controller's
+    # clock, each a whole number of cycles after the one before, at most max_stale cycles
+    # lost in a row (the run stops past that), all of the trajectory's cycles run. How many a
+    # loaded machine loses depends on its speed: benchmarks/record_samples.py prints it.
     assert done.approach_s > 0.0
     assert rec.time[0] == 0.0 and abs(rec.duration - 1.5) <= 2 * driver.dt
-    assert rec.samples >= 0.95 * (1.5 / driver.dt) and done.stale <= 0.05 * done.cycles
-    assert np.all(np.diff(rec.time) > 0)
+    cycles = math.floor(1.5 / driver.dt + 1e-9) + 1
+    assert done.cycles >= cycles and 2 <= rec.samples <= cycles
+    apart = np.diff(rec.time) / driver.dt
+    assert np.allclose(apart, np.round(apart), rtol=0.0, atol=1e-6), apart
+    max_stale = max(1, math.ceil(TrajectoryRunConfig().max_stale_s / driver.dt))
+    assert np.all((np.round(apart) >= 1) & (np.round(apart) <= max_stale + 1)), apart
     # the logged target is the trajectory on the controller's clock: the one sent before the
     # sample (one cycle earlier, two after a lost packet), never stretched by lost packets
     assert rec.q_cmd is not None

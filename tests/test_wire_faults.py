@@ -44,11 +44,15 @@ from leadthrough.sim.guiding_params import shipped_params_path
 from leadthrough.sim.session import light_guiding
 from wire_helpers import free_loopback_address, spawn_emulator, stop_process
 
-# the fault [s of the emulator's clock]: the operator starts 3 s after the stream's first
-# command (within 0.3 s of the emulator's start), pushes from 1 s later: 1.2-1.5 s into the
-# push, at the speed limit
-AT = 5.5
-END = 8.5
+#: The emulated operator's start after the stream's first command [s]: the loop's estimator
+#: warms up and tares in its first 1 s of samples (a press before that is no fresh press).
+OPERATOR_DELAY = 2.0
+# the fault [s of the emulator's clock]: the operator starts OPERATOR_DELAY after the stream's
+# first command (within 0.3 s of the emulator's start), pushes from 1 s later: 1.2-1.5 s into
+# the push, at the speed limit; the session ends 2 s after it (a stop from the speed limit
+# takes 0.5 s; RSI's last isolated late answer is 1.5 s after it)
+AT = OPERATOR_DELAY + 2.5
+END = AT + 2.0
 LIMIT_ACC = light_guiding(100.0).limits.max_linear_acceleration
 CYCLE_TOL = 1e-9        # relative: rounding
 CMD_TOL = 0.02          # relative: the joint-space cubics over a cycle (module doc)
@@ -131,7 +135,8 @@ def _session(kind: str, er20: Robot, emu_args: list[str], wrap: str = "",
     for part in parts:
         part.warm_up()
     args = ["--seed", "1", "--q0", *map(str, guide_start_pose(er20)), "--operator", "push-x",
-            *emu_args] + (["--cycle-ms", "12"] if kind == "kuka-rsi" else [])
+            "--operator-delay", str(OPERATOR_DELAY), *emu_args] + (
+                ["--cycle-ms", "12"] if kind == "kuka-rsi" else [])
     emu = spawn_emulator(kind, "er20", host, port, *args, wait=kind != "kuka-rsi")
     try:
         with driver:
