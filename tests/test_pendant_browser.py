@@ -349,3 +349,90 @@ def _check_export(folder: Path, at_p1: np.ndarray, at_p2: np.ndarray) -> None:
     assert (line["start_label"], line["end_label"]) == ("P1", "P2")
     assert line["length_m"] > 0.15
     assert abs(line["length_m"] - np.linalg.norm(p2 - p1)) < 0.01
+
+
+
+@pytest.mark.exclusive
+def test_a_robot_session_shows_the_controllers_input_and_its_fault_in_chromium(
+        er20: Robot, tmp_path: Path) -> None:
+    """The pendant on a robot: ``leadthrough emulate ur-rtde`` in its own process, the loop of
+    ``pendant --driver ur-rtde`` (a DriverRecipe) in the pendant's loop process. The page has
+    no hold-to-run device and shows the controller's enabling input as the loop reads it:
+    pressed (the emulator's input held from its start), not GUIDING all the same (held since
+    before the loop was ready: no fresh press). Then the controller goes (its process killed:
+    its TCP connection closed, at a time the test chooses): FAULT with the fault latched
+    shown, the notice naming the lost link,
+    and once the session has ended, STOPPED with the fault still shown. (The page's state
+    and fault are the controller's latched ones: the last snapshot of a loop ended by a lost
+    link showed IDLE and no fault before.)"""
+    from playwright.sync_api import sync_playwright
+
+    from leadthrough.drivers.controllers import DEFAULT_PORTS
+    from leadthrough.identification.params_file import load_params
+    from leadthrough.pendant.backend import LiveSession
+    from leadthrough.pendant.loop_process import DriverRecipe
+    from leadthrough.robot.poses import guide_start_pose
+    from leadthrough.session.loop_config import LoopOptions
+    from leadthrough.sim.guiding_params import shipped_params_path
+    from wire_helpers import free_loopback_address, spawn_emulator, stop_process
+
+    chromium = _chromium()
+    port = DEFAULT_PORTS["ur-rtde"]
+    host = free_loopback_address(port)
+    emu = spawn_emulator("ur-rtde", "er20", host, port, "--seed", "1", "--q0",
+                         *map(str, guide_start_pose(er20)), "--watchdog", "0.5",
+                         "--enable", "0:inf")
+    recipe = DriverRecipe(er20, load_params(shipped_params_path("er20"), er20), "ur-rtde",
+                          host, options=LoopOptions(enable_input=0, mark_input=1,
+                                                    watchdog_s=0.5, abort_s=1.0))
+    live = LiveSession(recipe, er20, record_s=30.0)
+    app = None
+    report = ""
+    try:
+        live.start(timeout_s=120.0)
+        app = Pendant(live, tmp_path / "out", port=_free_port(), params_note="shipped")
+        app.start()
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                page.goto(app.url)
+                assert wait_for_clients(app), "the page did not connect within 30 s"
+                state, enable = page.locator("#lt-state"), page.locator("#lt-enable")
+                fault = page.locator("#lt-fault")
+                _until(lambda: enable.count() == 1 and enable.inner_text()
+                       == "controller's enabling input pressed", 30,
+                       lambda: f"the input pressed on the page ({_loop_state(app)})")
+                _until(lambda: live.snapshot().estimator.name == "OK", 10,  # type: ignore[union-attr]
+                       "the estimator's tare")
+                time.sleep(0.5)         # ready, the input held: still no guiding
+                # (IDLE, or FAULT where the machine's load stalled the 2 ms stream: a stale
+                # sample, as on a real controller; the link's end below shows either way)
+                assert state.get_attribute("data-state") in ("IDLE", "FAULT"), _loop_state(app)
+                assert page.get_by_role("button", name=DEVICE_LABEL).count() == 0
+                report = stop_process(emu)             # the controller is gone
+                _until(lambda: state.get_attribute("data-state") in ("FAULT", "STOPPED"), 15,
+                       lambda: f"FAULT on the page ({_loop_state(app)})")
+                _until(lambda: fault.inner_text() in LINK_FAULTS, 10,
+                       lambda: f"the link's fault on the page ({_loop_state(app)})")
+                _until(lambda: "link lost: DriverError" in page.inner_text("body"), 10,
+                       "the notice naming the lost link")
+                if live.running:                # (a second failure ends it: the link lost)
+                    live.stop(timeout_s=20.0)
+                _until(lambda: state.get_attribute("data-state") == "STOPPED", 15,
+                       lambda: f"STOPPED on the page ({_loop_state(app)})")
+                assert fault.inner_text() in LINK_FAULTS    # still shown, stopped
+                page.screenshot(path=str(tmp_path / "robot-fault.png"))
+            finally:
+                browser.close()
+    finally:
+        if app is not None:
+            app.stop()
+        live.close()
+        if not report:
+            report = stop_process(emu)
+    assert "violations: ()" in report, report
+
+
+#: What a controller gone shows as: its socket's error, or silence.
+LINK_FAULTS = ("DRIVER_ERROR", "DRIVER_TIMEOUT", "STALE_FEEDBACK")

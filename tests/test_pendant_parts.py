@@ -110,6 +110,21 @@ def test_status_shows_state_speed_force_and_axes() -> None:
     assert 'data-state="STARTING"' in status_html(None, extras)
 
 
+def test_status_on_a_robot_shows_its_enabling_input_and_the_fault() -> None:
+    """On a robot (no device on the page) the enabling row is the controller's input as the
+    loop reads it, and the latched fault stays shown once the session has stopped."""
+    robot = StatusExtras(armed=False, device=None, push_n=None, period_us=(0.0, 0.0),
+                         params="p")
+    text = status_html(_snapshot(State.GUIDING, enabled=True), robot)
+    assert ">controller&#x27;s enabling input pressed<" in text and "armed" not in text
+    assert '<span id="lt-fault" style="font-weight:600">NONE<' in text
+    released = status_html(_snapshot(State.IDLE, enabled=False), robot)
+    assert ">controller&#x27;s enabling input released<" in released
+    stopped = status_html(_snapshot(State.FAULT, fault=Fault.CONTROLLER_STATE,
+                                    cause="CONTROLLER_STATE", error="stopped"), robot)
+    assert 'data-state="STOPPED"' in stopped and ">CONTROLLER_STATE<" in stopped
+
+
 def test_spring_damping_and_cap() -> None:
     spring = PushSpring(newton_per_cm=10.0, max_force_n=80.0, damping_ratio=0.7)
     assert spring.stiffness == 1000.0

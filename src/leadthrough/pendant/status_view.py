@@ -3,7 +3,9 @@ see at a glance (speed, force, frame and axes, the law's settings, the loop's ti
 
 A pure function of the loop's snapshot, rendered as HTML for viser's ``add_html``. Elements a
 test or a screen reader looks for carry ids: ``lt-state`` (with ``data-state``), ``lt-cause``,
-``lt-speed``, ``lt-force``, ``lt-push``, ``lt-frame``.
+``lt-speed``, ``lt-force``, ``lt-push``, ``lt-frame``, ``lt-enable``, ``lt-fault``. On a robot
+the enabling row is the controller's enabling input as the loop reads it (the page cannot
+enable there), and the fault row keeps the latched fault in view once the session has stopped.
 """
 
 from __future__ import annotations
@@ -63,9 +65,12 @@ def status_html(snap: LoopSnapshot | None, extras: StatusExtras) -> str:
                                                             strict=True))
     force = snap.wrench_base[:3]
     vf = cfg.virtual_friction
-    enable = ("armed" if extras.armed else "not armed") + (
-        "" if extras.device is None else
-        (", enabling device pressed" if extras.device else ", enabling device released"))
+    if extras.device is None:     # a robot: its own enabling device, read by the loop
+        enable = ("controller's enabling input "
+                  + ("pressed" if snap.enabled else "released"))
+    else:
+        enable = ("armed" if extras.armed else "not armed") + (
+            ", enabling device pressed" if extras.device else ", enabling device released")
     rows = [
         _row("speed", "TCP speed", f"{1e3 * snap.speed:.0f} mm/s"),
         _row("force", "estimated force",
@@ -79,6 +84,7 @@ def status_html(snap: LoopSnapshot | None, extras: StatusExtras) -> str:
              f"{vf.mass[0]:g} kg, {vf.mass[3]:g} kg·m² · {vf.friction[0]:g} N, "
              f"{vf.friction[3]:g} N·m" + (" (auto)" if cfg.friction_mode == "auto" else "")),
         _row("enable", "enabling", enable),
+        _row("fault", "fault", snap.fault.name),
         _row("estimator", "estimator", snap.estimator.name),
         _row("loop", "loop period work",
              f"{extras.period_us[0]:.0f} µs median, {extras.period_us[1]:.0f} µs max"),
