@@ -99,9 +99,9 @@ def presliding_test_run(er20: Robot) -> SimRecording:
 REALTIME_MODULES = frozenset({
     "test_emulator_answer_timing", "test_emulator_operator", "test_guide_driver",
     "test_loop_faults", "test_loop_requests", "test_pendant_backend", "test_pendant_browser",
-    "test_pendant_parts", "test_pendant_process", "test_record_driver", "test_wire_drivers",
-    "test_wire_fanuc_j519", "test_wire_faults", "test_wire_kuka_rsi", "test_wire_ur_rtde",
-    "test_wire_ur_rtde_reference",
+    "test_pendant_driver", "test_pendant_parts", "test_pendant_process", "test_record_driver",
+    "test_wire_drivers", "test_wire_fanuc_j519", "test_wire_faults", "test_wire_kuka_rsi",
+    "test_wire_ur_rtde", "test_wire_ur_rtde_reference",
 })
 
 #: The niceness of the worker that runs the other tests under pytest-xdist.
