@@ -17,7 +17,7 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot import Robot
 from leadthrough.session.loop import EndCause
 from leadthrough.session.loop_config import LoopConfig
-from leadthrough.session.requests import MAX_PENDING, LoopRequests, Request, RequestKind
+from leadthrough.session.requests import MAX_PENDING, ClearFault, LoopRequests
 from leadthrough.sim.session import SimSessionConfig, light_guiding, run_sim_session
 
 LIMIT_ACC = 0.4  # m/s², Table IV
@@ -98,15 +98,15 @@ def test_waiting_requests_are_bounded_and_taken_in_order() -> None:
     """Requests wait in order until the loop takes them; beyond :data:`MAX_PENDING` the caller
     is told (the loop is not running)."""
     req = LoopRequests()
-    assert not req.pending and req.take() is None and not req.stop_requested
+    assert not req.pending and req.poll() is None and not req.stop_requested
     for _ in range(MAX_PENDING):
         req.reset_fault()
     with pytest.raises(ControlError, match="pending"):
         req.reset_fault()
     assert req.pending
-    taken = [req.take() for _ in range(MAX_PENDING)]
-    assert taken == [Request(RequestKind.RESET_FAULT, None)] * MAX_PENDING
-    assert not req.pending and req.take() is None
+    taken = [req.poll() for _ in range(MAX_PENDING)]
+    assert taken == [ClearFault()] * MAX_PENDING
+    assert not req.pending and req.poll() is None
     req.stop()
     assert req.stop_requested
 

@@ -29,6 +29,7 @@ from leadthrough.control.safety import Fault, State
 from leadthrough.drivers.protocol import DriverFeedback, JointCommand
 from leadthrough.errors import ControlError, TeachError
 from leadthrough.estimation.estimator import EstimatorOutput
+from leadthrough.identification.params_file import ParamsFile
 from leadthrough.pendant.backend import (
     Adjust,
     ClearFault,
@@ -140,7 +141,8 @@ def test_settings_change_at_rest_only_and_are_reported(sim: SimulatedPendantSess
                     "the refusal")
     assert refused.settings.frame == "tool" and "IDLE or FAULT" in refused.notices[-1].text
     live.send(ClearFault())
-    warned = until(live, lambda s: s.notices[-1].text == "no fault to clear", 0.05, "notice")
+    warned = until(live, lambda s: s.notices[-1].text == "reset refused: no fault is latched",
+                   0.05, "notice")
     assert [n.number for n in warned.notices] == sorted({n.number for n in warned.notices})
 
 
@@ -157,7 +159,8 @@ def test_a_fault_latches_until_cleared_at_rest(sim: SimulatedPendantSession) -> 
     live.send(SetEnable(False))
     live.send(ClearFault())
     cleared = until(live, lambda s: s.state == State.IDLE, 0.5, "IDLE after the clear")
-    assert cleared.cause == "FAULT_CLEARED"
+    assert cleared.cause == "RESET"        # restarted at the measured position
+    assert cleared.notices[-1].text.startswith("fault reset: restarted at the measured")
 
 
 def test_the_loop_reports_why_it_did_not_start(er20: Robot) -> None:
@@ -397,15 +400,18 @@ def test_after_a_release_the_law_alone_stays_at_rest(er20: Robot) -> None:
     assert [_moves_again_at_rest(er20, light_guiding(), run) for run in REST_RUNS] == [None] * 4
 
 
-def test_marks_stop_at_the_limit_with_a_notice() -> None:
-    from types import SimpleNamespace
-
-    from leadthrough.pendant.loop_requests import MAX_MARKS, RequestHandler
-    loop = SimpleNamespace(fb=SimpleNamespace(q=np.zeros(6)))
-    handler = RequestHandler(None, loop, None)  # type: ignore[arg-type]
+def test_marks_stop_at_the_limit_with_a_notice(er20: Robot,
+                                               nominal_params: ParamsFile) -> None:
+    """The loop's one request handler: marks up to :data:`MAX_MARKS`, then a notice; a
+    simulator's request on a loop without a simulator is refused with a notice."""
+    from leadthrough.session.servo_loop import MAX_MARKS
+    from loop_helpers import bare_loop
+    loop = bare_loop(er20, nominal_params)
+    loop.fb.q[:] = 0.0
     for k in range(MAX_MARKS + 1):
-        handler.apply(MarkPoint(f"W{k + 1}"), float(k))
-    assert len(handler.marks) == MAX_MARKS
-    assert handler.notices[-1].text.startswith(f"not marked: {MAX_MARKS} marks")
-    handler.apply(InjectFault(InjectedFaultKind.STALE, 0.0, 1.0), 0.0)      # not a simulator
-    assert handler.notices[-1].text == "not a simulator: InjectFault refused"
+        loop.serve(MarkPoint(f"W{k + 1}"), float(k))
+    assert len(loop.marks) == MAX_MARKS and loop.marks[-1].label == f"W{MAX_MARKS}"
+    assert loop.notices[-1].text.startswith(f"not marked: {MAX_MARKS} marks")
+    assert sum(e.kind == "mark" for e in loop.events) == MAX_MARKS
+    loop.serve(InjectFault(InjectedFaultKind.STALE, 0.0, 1.0), 0.0)      # not a simulator
+    assert loop.notices[-1].text == "not a simulator: InjectFault refused"

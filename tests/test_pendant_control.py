@@ -34,10 +34,10 @@ from websockets.sync.client import ClientConnection, connect
 from websockets.typing import Subprotocol
 
 from leadthrough.control.safety import State
+from leadthrough.identification.params_file import ParamsFile
 from leadthrough.pendant.app import Pendant
 from leadthrough.pendant.backend import LiveSession, LoopSnapshot, MarkPoint, SetEnable
 from leadthrough.pendant.controls import HOLD_HZ, text_html
-from leadthrough.pendant.loop_requests import RequestHandler
 from leadthrough.pendant.messages import (
     LEASE_S,
     Adjust,
@@ -314,25 +314,24 @@ def test_the_loop_releases_a_lapsed_lease_with_the_pendant_stalled(
         "lease lapsed" in n.text for n in snap.notices)
 
 
-def test_a_lease_lapses_at_the_first_cycle_after_it() -> None:
-    """The loop's side, on a clock of its own: held up to the lease's end, released at the
+def test_a_lease_lapses_at_the_first_cycle_after_it(er20: Robot,
+                                                     nominal_params: ParamsFile) -> None:
+    """The loop's side, on a clock the test owns: held up to the lease's end, released at the
     first controller cycle after it (one cycle: 10 ms here), whatever arrives."""
-    from types import SimpleNamespace
-    now = [0.0]
-    handler = RequestHandler(None, SimpleNamespace(), None,  # type: ignore[arg-type]
-                             clock=lambda: now[0])
-    handler.apply(SetEnable(True, until=LEASE_S), 0.0)
+    from leadthrough.session.pacing import VirtualClock
+    from loop_helpers import bare_loop
+    clock = VirtualClock()
+    loop = bare_loop(er20, nominal_params, clock=clock)
+    loop.serve(SetEnable(True, until=LEASE_S), 0.0)
     for t in np.arange(0.0, LEASE_S + 1e-9, 0.01):
-        now[0] = float(t)
-        handler.check_lease()
-        assert handler.held, t
-    now[0] = LEASE_S + 0.01                                  # the next cycle
-    handler.check_lease()
-    assert not handler.held and handler.lapsed == 1
-    handler.apply(SetEnable(True, until=now[0] - 0.001), 0.0)  # a late heartbeat: no hold
-    assert not handler.held and handler.lapsed == 2
-    handler.apply(SetEnable(True, until=math.nan), 0.0)        # malformed: refused, released
-    assert not handler.held and handler.refused == 1
+        clock.t = float(t)
+        assert loop.enabled_by_operator(float(t)), t
+    clock.t = LEASE_S + 0.01                                   # the next cycle
+    assert not loop.enabled_by_operator(clock.t) and loop.lapsed == 1
+    loop.serve(SetEnable(True, until=clock.t - 0.001), 0.0)    # a late heartbeat: no hold
+    assert not loop.enabled_by_operator(clock.t) and loop.lapsed == 2
+    loop.serve(SetEnable(True, until=math.nan), 0.0)           # malformed: refused, released
+    assert not loop.enabled_by_operator(clock.t) and loop.refused == 1
 
 
 def test_crafted_labels_are_refused_to_that_page(app: Pendant,

@@ -55,17 +55,23 @@ from leadthrough.identification.params_file import ParamsFile
 from leadthrough.progress import Progress
 from leadthrough.robot.description import Robot
 from leadthrough.robot.poses import guide_start_pose
-from leadthrough.session.loop import EndCause, LoopResult, run_session
-from leadthrough.session.loop_config import LoopConfig, LoopOptions, LoopParts, build_loop
-from leadthrough.session.realtime import RealtimeRequest, setup_realtime
+from leadthrough.session.loop import REALTIME_NOTE, EndCause, LoopResult, run_session
+from leadthrough.session.loop_config import (
+    LoopConfig,
+    LoopOptions,
+    LoopParts,
+    build_loop,
+    controller_cycle,
+    warm_up_parts,
+)
+from leadthrough.session.realtime import RealtimeRequest
 from leadthrough.session.requests import LoopRequests
 from leadthrough.session.session_file import SessionFileSink
 from leadthrough.session_format import SessionEvent
 
-__all__ = ["add_robot_arguments", "controller_cycle", "guide_on_robot", "latched_faults"]
+__all__ = ["DEFAULT_WATCHDOG_S", "add_input_arguments", "add_robot_arguments", "guide_on_robot",
+           "latched_faults", "loop_options", "require_enable_input"]
 
-#: The guiding controller's cycle the paper uses [s].
-PAPER_CYCLE_S = 0.01
 _SIM_ONLY = ("operator", "seed", "operator_seed", "run")
 #: ``--watchdog``'s default [s].
 DEFAULT_WATCHDOG_S = 0.05
@@ -79,6 +85,19 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
     real-time options."""
     g = p.add_argument_group("on a robot controller")
     add_connection_arguments(g)
+    add_input_arguments(g)
+    g.add_argument("--rt-priority", type=int, default=None, metavar="P",
+                   help="run the loop with SCHED_FIFO priority P (1-99; needs CAP_SYS_NICE)")
+    g.add_argument("--lock-memory", action="store_true", default=None,
+                   help="mlockall the process (no page faults in the loop)")
+    g.add_argument("--cpus", type=int, nargs="+", default=None, metavar="CPU",
+                   help="run on these CPUs only")
+
+
+def add_input_arguments(g: Any) -> None:
+    """``--enable-input``, ``--mark-input``, ``--reset-input`` and ``--watchdog`` (into an
+    argument group or parser): the controller's inputs and the loop's watchdog, read by
+    :func:`loop_options`."""
     g.add_argument("--enable-input", type=int, default=None, metavar="I",
                    help="the controller's digital input wired to the enabling device (bit I "
                         "of the driver's inputs: J519 DI[1+I], UR DI I, KUKA $IN[1+I]); "
@@ -92,19 +111,35 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--watchdog", type=float, default=None, metavar="S",
                    help="a driver exchange longer than this is a fault (a commanded stop) "
                         "[s]; one blocked over max(1 s, S) is aborted (default 0.05)")
-    g.add_argument("--rt-priority", type=int, default=None, metavar="P",
-                   help="run the loop with SCHED_FIFO priority P (1-99; needs CAP_SYS_NICE)")
-    g.add_argument("--lock-memory", action="store_true", default=None,
-                   help="mlockall the process (no page faults in the loop)")
-    g.add_argument("--cpus", type=int, nargs="+", default=None, metavar="CPU",
-                   help="run on these CPUs only")
 
 
-def controller_cycle(servo_dt: float) -> float:
-    """The guiding controller's cycle on a controller of period ``servo_dt`` [s]: the multiple
-    of it nearest the paper's 10 ms (8 ms on J519 at 8 ms, 8 ms on RSI at 4 ms, 10 ms on an
-    e-Series UR at 2 ms)."""
-    return max(1, round(PAPER_CYCLE_S / servo_dt)) * servo_dt
+def require_enable_input(args: argparse.Namespace) -> None:
+    """A robot is guided only with its enabling device: ``--enable-input`` given.
+
+    Raises:
+        ControlError: Naming ``--enable-input`` (exit code 2).
+    """
+    if args.enable_input is None:
+        raise ControlError("no enabling device: a robot is guided only while its enabling "
+                           "device is pressed", field="--enable-input", value=None,
+                           expected="the controller's digital input wired to the enabling "
+                                    "device")
+
+
+def loop_options(args: argparse.Namespace,
+                 realtime: RealtimeRequest | None = None) -> LoopOptions:
+    """The loop's options from :func:`add_input_arguments`' options (``--watchdog`` default
+    :data:`DEFAULT_WATCHDOG_S`; an exchange blocked over max(1 s, watchdog) is aborted).
+
+    Raises:
+        ControlError: Two options on one input, or a watchdog not finite and > 0 (exit
+            code 2).
+    """
+    watchdog = DEFAULT_WATCHDOG_S if args.watchdog is None else args.watchdog
+    return LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
+                       reset_input=args.reset_input, watchdog_s=watchdog,
+                       abort_s=max(1.0, watchdog),
+                       realtime=RealtimeRequest() if realtime is None else realtime)
 
 
 def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
@@ -112,21 +147,17 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
     """Run ``leadthrough guide --driver`` (see the module doc)."""
     _check_args(args)
     # the inputs checked before anything is built (a clash of two inputs: exit 2 at once)
-    watchdog = DEFAULT_WATCHDOG_S if args.watchdog is None else args.watchdog
-    options = LoopOptions(enable_input=args.enable_input, mark_input=args.mark_input,
-                          reset_input=args.reset_input,
-                          watchdog_s=watchdog, abort_s=max(1.0, watchdog))
-    # the session writer's process first: started after the real-time set-up, it would
-    # inherit the loop's CPUs and SCHED_FIFO (it leaves the policy itself, not the CPUs), and
-    # its shared chunks are mapped before mlockall; closed on every way out
+    options = loop_options(args, RealtimeRequest(args.rt_priority, bool(args.lock_memory),
+                                                 tuple(args.cpus) if args.cpus else None))
+    # the session writer's process first: started after the real-time set-up (the loop's,
+    # as it starts), it would inherit the loop's CPUs and SCHED_FIFO (it leaves the policy
+    # itself, not the CPUs), and its shared chunks are mapped before mlockall; closed on every
+    # way out
     settings: dict[str, object] = {"driver": args.driver, "host": args.host,
                                    "port": args.port, "enable_input": args.enable_input,
                                    "mark_input": args.mark_input,
                                    "reset_input": args.reset_input}
     with SessionFileSink(args.output, robot.n, robot=robot.name, settings=settings) as sink:
-        for line in setup_realtime(RealtimeRequest(args.rt_priority, bool(args.lock_memory),
-                                                   tuple(args.cpus) if args.cpus else None)):
-            print(f"leadthrough: {line}", file=sys.stderr, flush=True)
         driver = connect(args.driver, robot, args.host, args.port,
                          getattr(args, "robot_address", None))
         # everything built and compiled before the link opens: a controller streams from the
@@ -145,6 +176,9 @@ def guide_on_robot(args: argparse.Namespace, robot: Robot, pf: ParamsFile,
                   f"guide, Ctrl-C to stop", file=sys.stderr, flush=True)
             result = run_session(driver, *parts, args.duration, options=options,
                                  requests=requests, settings=settings, sink=sink)
+    for event in sink.events:
+        if event.kind == "loop" and event.label == REALTIME_NOTE:
+            print(f"leadthrough: {event.cause}", file=sys.stderr, flush=True)
     return _report(args, result, getattr(driver, "late_answers", 0),
                    latched_faults(sink.events))
 
@@ -155,11 +189,7 @@ def _check_args(args: argparse.Namespace) -> None:
     if args.realtime:
         raise ControlError("a simulator setting given for a robot", field="--realtime",
                            value=True, expected="none: the controller paces the loop")
-    if args.enable_input is None:
-        raise ControlError("no enabling device: a robot is guided only while its enabling "
-                           "device is pressed", field="--enable-input", value=None,
-                           expected="the controller's digital input wired to the enabling "
-                                    "device")
+    require_enable_input(args)
     check_rt_priority(args.rt_priority)
     bad_cpus = [c for c in args.cpus or () if not 0 <= c < MAX_CPUS]
     if bad_cpus:
@@ -176,16 +206,7 @@ def _loop_parts(robot: Robot, pf: ParamsFile, guiding: GuidingConfig, dt: float)
     parts = build_loop(robot, pf, LoopConfig(guiding=replace(
         guiding, dt=controller_cycle(dt))), dt)
     bar(1)
-    q0 = guide_start_pose(robot)
-    parts.estimator.reset(q0)
-    parts.estimator.warm_up()
-    bar(2)
-    parts.controller.reset(q0, 0.0)
-    parts.controller.warm_up()
-    bar(3)
-    parts.interpolator.reset(q0)
-    parts.interpolator.warm_up()
-    bar(4)
+    warm_up_parts(parts, guide_start_pose(robot), lambda k: bar(k + 1))
     bar.close()
     return parts
 

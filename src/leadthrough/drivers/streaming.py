@@ -130,7 +130,7 @@ class StreamingDriver(ABC, Generic[S]):
     packet left unanswered as late just as one answered late (RSI), so an answer can only
     help. Else a late answer is worse than none (J519 refuses it; the UR program holds a
     cycle either way): the loop answers at its start only packets it waited for
-    (:func:`~leadthrough.session.loop_start.fresh_packet`)."""
+    (:func:`~leadthrough.session.servo_loop.fresh_packet`)."""
 
     def make_feedback(self) -> DriverFeedback:
         """A feedback for this robot, holding no sample yet."""

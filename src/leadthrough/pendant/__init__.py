@@ -4,8 +4,8 @@ pendant``).
 * :mod:`~leadthrough.pendant.backend`: the loop in a process of its own, its snapshot and
   requests (the only module that talks to the loop), with
   :mod:`~leadthrough.pendant.messages` (requests, snapshot), :mod:`~leadthrough.pendant.
-  shared_state` (lock-free shared memory), :mod:`~leadthrough.pendant.loop_process` and
-  :mod:`~leadthrough.pendant.loop_requests` (the loop's process);
+  shared_state` (lock-free shared memory) and :mod:`~leadthrough.pendant.loop_process` (the
+  loop's process: the one guiding loop, :func:`leadthrough.session.loop.run`);
   :mod:`~leadthrough.pendant.live_recording`: the last minutes of the session, for the export;
 * :mod:`~leadthrough.pendant.app`: the web app (viser), with
   :mod:`~leadthrough.pendant.status_view`, :mod:`~leadthrough.pendant.scene_view`,

@@ -13,8 +13,10 @@ period; only the operating system's scheduler is shared. The pendant's side:
   :meth:`~LiveSession.period_times` and the recording for the export
   (:meth:`~LiveSession.session_log`) are rings in shared memory, read the same way;
 * **requests out**: :meth:`LiveSession.send` writes a request into a ``multiprocessing`` pipe;
-  the loop takes what has arrived at the start of each controller cycle
-  (:mod:`~leadthrough.pendant.loop_requests`). Refusals and results come back as notices.
+  the loop reads what has arrived every servo period and serves it in order
+  (:class:`~leadthrough.session.requests.PipeRequests`, :meth:`ServoLoop.serve
+  <leadthrough.session.servo_loop.ServoLoop.serve>`). Refusals and results come back as
+  notices.
 
 A frozen, slow or closed browser therefore changes nothing in the loop's process
 (``benchmarks/pendant_isolation.py`` measures it). If the pendant's process dies, the loop sees

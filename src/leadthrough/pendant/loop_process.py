@@ -3,61 +3,73 @@
 The pendant's process starts this one (``multiprocessing``, *spawn*: a fresh interpreter, no
 threads or locks inherited) with a :class:`LoopRecipe`, picklable settings from which this
 process builds the driver and the loop's parts itself, and loads or compiles their Numba code
-before it reports ready (with progress on the way). Then it runs
-:class:`~leadthrough.session.loop.ServoPeriods` (driver, estimator, controller, interpolator)
-open-ended, paced by the wall clock on a simulator and by the driver's ``step`` on a robot, and
-shares nothing with the pendant but memory it writes without waiting
-(:mod:`~leadthrough.pendant.shared_state`):
+before it reports ready (with progress on the way). Then it runs the one guiding loop,
+:func:`leadthrough.session.loop.run` on a :class:`~leadthrough.session.servo_loop.ServoLoop`,
+with the same start, pacing, real-time set-up, watchdog, faults (driver, stale feedback, the
+controller's state) and ways out as ``leadthrough guide``: a simulator paced by the wall clock,
+a robot by its driver's ``step``. It shares nothing with the pendant but memory it writes
+without waiting (:mod:`~leadthrough.pendant.shared_state`):
 
 * **state out**: after every controller cycle, the snapshot (a sequence-locked record), every
   servo period its timing (a ring), every controller cycle a row of the recording (a ring);
-* **requests in**: the pendant sends :mod:`~leadthrough.pendant.messages` requests through a
-  pipe; at the start of each controller cycle, before the controller runs, this process takes
-  what has arrived (``poll`` does not wait), so that a request takes effect at a cycle boundary
-  and in the order sent. Refusals and results come back as notices in the snapshot. A
-  malformed request is refused and counted, never raised; a snapshot whose slow part outgrows
-  its record leaves out the oldest transitions (then marks) with a notice
-  (:func:`~leadthrough.pendant.messages.fit_slow`); a lapsed lease on the enabling input is
-  released here, every controller cycle.
+* **requests in**: the pendant sends the loop's own requests
+  (:mod:`leadthrough.session.requests`) through a pipe, which the loop reads every period
+  without waiting (:class:`~leadthrough.session.requests.PipeRequests`) and serves in the
+  order sent (:meth:`ServoLoop.serve <leadthrough.session.servo_loop.ServoLoop.serve>`).
+  Refusals and results come back as notices in the snapshot. A malformed request is refused
+  and counted, never raised; a snapshot whose slow part outgrows its record leaves out the
+  oldest transitions (then marks) with a notice
+  (:func:`~leadthrough.pendant.messages.fit_slow`); a lapsed lease on the enabling device is
+  released by the loop itself, on its own clock.
 
-If the pipe closes or the parent process is gone (checked every controller cycle), the loop
-releases the enabling input, which the controller turns into a commanded stop, runs until the
-robot is at rest, says so on standard error and exits.
+If the pipe closes or the parent process is gone, the loop releases the enabling device,
+which the controller turns into a commanded stop, runs until the robot is at rest, says so on
+standard error and exits; on a real controller the driver's stop then ends the stream, as at
+the end of every session.
 """
 
 from __future__ import annotations
 
 import os
 import sys
-import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.safety import State
+from leadthrough.drivers.controllers import connect
 from leadthrough.drivers.protocol import Driver
-from leadthrough.errors import ControlError, LeadthroughError
+from leadthrough.errors import LeadthroughError
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.pendant.live_recording import LiveRecording
-from leadthrough.pendant.loop_requests import RequestHandler
 from leadthrough.pendant.messages import SlowState, fit_slow, numbers_size, snapshot_numbers
 from leadthrough.pendant.shared_state import PeriodRing, SeqlockRecord, SharedBlock
 from leadthrough.pendant.transitions import describe
 from leadthrough.robot.description import Robot
-from leadthrough.session.loop import ServoPeriods
-from leadthrough.session.loop_config import LoopConfig, LoopParts, build_loop
+from leadthrough.robot.poses import guide_start_pose
+from leadthrough.session.loop import check_setup, run
+from leadthrough.session.loop_config import (
+    LoopConfig,
+    LoopOptions,
+    LoopParts,
+    build_loop,
+    controller_cycle,
+    warm_up_parts,
+)
+from leadthrough.session.loop_end import EndCause
+from leadthrough.session.pacing import PeriodClock
+from leadthrough.session.requests import PipeRequests
+from leadthrough.session.servo_loop import ServoLoop, Simulator
 
-__all__ = ["MAX_LAG_S", "DriverRecipe", "LoopProcessOptions", "LoopRecipe", "LoopSetup",
-           "SharedNames", "run_loop_process"]
+__all__ = ["DriverRecipe", "LoopProcessOptions", "LoopRecipe", "LoopSetup", "SharedNames",
+           "run_loop_process"]
 
 Array = NDArray[np.float64]
-
-#: How far a simulated loop may fall behind the wall clock before it stops catching up [s].
-MAX_LAG_S = 0.05
 
 
 class LoopSetup(NamedTuple):
@@ -69,8 +81,11 @@ class LoopSetup(NamedTuple):
         settings: Recorded in the session file.
         applied_wrench: A simulator's truth, recorded for comparison; None for a robot.
         hand_force: The simulated hand's force now [N], shape (3,); None for a robot.
-        simulator: Applies a :class:`~leadthrough.pendant.messages.SimulatorRequest` at loop
+        simulator: Applies a :class:`~leadthrough.session.requests.SimulatorRequest` at loop
             time t [s] and returns a notice (or None); None for a robot.
+        options: How the loop meets the driver and the operator (the controller's enabling,
+            mark and reset inputs, the watchdog); the pendant's process sets the real-time
+            set-up and, on a simulator, the pacing.
     """
 
     driver: Driver
@@ -78,7 +93,8 @@ class LoopSetup(NamedTuple):
     settings: dict[str, object]
     applied_wrench: Callable[[], Array] | None = None
     hand_force: Callable[[], Array] | None = None
-    simulator: Callable[[object, float], str | None] | None = None
+    simulator: Simulator | None = None
+    options: LoopOptions = LoopOptions()
 
 
 class LoopRecipe(Protocol):
@@ -96,19 +112,30 @@ class LoopRecipe(Protocol):
 
 @dataclass(frozen=True)
 class DriverRecipe:
-    """A robot's driver and its loop (picklable: ``factory`` a module-level function).
+    """A real controller and its loop, as ``leadthrough guide --driver`` builds them
+    (picklable).
 
     Attributes:
         robot: The robot.
-        params: Its identified parameters.
-        factory: Makes the driver from the robot and the controller's address.
-        host: The controller's address.
+        params: Its identified parameters (ready to guide: with the friction sweep).
+        driver: The controller interface (``fanuc-j519``, ``ur-rtde``, ``kuka-rsi``:
+            :data:`~leadthrough.drivers.controllers.CONTROLLERS`).
+        host: The controller's address (RSI: the address to listen on).
+        port: The interface's port (None: its own).
+        robot_address: RSI only: the robot's ``HOST[:PORT]`` (None: the first sender).
+        options: The controller's enabling, mark and reset inputs, the watchdog.
+        guiding: The controller's settings (its cycle set from the controller's:
+            :func:`~leadthrough.session.loop_config.controller_cycle`).
     """
 
     robot: Robot
     params: ParamsFile
-    factory: Callable[[Robot, str], Driver]
+    driver: str
     host: str
+    port: int | None = None
+    robot_address: str | None = None
+    options: LoopOptions = field(default_factory=LoopOptions)
+    guiding: GuidingConfig = field(default_factory=GuidingConfig)
 
     @property
     def with_truth(self) -> bool:
@@ -116,11 +143,31 @@ class DriverRecipe:
         return False
 
     def build(self) -> LoopSetup:
-        """The driver (connected) and the loop's parts."""
-        driver = self.factory(self.robot, self.host)
-        parts = build_loop(self.robot, self.params, LoopConfig(), driver.dt)
-        return LoopSetup(driver, parts, {"operator": "pendant", "host": self.host,
-                                         "params_method": self.params.method})
+        """The loop's parts, their compiled code loaded, then the driver opened (the
+        controller streams from the open on: nothing slow is left between it and the loop's
+        start)."""
+        driver = connect(self.driver, self.robot, self.host, self.port, self.robot_address)
+        parts = self._parts(driver.dt)
+        dt = driver.dt
+        driver.open()
+        try:
+            if driver.dt != dt:    # the cycle the controller reported at open (UR CB3: 8 ms)
+                parts = self._parts(driver.dt)
+        except BaseException:
+            driver.close()
+            raise
+        settings: dict[str, object] = {
+            "operator": "pendant", "driver": self.driver, "host": self.host,
+            "port": self.port, "params_method": self.params.method,
+            "enable_input": self.options.enable_input, "mark_input": self.options.mark_input,
+            "reset_input": self.options.reset_input}
+        return LoopSetup(driver, parts, settings, options=self.options)
+
+    def _parts(self, dt: float) -> LoopParts:
+        parts = build_loop(self.robot, self.params, LoopConfig(guiding=replace(
+            self.guiding, dt=controller_cycle(dt))), dt)
+        warm_up_parts(parts, guide_start_pose(self.robot))
+        return parts
 
 
 @dataclass(frozen=True)
@@ -149,40 +196,42 @@ class LoopProcessOptions:
 
 def run_loop_process(recipe: LoopRecipe, names: SharedNames, conn: Connection,
                      options: LoopProcessOptions) -> None:
-    """The loop process's main: build, warm up, report ready, run until stopped."""
+    """The loop process's main: build, start (warm up), report ready, run until it ends."""
     blocks = [SharedBlock(name=n) for n in (names.record, names.periods, names.recording)]
     record = SeqlockRecord(blocks[0], numbers_size(names.n), names.blob_bytes)
     try:
         conn.send(("progress", "building the loop"))
         setup = recipe.build()
         conn.send(("progress", "loading the compiled code (Numba; compiles on first use)"))
-        runner = _Runner(setup, names, blocks, record, conn, options)
-        runner.start()
+        publisher = _Publisher(setup, names, blocks, record, conn, options)
     except Exception as e:  # the pendant must learn why, not wait
-        text = str(e) if isinstance(e, LeadthroughError) else f"{type(e).__name__}: {e}"
-        conn.send(("error", text))
+        conn.send(("error", _text(e)))
         return
-    runner.run()
+    publisher.run()
 
 
-class _Runner:
-    """The loop's periods, requests at cycle starts, and what it publishes."""
+def _text(e: BaseException) -> str:
+    return str(e) if isinstance(e, LeadthroughError) else f"{type(e).__name__}: {e}"
+
+
+class _Publisher:
+    """The loop (:func:`leadthrough.session.loop.run`) and what it publishes each period."""
 
     def __init__(self, setup: LoopSetup, names: SharedNames, blocks: list[SharedBlock],
                  record: SeqlockRecord, conn: Connection, options: LoopProcessOptions) -> None:
         driver, parts = setup.driver, setup.parts
-        every = round(parts.controller.config.dt / driver.dt)
-        if every < 1 or abs(every * driver.dt - parts.controller.config.dt) > 1e-9:
-            raise ControlError("controller cycle must be a multiple of the servo period",
-                               field="controller.dt", value=parts.controller.config.dt,
-                               expected=f"k × {driver.dt} s")
-        self.setup, self.every, self.conn, self.record = setup, every, conn, record
-        self.paced = driver.simulated if options.paced is None else options.paced
-        self.rt_priority = options.rt_priority
-        self.loop = ServoPeriods(driver, parts.estimator, parts.controller,
-                                 parts.interpolator, every, lambda _t: self.requests.held,
-                                 setup.applied_wrench)
-        self.requests = RequestHandler(parts.controller, self.loop, setup.simulator)
+        paced = driver.simulated if options.paced is None else options.paced
+        realtime = (setup.options.realtime if options.rt_priority is None else
+                    replace(setup.options.realtime, priority=options.rt_priority))
+        loop_options = replace(setup.options, paced=paced, realtime=realtime)
+        requests = PipeRequests(conn, os.getppid())
+        self.every = check_setup(driver, parts.estimator, parts.controller, None, loop_options,
+                                 requests, None)
+        self.setup, self.conn, self.record = setup, conn, record
+        self.loop = ServoLoop(driver, parts.estimator, parts.controller, parts.interpolator,
+                              self.every, loop_options, requests, None, setup.simulator)
+        self.pacing = PeriodClock(driver.dt, paced, real_time=not driver.simulated,
+                                  clock=self.loop.clock)
         self.periods = PeriodRing(blocks[1], names.timing_window)
         self.recording = LiveRecording(names.cycles, names.n, names.with_truth, blocks[2])
         self._numbers = np.zeros(numbers_size(names.n))
@@ -191,100 +240,74 @@ class _Runner:
         self._cause = ""
         self.blob_bytes = names.blob_bytes
         self._left_out: str | None = None
-        self._ppid = os.getppid()
-        self.t_start = 0.0
-
-    def start(self) -> None:
-        """Scheduling, the first sample, warm-up, the first snapshot; then report ready."""
-        self._schedule()
-        self.t_start = self.loop.start()
-        self._publish(self.t_start)
-        self.conn.send(("ready", self.setup.settings, self.every))
 
     def run(self) -> None:
-        """The periods until stopped (and at rest), then the last snapshot."""
-        error = "stopped"
+        """The loop until it ends (and at rest), then the last snapshot."""
+        loop, error = self.loop, "stopped"
         try:
-            self._periods()
+            run(loop, self.pacing, observe=self._period, started=self._started)
         except LeadthroughError as e:
             error = str(e)
+            if not self._ready:         # it failed to start: the pendant must learn why
+                self.conn.send(("error", error))
+                return
         except Exception as e:  # the loop must report, not vanish
-            error = f"{type(e).__name__}: {e}"
-        handler = self.requests
-        if handler.lost is not None:
-            c_out = self.loop.c_out
-            print(f"leadthrough loop: {handler.lost}: commanded stop; "
-                  f"{State(int(c_out.state)).name} "
-                  f"at rest at {self.loop.fb.t:.3f} s, loop ended", file=sys.stderr, flush=True)
-        self._publish(self.loop.fb.t, error)
+            error = _text(e)
+            if not self._ready:
+                self.conn.send(("error", error))
+                return
+        end = loop.end
+        if end is not None and end.cause is EndCause.OPERATOR_LOST:
+            print(f"leadthrough loop: {loop.operator_lost}: commanded stop; "
+                  f"{State(int(loop.c_out.state)).name} "
+                  f"at rest at {loop.fb.t:.3f} s, loop ended", file=sys.stderr, flush=True)
+        elif end is not None and end.cause is not EndCause.STOP_REQUESTED:
+            error = f"{end.cause}: {end.detail}" if end.detail else str(end.cause)
+        self._publish(loop.t if np.isfinite(loop.t) else loop.fb.t, error)
 
-    def _schedule(self) -> None:
-        """Real-time scheduling of this process, if asked for (see ``rt_priority``)."""
-        if self.rt_priority is None:
-            return
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
-        except (AttributeError, OSError, ValueError) as e:
-            self.requests.notice("warning", f"no real-time priority for the loop ({e}); it "
-                                            "runs with ordinary scheduling")
-        else:
-            self.requests.notice("info", f"the loop runs under SCHED_FIFO, priority "
-                                         f"{self.rt_priority}")
+    _ready = False
 
-    def _periods(self) -> None:
-        """The loop: periods until stopped (and then at rest), requests at cycle starts."""
-        loop, dt, every, handler = self.loop, self.setup.driver.dt, self.every, self.requests
-        t_start, periods = self.t_start, self.periods
-        wall0 = time.perf_counter()
-        i = 0
-        while not (handler.stopping and self._at_rest()):
-            t_loop = t_start + (i + 1) * dt
-            deadline = None
-            if self.paced:
-                deadline = wall0 + (i + 1) * dt
-                if time.perf_counter() - deadline > MAX_LAG_S:   # fell behind: no catching up
-                    wall0 = time.perf_counter() - (i + 1) * dt
-                    deadline = wall0 + (i + 1) * dt
-            cycle = i % every == 0
-            if cycle:
-                handler.take(self.conn, t_loop)
-                if os.getppid() != self._ppid:
-                    handler.lose("the pendant's process ended")
-            work = loop.period(i, t_loop, deadline)
-            done = np.nan if deadline is None else (time.perf_counter() - deadline) * 1e6
-            periods.store(i, work, done)
-            if cycle:
-                applied = self.setup.applied_wrench
-                self.recording.store(t_loop, loop.fb, loop.cmd, loop.e_out, loop.c_out,
-                                     applied() if applied is not None else None)
-                self._publish(t_loop)
-            i += 1
+    def _started(self, t_start: float) -> None:
+        """The loop has started: the first snapshot, then ready."""
+        self._publish(t_start)
+        self._ready = True
+        self.conn.send(("ready", self.setup.settings, self.every))
 
-    def _at_rest(self) -> bool:
-        c_out = self.loop.c_out
-        return c_out.state in (State.IDLE, State.FAULT) and not c_out.twist_base.any()
+    def _period(self, i: int, work_us: float) -> None:
+        """After servo period ``i``: its timing; every controller cycle a row of the recording
+        and the snapshot."""
+        pacing = self.pacing
+        done = ((pacing.clock.now() - pacing.next_start) * 1e6 if pacing.paced else np.nan)
+        self.periods.store(i, work_us, done)
+        if i % self.every == 0:
+            loop, applied = self.loop, self.setup.applied_wrench
+            self.recording.store(loop.t, loop.fb, loop.cmd, loop.e_out, loop.c_out,
+                                 applied() if applied is not None else None)
+            self._publish(loop.t)
 
     def _publish(self, t: float, error: str | None = None) -> None:
         """Write this cycle's snapshot (its slow part only if something in it changed)."""
-        loop, ctl, handler = self.loop, self.setup.parts.controller, self.requests
+        loop, ctl = self.loop, self.setup.parts.controller
         if ctl.event_count != self._event_count:
             self._event_count = ctl.event_count
             self._cause = describe(ctl.last_event)
-            handler.changed = True
+            loop.changed = True
         c_out, e_out = loop.c_out, loop.e_out
         push = self.setup.hand_force() if self.setup.hand_force is not None else self._no_push
         snapshot_numbers(self._numbers, t, loop.fb.q, c_out.transform_tool_to_base,
                          e_out.wrench, c_out.twist_base,
-                         (int(c_out.state), int(c_out.fault), int(e_out.status), handler.held),
+                         # the controller's own state: a trip outside the cycle (a lost link
+                         # ends the loop before another cycle) is not in c_out yet
+                         (int(ctl.state), int(ctl.fault), int(e_out.status), loop.held),
                          push)
         blob = None
-        if handler.changed or error is not None:
-            handler.changed = False
+        if loop.changed or error is not None:
+            loop.changed = False
             blob, left_out = fit_slow(
-                SlowState(self._cause, ctl.config, handler.marks, tuple(handler.notices),
-                          tuple(ctl.events), error, handler.refused, handler.lapsed),
+                SlowState(self._cause, ctl.config, loop.marks, tuple(loop.notices),
+                          tuple(ctl.events), error, loop.refused, loop.lapsed),
                 self.blob_bytes)
             if left_out is not None and left_out != self._left_out:
                 self._left_out = left_out
-                handler.notice("warning", left_out)      # in the next cycle's snapshot
+                loop.notice("warning", left_out)      # in the next cycle's snapshot
         self.record.write(self._numbers, blob)

@@ -1,6 +1,7 @@
-"""What the pendant and the loop's process say to each other: the operator's requests, the
-loop's snapshot with its notices and marks, the servo periods' timing, and the snapshot's
-encoding in shared memory (:class:`~leadthrough.pendant.shared_state.SeqlockRecord`).
+"""What the pendant and the loop's process say to each other: the operator's requests (the
+loop's own vocabulary, :mod:`leadthrough.session.requests`, re-exported here), the loop's
+snapshot with its notices and marks, the servo periods' timing, and the snapshot's encoding in
+shared memory (:class:`~leadthrough.pendant.shared_state.SeqlockRecord`).
 
 A snapshot is encoded in two parts: the numbers that change every controller cycle (time,
 joint positions, the TCP pose, wrench, twist, state, fault, estimator status, enabling input,
@@ -11,7 +12,6 @@ rewritten only when one of them changes.
 
 from __future__ import annotations
 
-import math
 import pickle
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
@@ -21,9 +21,24 @@ from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig
 from leadthrough.control.safety import Event, Fault, State
-from leadthrough.errors import ControlError
 from leadthrough.estimation.estimator import EstimatorStatus
-from leadthrough.labels import LabelError, check_label
+from leadthrough.session.requests import (
+    LEASE_S,
+    MAX_SETTING,
+    Adjust,
+    ClearFault,
+    MarkedPoint,
+    MarkPoint,
+    Notice,
+    Request,
+    RequestError,
+    SetEnable,
+    SimulatorRequest,
+    Stop,
+    check_finite,
+    check_request,
+    check_vector,
+)
 
 __all__ = ["LEASE_S", "MAX_SETTING", "Adjust", "ClearFault", "LoopSnapshot", "MarkPoint",
            "MarkedPoint", "Notice", "PeriodTimes", "Request", "RequestError", "SetEnable",
@@ -32,158 +47,6 @@ __all__ = ["LEASE_S", "MAX_SETTING", "Adjust", "ClearFault", "LoopSnapshot", "Ma
            "decode_snapshot", "fit_slow", "numbers_size", "snapshot_numbers"]
 
 Array = NDArray[np.float64]
-
-#: How long one heartbeat of the page's hold-to-run enabling device keeps it held [s]: the
-#: loop releases the input itself once a lease has lapsed (:class:`SetEnable`).
-LEASE_S = 0.2
-#: The largest virtual mass or friction a request may carry (the controller clamps to its
-#: operator limits further) [kg, kg·m², N, N·m].
-MAX_SETTING = 1e6
-
-
-class RequestError(ControlError):
-    """A request to the loop is malformed (wrong type, a number not finite or out of range,
-    a label outside the label charset): refused, nothing applied."""
-
-
-@dataclass(frozen=True)
-class SetEnable:
-    """The enabling input (deadman): held or released.
-
-    Attributes:
-        held: Held (True) or released.
-        until: When the hold lapses (``time.monotonic()`` of the pendant's machine [s]; a
-            lease, renewed by each heartbeat of a hold-to-run device): the loop releases the
-            input at its first controller cycle after it, whatever the pendant does. None:
-            held until released (a caller of the loop's own interface).
-    """
-
-    held: bool
-    until: float | None = None
-
-
-@dataclass(frozen=True)
-class ClearFault:
-    """Clear a latched fault (done once the commanded motion is at rest)."""
-
-
-@dataclass(frozen=True)
-class MarkPoint:
-    """The operator marks the measured pose under a name (``P1``, ``P2``, ``W3``)."""
-
-    label: str
-
-
-@dataclass(frozen=True)
-class Adjust:
-    """Change the frame, the axes, the virtual mass or friction (None: unchanged); see
-    :meth:`GuidingController.adjust <leadthrough.control.guiding.GuidingController.adjust>`."""
-
-    frame: str | None = None
-    axes_enabled: tuple[bool, ...] | None = None
-    mass: tuple[float, float] | None = None
-    friction: tuple[float, float] | None = None
-
-
-@dataclass(frozen=True)
-class SimulatorRequest:
-    """A request to the simulated plant (the mouse's push, a fault to practise on); refused
-    on a robot. Its kinds are defined with the simulator's parts
-    (:mod:`~leadthrough.pendant.push`, :mod:`~leadthrough.pendant.simulated`)."""
-
-    def check(self) -> None:
-        """Raise :class:`RequestError` if a field is malformed (a kind with fields checks
-        them)."""
-
-
-@dataclass(frozen=True)
-class Stop:
-    """End the loop: release the enabling input, come to rest, exit (the pendant's own)."""
-
-
-#: What the interface may ask of the loop.
-Request = SetEnable | ClearFault | MarkPoint | Adjust | SimulatorRequest
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float | np.floating | np.integer) and not isinstance(
-        value, bool | np.bool_)
-
-
-def check_finite(value: Any, field: str, *, low: float = -math.inf, high: float = math.inf,
-                 low_open: bool = False) -> float:
-    """``value`` as a float if it is a real number, finite and within [low, high] (``low``
-    excluded if ``low_open``), else a :class:`RequestError` naming ``field``."""
-    ok = _is_number(value) and math.isfinite(float(value))
-    if ok:
-        v = float(value)
-        ok = (v > low if low_open else v >= low) and v <= high
-    if not ok:
-        shown = value if not isinstance(value, str) or len(value) <= 40 else value[:40] + "..."
-        raise RequestError("not a finite number in range", source="pendant", field=field,
-                           value=shown, expected=f"a number in {'(' if low_open else '['}"
-                                                 f"{low:g}, {high:g}]")
-    return float(value)
-
-
-def check_vector(value: Any, field: str, size: int, *, bound: float) -> tuple[float, ...]:
-    """``value`` as ``size`` finite floats within ±``bound``, else a :class:`RequestError`."""
-    if not isinstance(value, tuple | list | np.ndarray) or len(value) != size:
-        raise RequestError(f"not {size} numbers", source="pendant", field=field,
-                           value=type(value).__name__, expected=f"{size} finite numbers")
-    return tuple(check_finite(v, f"{field}[{k}]", low=-bound, high=bound)
-                 for k, v in enumerate(value))
-
-
-def check_request(request: Any) -> None:
-    """Check a request before it is sent and again where the loop applies it: types, finite
-    numbers, ranges, labels (:func:`leadthrough.labels.check_label`).
-
-    Raises:
-        RequestError: naming the field, the value and what is accepted; nothing is applied.
-    """
-    if isinstance(request, SetEnable):
-        if not isinstance(request.held, bool | np.bool_):
-            raise RequestError("held must be true or false", source="pendant", field="held",
-                               value=type(request.held).__name__, expected="a bool")
-        if request.until is not None:
-            check_finite(request.until, "until")
-    elif isinstance(request, MarkPoint):
-        try:
-            check_label(request.label, source="pendant", field="label")
-        except LabelError as e:   # the same words, as a refused request
-            raise RequestError(e.message, source=e.source, field=e.field, value=e.value,
-                               expected=e.expected) from e
-    elif isinstance(request, Adjust):
-        _check_adjust(request)
-    elif isinstance(request, SimulatorRequest):
-        request.check()
-    elif not isinstance(request, ClearFault | Stop):
-        raise RequestError("unknown request", source="pendant", field="request",
-                           value=type(request).__name__, expected="a pendant request")
-
-
-def _check_adjust(req: Adjust) -> None:
-    if req.frame is not None and req.frame not in ("base", "tool"):
-        shown = req.frame if not isinstance(req.frame, str) else req.frame[:40]
-        raise RequestError("unknown frame", source="pendant", field="frame", value=shown,
-                           expected="'base' or 'tool'")
-    if req.axes_enabled is not None and (
-            not isinstance(req.axes_enabled, tuple) or len(req.axes_enabled) != 6
-            or not all(isinstance(a, bool) for a in req.axes_enabled)):
-        raise RequestError("axes must be six true/false values", source="pendant",
-                           field="axes_enabled", value=type(req.axes_enabled).__name__,
-                           expected="a tuple of 6 bools")
-    for name, pair, low_open in (("mass", req.mass, True), ("friction", req.friction, False)):
-        if pair is None:
-            continue
-        if not isinstance(pair, tuple) or len(pair) != 2:
-            raise RequestError("not a pair of numbers", source="pendant", field=name,
-                               value=type(pair).__name__,
-                               expected="(translational, rotational)")
-        for k, v in enumerate(pair):
-            check_finite(v, f"{name}[{k}]", low=0.0, high=MAX_SETTING, low_open=low_open)
-
 
 class PeriodTimes(NamedTuple):
     """Timing of consecutive servo periods of a live loop.
@@ -200,36 +63,6 @@ class PeriodTimes(NamedTuple):
     work_us: NDArray[np.float64]
     done_us: NDArray[np.float64]
     controller_cycle: NDArray[np.bool_]
-
-
-@dataclass(frozen=True)
-class MarkedPoint:
-    """A point the operator marked.
-
-    Attributes:
-        label: Its name.
-        t: Loop time of the mark [s].
-        q: Measured joint positions then [rad], shape (n,).
-    """
-
-    label: str
-    t: float
-    q: Array
-
-
-@dataclass(frozen=True)
-class Notice:
-    """A message from the loop to the operator (a refused or clamped request, a mark).
-
-    Attributes:
-        number: Running number (1, 2, ...), to tell new notices from seen ones.
-        level: ``"info"`` or ``"warning"``.
-        text: The message.
-    """
-
-    number: int
-    level: str
-    text: str
 
 
 @dataclass(frozen=True)

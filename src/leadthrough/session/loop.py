@@ -13,9 +13,20 @@ Per servo period (``driver.dt``):
 4. the row is recorded (:mod:`~leadthrough.session.recorder`) and the compute time of steps
    2–3 measured.
 
+**One loop for every way of driving a robot.** :func:`run` owns the periods in time: the
+real-time set-up (``LoopOptions.realtime``, one switch), the interpreter's settings, the start,
+the pacing and late-period count (:class:`~leadthrough.session.pacing.PeriodClock`), the
+watchdog, and every way out, each ending in the driver's commanded stop (:func:`stop_driver`).
+:func:`run_session` (the CLI's ``guide``, the library) records each period to memory or a file
+and returns a :class:`LoopResult`; the pendant's loop process
+(:mod:`leadthrough.pendant.loop_process`) runs the same :func:`run` and publishes each
+controller cycle to the page. The state and the work of a period are
+:class:`~leadthrough.session.servo_loop.ServoLoop`'s.
+
 **Start.** The first sample: each part's compiled code loaded and a few periods computed on
 it, then every part reset there; on a real controller the packets of the start answered as the
-controller wants them (:func:`~leadthrough.session.loop_start.start_loop`).
+controller wants them (:meth:`ServoLoop.start
+<leadthrough.session.servo_loop.ServoLoop.start>`).
 
 **Enabling.** The enabling device (a digital input of the driver, ``LoopOptions.enable_input``;
 or a ``deadman`` function) starts guiding
@@ -25,7 +36,9 @@ transients), no fault is latched and no stop is requested
 (:class:`~leadthrough.session.operator_inputs.EnablingDevice`). A device held at the start must
 be released and pressed again; with no enabling input the loop never guides.
 
-**Ways out.** The loop runs until a stop: ``LoopRequests.stop``, or the end of ``duration_s``.
+**Ways out.** The loop runs until a stop: ``LoopRequests.stop`` (or the operator's
+:class:`~leadthrough.session.requests.Stop`), the operator's channel lost, or the end of
+``duration_s``.
 A stop releases the controller (a stop at the acceleration limit) and the loop ends once the
 commanded motion is at rest. However it ended (a stop, a fault's stop, a lost link, a stop
 that timed out, an exception escaping the loop such as a second Ctrl-C), a real controller's
@@ -79,6 +92,7 @@ import math
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -91,20 +105,21 @@ from leadthrough.estimation.estimator import ExternalForceEstimator
 from leadthrough.session.controller_events import transition_event
 from leadthrough.session.loop_config import LoopOptions
 from leadthrough.session.loop_end import EndCause, LoopEnd
-from leadthrough.session.loop_start import start_loop
-from leadthrough.session.pacing import ComputeTimes, PeriodClock
+from leadthrough.session.pacing import Clock, ComputeTimes, PeriodClock
+from leadthrough.session.realtime import setup_realtime
 from leadthrough.session.recorder import ChunkSink, SessionRecorder
-from leadthrough.session.requests import LoopRequests
+from leadthrough.session.requests import RequestSource
 from leadthrough.session.servo_loop import ServoLoop
-from leadthrough.session.servo_periods import ServoPeriods
 from leadthrough.session_format import SessionLog
 
-__all__ = ["GIL_SWITCH_S", "EndCause", "LoopEnd", "LoopResult", "ServoPeriods",
-           "run_session", "stop_driver", "transition_event"]
+__all__ = ["GIL_SWITCH_S", "REALTIME_NOTE", "EndCause", "LoopEnd", "LoopResult", "PeriodObserver",
+           "check_setup", "run", "run_session", "stop_driver", "transition_event"]
 
 Array = NDArray[np.float64]
 log = logging.getLogger("leadthrough.session")
 
+#: The label of the session's events that say how the real-time set-up went.
+REALTIME_NOTE = "real-time set-up"
 #: The interpreter's thread switch interval while the loop runs [s] (see the module doc): the
 #: longest the loop's thread waits for the lock when another thread holds it in Python code.
 GIL_SWITCH_S = 2e-4
@@ -146,11 +161,12 @@ def run_session(
     duration_s: float | None = None,
     *,
     options: LoopOptions | None = None,
-    requests: LoopRequests | None = None,
+    requests: RequestSource | None = None,
     deadman: Callable[[float], bool] | None = None,
     applied_wrench: Callable[[], Array] | None = None,
     settings: dict[str, object] | None = None,
     sink: ChunkSink | None = None,
+    clock: Clock | None = None,
 ) -> LoopResult:
     """Run a guiding session until a stop (see the module doc).
 
@@ -163,7 +179,8 @@ def run_session(
         duration_s: Stop after this long [s]; None: run until ``requests.stop()``.
         options: How the loop meets the driver and the operator (the enabling and mark inputs,
             pacing, the watchdog).
-        requests: The channel for requests from other threads.
+        requests: The operator's requests (a :class:`~leadthrough.session.requests.
+            LoopRequests` queue from other threads).
         deadman: The enabling device's level as a function of the loop's time, instead of an
             input (e.g. a scripted operator).
         applied_wrench: A simulator's truth: the wrench applied this period (base frame),
@@ -172,6 +189,8 @@ def run_session(
         sink: Where the recording's chunks go (e.g. a
             :class:`~leadthrough.session.session_file.SessionFileSink`, streaming to disk);
             None: memory, returned in the result.
+        clock: What the loop times with (default: the wall clock; a
+            :class:`~leadthrough.session.pacing.VirtualClock` in tests).
 
     Returns:
         The recording, how the loop ended, the compute times.
@@ -181,37 +200,84 @@ def run_session(
             anything runs), or no feedback on the first read.
     """
     options = options if options is not None else LoopOptions()
-    every = _check_setup(driver, estimator, controller, duration_s, options, requests, deadman)
+    every = check_setup(driver, estimator, controller, duration_s, options, requests, deadman)
     dt = driver.dt
     steps = None if duration_s is None else round(duration_s / dt)
     loop = ServoLoop(driver, estimator, controller, interpolator, every, options, requests,
-                    deadman)
+                     deadman, clock=clock)
     rec = SessionRecorder(driver.n, applied_wrench is not None, sink, events=loop.events)
-    clock = PeriodClock(dt, options.paced, real_time=not driver.simulated)
     times = ComputeTimes()
+    fb, cmd, e_out, c_out = loop.fb, loop.cmd, loop.e_out, loop.c_out
+
+    def record(i: int, work_us: float) -> None:
+        times.add(work_us)
+        rec.store(loop.t, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
+                  c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
+                  int(c_out.fault), applied_wrench() if applied_wrench is not None else None)
+
+    pacing = PeriodClock(dt, options.paced, real_time=not driver.simulated, clock=loop.clock)
+    try:
+        run(loop, pacing, steps=steps, observe=record)
+    finally:
+        session_log = rec.finish(controller.robot.name, loop.session_events(), settings or {})
+    assert loop.end is not None
+    cycle_us, servo_us = times.split(every)
+    return LoopResult(log=session_log, end=loop.end, cycle_us=cycle_us, servo_us=servo_us,
+                      late_periods=pacing.late, skipped_periods=pacing.skipped,
+                      periods=times.count, cycles=-(-times.count // every))
+
+
+class PeriodObserver(Protocol):
+    """Called after each servo period with its index and its compute time [µs] (after the
+    period's work, before its late count: what it costs counts)."""
+
+    def __call__(self, i: int, work_us: float) -> None: ...
+
+
+def run(loop: ServoLoop, pacing: PeriodClock, *, steps: int | None = None,
+        observe: PeriodObserver | None = None,
+        started: Callable[[float], None] | None = None) -> None:
+    """Run ``loop`` until it ends (the one loop, see the module doc): the real-time set-up,
+    the start, the periods, and the way out, which always ends in the driver's commanded stop.
+
+    Args:
+        loop: The loop, not started.
+        pacing: Paces the periods and counts the late ones (on ``loop.clock``).
+        steps: Servo periods before a stop (``EndCause.DURATION``); None: until a stop.
+        observe: Called after each period (recording, publishing).
+        started: Called with the first sample's time [s] once the loop has started, before
+            its first period.
+
+    Raises:
+        ControlError: No feedback on the first read (nothing was commanded).
+        BaseException: Whatever escaped a period (a second Ctrl-C, a bug), after the
+            driver's stop.
+    """
+    lines = setup_realtime(loop.options.realtime)   # before the start's warm-up and locks
+    for line in lines:
+        refused = " not " in line
+        (log.warning if refused else log.info)("real-time set-up: %s", line)
     interpreter = _InterpreterSettings()   # from the start on: no collection between the
     try:                                   # start's last packet and the first answer
-        t_start = start_loop(loop)
+        t_start = loop.start()
     except BaseException:
         interpreter.restore()
         raise
     escaped: BaseException | None = None
     try:
-        _run(loop, rec, t_start, steps, clock, applied_wrench, times)
+        for line in lines:      # in the session's events and the operator's notices
+            loop.note(t_start, REALTIME_NOTE, line, "warning" if " not " in line else "info")
+        if started is not None:
+            started(t_start)
+        _periods(loop, t_start, steps, pacing, observe)
     except BaseException as e:   # a second Ctrl-C, or a bug: stopped and recorded, re-raised
         escaped = e
         raise
     finally:
-        session_log = _end(loop, rec, escaped, interpreter, controller.robot.name,
-                           settings or {})
-    assert loop.end is not None
-    if clock.late:
-        log.warning("%d servo periods late (%d slots skipped, none caught up)", clock.late,
-                    clock.skipped)
-    cycle_us, servo_us = times.split(every)
-    return LoopResult(log=session_log, end=loop.end, cycle_us=cycle_us, servo_us=servo_us,
-                      late_periods=clock.late, skipped_periods=clock.skipped,
-                      periods=times.count, cycles=-(-times.count // every))
+        _end(loop, escaped, interpreter)
+    if pacing.late:
+        log.warning("%d servo periods late (%d slots skipped, none caught up)", pacing.late,
+                    pacing.skipped)
 
 
 class _InterpreterSettings:
@@ -231,23 +297,17 @@ class _InterpreterSettings:
             gc.enable()
 
 
-def _end(loop: ServoLoop, rec: SessionRecorder, escaped: BaseException | None,
-         interpreter: _InterpreterSettings, robot_name: str,
-         settings: dict[str, object]) -> SessionLog | None:
+def _end(loop: ServoLoop, escaped: BaseException | None,
+         interpreter: _InterpreterSettings) -> None:
     """After the last period, however the loop left: first the driver's stop, which answers the
     controller's packet the last period read (:func:`stop_driver`), with the interpreter still
-    set for the loop; then the interpreter restored, the loop closed, and the recording
-    finished whatever the steps before did. Returns the recording (None where it went to a
-    sink)."""
+    set for the loop; then the interpreter restored and the loop closed, whatever the steps
+    before did."""
     try:
         stop_driver(loop, escaped)
     finally:
         interpreter.restore()
-        try:
-            loop.close()
-        finally:
-            session_log = rec.finish(robot_name, loop.session_events(), settings)
-    return session_log
+        loop.close()
 
 
 def stop_driver(loop: ServoLoop, escaped: BaseException | None = None) -> None:
@@ -288,25 +348,22 @@ def stop_driver(loop: ServoLoop, escaped: BaseException | None = None) -> None:
     loop.note(t, "driver stopped", f"{how}; {method}" if method else how)
 
 
-def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | None,
-         clock: PeriodClock, applied_wrench: Callable[[], Array] | None,
-         times: ComputeTimes) -> None:
+def _periods(loop: ServoLoop, t_start: float, steps: int | None, pacing: PeriodClock,
+             observe: PeriodObserver | None) -> None:
     """The periods, until the loop ends."""
     dt, simulated = loop.driver.dt, loop.driver.simulated
-    fb, cmd, e_out, c_out = loop.fb, loop.cmd, loop.e_out, loop.c_out
-    clock.start()
+    pacing.start()
     i = 0
     while True:
         # the loop's clock advances on stale feedback too; on a real controller it catches up
         # with the controller's clock after cycles that went by unseen (ServoLoop.t)
         t_loop = t_start + (i + 1) * dt if simulated else loop.t + dt
-        times.add(loop.period(i, t_loop, clock))
+        work_us = loop.period(i, t_loop, pacing)
+        if observe is not None:
+            observe(i, work_us)
+        pacing.done()
+        loop.late = pacing.late
         t_loop = loop.t
-        rec.store(t_loop, fb.q, fb.current, e_out.tau_ext, e_out.wrench, cmd.q, cmd.qd,
-                  c_out.transform_tool_to_base, c_out.twist_base, int(c_out.state),
-                  int(c_out.fault), applied_wrench() if applied_wrench is not None else None)
-        clock.done()
-        loop.late = clock.late
         i += 1
         if steps is not None and i >= steps:
             loop.begin_end(EndCause.DURATION, t_loop)
@@ -314,11 +371,15 @@ def _run(loop: ServoLoop, rec: SessionRecorder, t_start: float, steps: int | Non
             return
 
 
-def _check_setup(driver: Driver, estimator: ExternalForceEstimator,
-                 controller: GuidingController, duration_s: float | None, options: LoopOptions,
-                 requests: LoopRequests | None, deadman: Callable[[float], bool] | None) -> int:
+def check_setup(driver: Driver, estimator: ExternalForceEstimator,
+                controller: GuidingController, duration_s: float | None, options: LoopOptions,
+                requests: RequestSource | None, deadman: Callable[[float], bool] | None) -> int:
     """The loop's settings checked against each other; returns the servo periods per
-    controller cycle."""
+    controller cycle.
+
+    Raises:
+        ControlError: Naming the setting that does not fit the others.
+    """
     dt = driver.dt
     every = round(controller.config.dt / dt)
     if every < 1 or abs(every * dt - controller.config.dt) > 1e-9:

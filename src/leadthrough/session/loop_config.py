@@ -12,8 +12,12 @@ the operator: which digital input is the enabling device, pacing.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
 
 from leadthrough.control.guiding import GuidingConfig, GuidingController
 from leadthrough.control.interpolation import HermiteInterpolator
@@ -21,6 +25,7 @@ from leadthrough.errors import ControlError, check_fields
 from leadthrough.estimation.estimator import EstimatorConfig, ExternalForceEstimator
 from leadthrough.identification.params_file import ParamsFile
 from leadthrough.robot.description import Robot
+from leadthrough.session.realtime import RealtimeRequest
 
 __all__ = ["MAX_INPUT_BIT", "SLOW_COMMAND_VELOCITY", "LoopConfig", "LoopOptions", "LoopParts",
            "build_loop"]
@@ -31,6 +36,8 @@ SLOW_COMMAND_VELOCITY = 0.01
 
 #: Highest digital input bit a driver can report (a 64-bit field).
 MAX_INPUT_BIT = 63
+
+Array = NDArray[np.float64]
 
 
 def _guiding_estimator() -> EstimatorConfig:
@@ -88,6 +95,9 @@ class LoopOptions:
             robot) [s]; at least ``watchdog_s``.
         stop_timeout_s: A stop (requested, or the end of ``duration_s``) that has not brought
             the commanded motion to rest after this long ends the loop anyway [s].
+        realtime: The real-time set-up of the loop's process (SCHED_FIFO priority, memory
+            locked, CPUs), applied as the loop starts; each step the OS refuses is noted and
+            the loop runs without it (:mod:`~leadthrough.session.realtime`). Default: none.
     """
 
     enable_input: int | None = None
@@ -97,6 +107,7 @@ class LoopOptions:
     watchdog_s: float = 0.05
     abort_s: float = 1.0
     stop_timeout_s: float = 10.0
+    realtime: RealtimeRequest = field(default_factory=RealtimeRequest)
 
     def __post_init__(self) -> None:
         bits = f"None or an input bit 0..{MAX_INPUT_BIT}"
@@ -115,6 +126,17 @@ class LoopOptions:
             ("stop_timeout_s", math.isfinite(self.stop_timeout_s) and self.stop_timeout_s > 0,
              "> 0 s"),
         ], ControlError)
+
+
+#: The paper's controller cycle [s] (Table IV: 10 ms).
+PAPER_CYCLE_S = 0.01
+
+
+def controller_cycle(servo_dt: float) -> float:
+    """The guiding controller's cycle on a controller of period ``servo_dt`` [s]: the multiple
+    of it nearest the paper's 10 ms (8 ms on J519 at 8 ms, 8 ms on RSI at 4 ms, 10 ms on an
+    e-Series UR at 2 ms)."""
+    return max(1, round(PAPER_CYCLE_S / servo_dt)) * servo_dt
 
 
 class LoopParts(NamedTuple):
@@ -150,3 +172,23 @@ def build_loop(robot: Robot, params: ParamsFile, config: LoopConfig, dt: float) 
     controller = GuidingController(robot, guiding, params.noise_mean, params.noise_std)
     interpolator = HermiteInterpolator(robot.n, guiding.dt, round(guiding.dt / dt))
     return LoopParts(estimator, controller, interpolator)
+
+
+def warm_up_parts(parts: LoopParts, q0: Array,
+                  progress: Callable[[int], None] | None = None) -> None:
+    """Load (or compile, on a first run) each part's compiled code on copies of its state, at
+    the pose ``q0`` [rad], shape (n,): built before a real controller's stream opens, the
+    loop's first cycle then runs at full speed. ``progress`` is called with 1, 2, 3 as each
+    part is done."""
+    parts.estimator.reset(q0)
+    parts.estimator.warm_up()
+    if progress is not None:
+        progress(1)
+    parts.controller.reset(q0, 0.0)
+    parts.controller.warm_up()
+    if progress is not None:
+        progress(2)
+    parts.interpolator.reset(q0)
+    parts.interpolator.warm_up()
+    if progress is not None:
+        progress(3)

@@ -33,6 +33,9 @@ class EndCause(StrEnum):
     STOP_REQUESTED = "stop requested"
     #: The driver failed twice (or a blocked call was aborted): no more commands were sent.
     LINK_LOST = "link lost"
+    #: The operator's channel closed (the pendant's process gone): the enabling device
+    #: released, and the commanded motion came to rest.
+    OPERATOR_LOST = "operator lost"
     #: A stop did not bring the commanded motion to rest within ``stop_timeout_s``.
     STOP_TIMEOUT = "stop timeout"
 

@@ -13,17 +13,78 @@ simulated one runs flat out unless the loop is paced. :class:`PeriodClock` does 
   a period, so the reply misses the controller's cycle.
 
 Flat out, on a simulated driver, nothing is late: there is no clock to be late against.
+
+**The clock.** Everything the loop times (pacing, late periods, compute times, stale feedback,
+the exchange's watchdog timeout, the enabling device's lease) reads one :class:`Clock`: the
+:class:`WallClock` (``time.monotonic``, which on Linux is ``CLOCK_MONOTONIC``, the clock of
+another process's lease too) in a session, a :class:`VirtualClock` that a test advances
+itself, so that the loop's logic is tested deterministically (a driver whose ``step``
+advances the virtual clock scripts the controller's timing).
 """
 
 from __future__ import annotations
 
 import math
 import time
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ComputeTimes", "PeriodClock", "sleep_until"]
+__all__ = ["Clock", "ComputeTimes", "PeriodClock", "VirtualClock", "WallClock"]
+
+
+class Clock(Protocol):
+    """What the loop reads the time from (see the module doc)."""
+
+    def now(self) -> float:
+        """The time [s] (a monotonic clock: only differences mean anything)."""
+        ...
+
+    def sleep_until(self, t: float) -> None:
+        """Return at ``t`` [s] (at once if past)."""
+        ...
+
+
+class WallClock:
+    """The machine's monotonic clock (``time.monotonic``)."""
+
+    __slots__ = ()
+
+    def now(self) -> float:
+        """``time.monotonic()`` [s]."""
+        return time.monotonic()
+
+    def sleep_until(self, t: float) -> None:
+        """Sleep until ``t`` [s] (at once if past)."""
+        remaining = t - time.monotonic()
+        if remaining > 0:
+            time.sleep(remaining)
+
+
+class VirtualClock:
+    """A clock that moves only when told to (tests; see the module doc).
+
+    Args:
+        t: Its time at first [s].
+    """
+
+    __slots__ = ("t",)
+
+    def __init__(self, t: float = 0.0) -> None:
+        self.t = t
+
+    def now(self) -> float:
+        """Its time [s]."""
+        return self.t
+
+    def sleep_until(self, t: float) -> None:
+        """Its time moves on to ``t`` (never back)."""
+        self.t = max(self.t, t)
+
+    def advance(self, dt: float) -> None:
+        """Its time moves on by ``dt`` [s] (>= 0)."""
+        self.t += max(0.0, dt)
 
 
 class PeriodClock:
@@ -31,43 +92,44 @@ class PeriodClock:
 
     Args:
         dt: Servo period [s].
-        paced: Pace to the wall clock (a simulated driver).
+        paced: Pace to the clock (a simulated driver).
         real_time: Count late periods (paced, or a real driver).
+        clock: The time (default: the wall clock).
 
     Attributes:
         late: Late periods so far.
         skipped: Period slots skipped after late periods (paced only).
     """
 
-    __slots__ = ("dt", "late", "next_start", "paced", "real_time", "skipped", "t0",
+    __slots__ = ("clock", "dt", "late", "next_start", "paced", "real_time", "skipped", "t0",
                  "work_start")
 
-    def __init__(self, dt: float, paced: bool, real_time: bool) -> None:
+    def __init__(self, dt: float, paced: bool, real_time: bool,
+                 clock: Clock | None = None) -> None:
         self.dt, self.paced, self.real_time = dt, paced, real_time or paced
+        self.clock: Clock = clock if clock is not None else WallClock()
         self.late = self.skipped = 0
         self.t0 = self.next_start = self.work_start = math.nan
 
     def start(self) -> None:
         """The first period starts now."""
-        self.t0 = self.next_start = time.perf_counter()
+        self.t0 = self.next_start = self.clock.now()
 
     def wait(self) -> None:
         """Before a period's exchange: sleep until its start (paced)."""
         if self.paced:
-            remaining = self.next_start - time.perf_counter()
-            if remaining > 0:
-                time.sleep(remaining)
+            self.clock.sleep_until(self.next_start)
 
     def exchanged(self) -> None:
         """The period's exchange with the driver is over; its work starts."""
         if self.real_time:
-            self.work_start = time.perf_counter()
+            self.work_start = self.clock.now()
 
     def done(self) -> None:
         """The period's work is over: count it if late; set the next period's start."""
         if not self.real_time:
             return
-        now = time.perf_counter()
+        now = self.clock.now()
         if not self.paced:
             if now - self.work_start > self.dt:
                 self.late += 1
@@ -111,10 +173,3 @@ class ComputeTimes:
         times = self.ring[idx % size]
         cycle = idx % every == 0
         return times[cycle], times[~cycle]
-
-
-def sleep_until(deadline: float) -> None:
-    """Sleep until ``deadline`` (``time.perf_counter`` seconds), at once if past."""
-    remaining = deadline - time.perf_counter()
-    if remaining > 0:
-        time.sleep(remaining)

@@ -2,8 +2,7 @@
 commanded motion has been at rest for the controller's settling time, the estimator takes the
 force it reads there as zero (:meth:`~leadthrough.estimation.estimator.ExternalForceEstimator.
 rezero`); a motion that restarts before the re-zero is done abandons it. Run by the loop on
-its controller cycles (:mod:`leadthrough.session.servo_loop`,
-:mod:`leadthrough.session.servo_periods`).
+its controller cycles (:mod:`leadthrough.session.servo_loop`).
 """
 
 from __future__ import annotations

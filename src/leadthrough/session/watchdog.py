@@ -52,7 +52,7 @@ class DriverWatchdog:
             driver's ``abort``), or None.
 
     Attributes:
-        started_at: ``time.perf_counter()`` when the exchange in progress began (inf: none).
+        started_at: ``time.monotonic()`` when the exchange in progress began (inf: none).
         fired: The watchdog aborted the exchange in progress (reset by :meth:`enter`).
     """
 
@@ -94,10 +94,11 @@ class DriverWatchdog:
         if self._thread.is_alive():
             self._thread.join()
 
-    def enter(self, now: float) -> None:
-        """An exchange begins at ``now`` (``time.perf_counter()``)."""
+    def enter(self) -> None:
+        """An exchange begins now (the wall clock's: the watchdog watches real time, whatever
+        clock the loop reads)."""
         self.fired = self._logged = False
-        self.started_at = now
+        self.started_at = time.monotonic()
 
     def leave(self) -> None:
         """The exchange is over."""
@@ -107,7 +108,7 @@ class DriverWatchdog:
         period = self.timeout_s / 4.0
         while not self._stop.wait(period):
             started = self.started_at
-            blocked = time.perf_counter() - started
+            blocked = time.monotonic() - started
             if started != self.started_at or self.fired:
                 continue
             if blocked > self.timeout_s and not self._logged:
