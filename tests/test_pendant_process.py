@@ -115,7 +115,11 @@ from leadthrough.robot import load_robot
 if __name__ == "__main__":
     sim = simulated_session(load_robot("er20"), record_s=10.0)
     sim.live.start()
-    time.sleep(1.0)                                   # the estimator's tare
+    from leadthrough.estimation.estimator import EstimatorStatus
+    ready = time.monotonic() + 60.0                   # the estimator's warm-up and tare, on
+    while sim.live.snapshot().estimator != EstimatorStatus.OK:   # the loop's clock: a press
+        assert time.monotonic() < ready               # before it needs a fresh one
+        time.sleep(0.02)
     sim.live.send(SetEnable(True))
     sim.hand.push([0.0, 40.0, 0.0])
     end = time.monotonic() + 60
