@@ -240,20 +240,16 @@ class _Publisher:
         self._cause = ""
         self.blob_bytes = names.blob_bytes
         self._left_out: str | None = None
+        self._ready = False             # the loop has started and said so
 
     def run(self) -> None:
         """The loop until it ends (and at rest), then the last snapshot."""
         loop, error = self.loop, "stopped"
         try:
             run(loop, self.pacing, observe=self._period, started=self._started)
-        except LeadthroughError as e:
-            error = str(e)
-            if not self._ready:         # it failed to start: the pendant must learn why
-                self.conn.send(("error", error))
-                return
         except Exception as e:  # the loop must report, not vanish
             error = _text(e)
-            if not self._ready:
+            if not self._ready:         # it failed to start: the pendant must learn why
                 self.conn.send(("error", error))
                 return
         end = loop.end
@@ -264,8 +260,6 @@ class _Publisher:
         elif end is not None and end.cause is not EndCause.STOP_REQUESTED:
             error = f"{end.cause}: {end.detail}" if end.detail else str(end.cause)
         self._publish(loop.t if np.isfinite(loop.t) else loop.fb.t, error)
-
-    _ready = False
 
     def _started(self, t_start: float) -> None:
         """The loop has started: the first snapshot, then ready."""
